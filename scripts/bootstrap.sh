@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Idempotent setup for robotatfactory on Debian 12 (run as root, or with sudo available).
+#  - installs the Debian packages that are missing (ROS 1 from Debian, Mesa EGL, Free Pascal, Xvfb, ...)
+#  - creates .venv (sees Debian's ROS Python through --system-site-packages)
+#  - installs the pinned pip requirements and the package itself (editable)
+# A second run when everything is present does no network access and takes a second or two.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+
+DEB_PACKAGES=(
+  # ROS 1 (ros_comm 1.15, Noetic generation) from Debian's own archive
+  ros-core python3-rospy python3-rosbag python3-tf2-ros python3-rosgraph python3-roslaunch
+  python3-std-msgs python3-sensor-msgs python3-nav-msgs python3-geometry-msgs
+  python3-visualization-msgs python3-diagnostic-msgs python3-tf2-msgs python3-rosgraph-msgs
+  tf2-tools rviz
+  # headless rendering for MuJoCo (EGL on Mesa), and a virtual screen for RViz screenshots
+  libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri xvfb x11-apps xauth
+  # the project's Python environment
+  python3-venv python3-dev
+  # Free Pascal: compiles simtwo/control.pas in the test suite
+  fp-compiler fp-units-base fp-units-fcl
+  # tools the docs and experiments use
+  graphviz
+)
+
+SUDO=""
+if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
+
+missing=()
+for p in "${DEB_PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "[bootstrap] installing Debian packages: ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  echo "[bootstrap] creating .venv (with Debian's ROS Python visible)"
+  /usr/bin/python3 -m venv --system-site-packages .venv
+fi
+
+# pip only when requirements or pyproject changed since the last successful install
+stamp=.venv/.raf-installed
+want=$(cat requirements.txt pyproject.toml | sha256sum | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  echo "[bootstrap] installing pinned pip requirements"
+  .venv/bin/python -m pip install -q --disable-pip-version-check -r requirements.txt
+  .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
+  echo "$want" > "$stamp"
+fi
+echo "[bootstrap] ready: $ROOT/.venv/bin/raf"

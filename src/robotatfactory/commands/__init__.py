@@ -1,0 +1,1 @@
+"""``raf`` subcommands, one module each (see :mod:`robotatfactory.cli`)."""

@@ -1,0 +1,41 @@
+"""``raf experiment NAME``: run one experiment, print a table, --out DIR writes figures and results.json."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "experiment"
+HELP = "run an experiment (raf experiment --help lists them); --out DIR writes figures and results.json"
+ORDER = 81
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ..experiments import registry
+
+    sub = parser.add_subparsers(dest="experiment", metavar="NAME", title="experiments")
+    for name, mod in registry().items():
+        p = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
+        p.add_argument("--out", metavar="DIR", help="write figures and DIR/results.json here")
+        mod.add_arguments(p)
+        p.set_defaults(_experiment=mod)
+    parser.set_defaults(_parser=parser)
+
+
+def run(args) -> int:
+    from ..results import print_table, write_json
+
+    mod = getattr(args, "_experiment", None)
+    if mod is None:
+        args._parser.print_help()
+        return 2
+    out = Path(args.out) if args.out else None
+    if out:
+        out.mkdir(parents=True, exist_ok=True)
+    results = dict(mod.run(args, out))
+    print_table(f"raf experiment {mod.NAME}", results, getattr(mod, "TARGETS", {}))
+    if out:
+        print(f"wrote {write_json(out / 'results.json', results)}")
+    failed = [k for k, ok in results.items() if k.endswith("_target_met") and ok is False]
+    if failed:
+        print(f"targets not met: {', '.join(failed)}")
+    return 0

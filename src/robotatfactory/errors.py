@@ -1,0 +1,10 @@
+"""Errors a user can cause (bad settings, unknown names); ``raf`` prints them without a traceback."""
+from .field.loader import FieldError
+from .simtwo.errors import ProtocolError
+
+
+class ConfigError(ValueError):
+    """A setting or parameter has a bad value; the message names the setting and what is allowed."""
+
+
+UserError = (FieldError, ProtocolError, ConfigError, FileNotFoundError)
