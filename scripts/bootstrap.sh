@@ -4,6 +4,11 @@
 #  - creates .venv (sees Debian's ROS Python through --system-site-packages)
 #  - installs the pinned pip requirements and the package itself (editable)
 # A second run when everything is present does no network access and takes a second or two.
+#
+# usage: scripts/bootstrap.sh [demo|test [ARGS...]]
+#   (nothing)  set up only
+#   demo       set up, then run the main demo (.venv/bin/raf demo ARGS)
+#   test       set up, then run the whole test suite (.venv/bin/python -m pytest ARGS)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -55,3 +60,12 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "$want" > "$stamp"
 fi
 echo "[bootstrap] ready: $ROOT/.venv/bin/raf"
+
+action=${1:-}
+[ $# -gt 0 ] && shift
+case "$action" in
+  "") ;;
+  demo) exec .venv/bin/raf demo "$@" ;;
+  test) exec .venv/bin/python -m pytest "$@" ;;
+  *) echo "usage: $0 [demo|test [ARGS...]]" >&2; exit 2 ;;
+esac
