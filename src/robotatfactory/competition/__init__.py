@@ -12,6 +12,7 @@ docs/competition.md has the rules as implemented and every decision.
 """
 from .factory import (DEFAULT_ROBOT_CLEARANCE, DEFAULT_TOLERANCE, MACHINE_ACCEPTS, ZONES, Factory, FactoryEvent, Job,
                       Lane, PartState, Teleport, machine_lanes, slot_label)
+from .kinematic import KinematicWorld
 from .parts import EMPTY, PartType, letter_of, letters_of
 from .referee import Referee, ScoreEvent, ScoreReport, is_delivery
 from .rounds import (DEFAULT_DURATION, DEFAULT_PROCESSING_DELAY, ROUND_RULES, ROUNDS, RoundSetup, draw_parts,
@@ -21,7 +22,7 @@ from .server import MAX_REQUEST, REQUESTS, ZONE_OF, FactoryServer, ctl_reply, qu
 X = EMPTY
 
 __all__ = ["DEFAULT_ROBOT_CLEARANCE", "DEFAULT_TOLERANCE", "MACHINE_ACCEPTS", "ZONES", "Factory", "FactoryEvent",
-           "Job", "Lane", "PartState", "Teleport", "machine_lanes", "slot_label", "EMPTY", "X", "PartType",
+           "Job", "KinematicWorld", "Lane", "PartState", "Teleport", "machine_lanes", "slot_label", "EMPTY", "X", "PartType",
            "letter_of", "letters_of", "Referee", "ScoreEvent", "ScoreReport", "is_delivery", "DEFAULT_DURATION",
            "DEFAULT_PROCESSING_DELAY", "ROUND_RULES", "ROUNDS", "RoundSetup", "draw_parts", "parse_parts",
            "MAX_REQUEST", "REQUESTS", "ZONE_OF", "FactoryServer", "ctl_reply", "query"]

@@ -156,7 +156,7 @@ class Factory:
         self._events: list[FactoryEvent] = []
         self._start: float | None = None
         self._last_t: float | None = None
-        self._counters = dict(steps=0, bad_time=0, bad_positions=0, unknown_parts=0, missing_parts=0,
+        self._counters = dict(steps=0, bad_time=0, bad_positions=0, bad_held=0, unknown_parts=0, missing_parts=0,
                               bad_robot=0, processing=0, processed=0, cancelled=0)
         self._rlog = RateLimitedLog(log)
 
@@ -254,7 +254,7 @@ class Factory:
 
     @property
     def counters(self) -> dict[str, int]:
-        """steps, rejected inputs (bad_time, bad_positions, unknown_parts, missing_parts, bad_robot) and
+        """steps, rejected inputs (bad_time, bad_positions, bad_held, unknown_parts, missing_parts, bad_robot) and
         machine activity (processing, processed, cancelled)."""
         with self._lock:
             return dict(self._counters)
@@ -300,6 +300,7 @@ class Factory:
         try:
             items = list(held or ())
         except TypeError:
+            self._counters["bad_held"] += 1
             self._rlog.warn("bad_held", "held parts must be a collection of ids, got %r", held)
             return out
         for pid in items:
