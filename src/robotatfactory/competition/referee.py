@@ -119,8 +119,12 @@ class Referee:
         end = min(t, start + setup.duration)
         seen: set[tuple[int, str]] = set()
         scored: list[ScoreEvent] = []
+        running = False  # the log's order decides: a placement logged before the start never counts
         for e in events:
-            if e.kind != "placed" or e.slot is None or e.part_type is None:
+            if e.kind == "start":
+                running = True
+                continue
+            if not running or e.kind != "placed" or e.slot is None or e.part_type is None:
                 continue
             if not (start <= e.t <= end) or not is_delivery(e.part_type, e.slot):
                 continue
