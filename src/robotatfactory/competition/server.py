@@ -139,6 +139,13 @@ class FactoryServer:
     def stop(self) -> None:
         """Stop serving and close the socket (idempotent)."""
         self._stopping.set()
+        if self._thread is not None and self._sock is not None:
+            try:  # wake the receive call at once instead of waiting for its timeout
+                host, port = self._sock.getsockname()[:2]
+                with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                    s.sendto(b"", ("127.0.0.1" if host == "0.0.0.0" else host, port))
+            except OSError:
+                pass
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
@@ -185,18 +192,21 @@ class FactoryServer:
                 self._rlog.warn("recv", "factory-state server receive error: %s", e)
                 time.sleep(0.01)
                 continue
+            if self._stopping.is_set():
+                break
             reply = self.answer(data)
             if self.log_requests:
                 log.info("%s:%d %r -> %r", addr[0], addr[1], data[:MAX_REQUEST], reply)
             elif reply.startswith("ERR"):
                 self._rlog.warn("bad_request", "factory-state server: %s:%d sent %r -> %s", addr[0], addr[1],
                                 data[:40], reply)
+            with self._lock:  # counted before sending, so a client that got its reply sees it counted
+                self._counters["replies"] += 1
             try:
                 sock.sendto(reply.encode("ascii"), addr)
-                with self._lock:
-                    self._counters["replies"] += 1
             except OSError as e:
                 with self._lock:
+                    self._counters["replies"] -= 1
                     self._counters["send_errors"] += 1
                 self._rlog.warn("send", "factory-state server cannot reply to %s: %s", addr, e)
 
