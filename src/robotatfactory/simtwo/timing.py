@@ -1,0 +1,252 @@
+"""Simulation time from the SensorFrame stream, and honest simulation-time stamps for camera frames.
+
+Plain Python, no ROS, no I/O. Times: simulation time in integer milliseconds (``Tms``) or seconds; arrival
+times in seconds of one monotonic wall clock shared by the UDP and the camera receivers.
+
+The camera problem. SimTwo's camera frames (ZMQ, 640x480 BGRA) carry no timestamp. The bridge stamps each
+one with an estimate of the simulation time at which it was rendered, using only what any SimTwo user has:
+
+1. the SensorFrame stream: ``Tms`` (end of each control cycle, period ``P`` = 40 ms) and its arrival times;
+2. the camera frame's arrival time (order relative to the SensorFrames);
+3. the camera's render-clock settings: render ticks every ``1/render_fps`` s of simulation time, one frame
+   published every ``decimation`` ticks (60 FPS / 4 = 15 frames/s);
+4. the ordering rule: a frame rendered at ``t_r`` is published after the SensorFrame of the cycle before
+   (the simulator renders during a cycle, after it has sent the previous cycle's frame) and before the
+   SensorFrame of the cycle whose end is the first cycle end ``>= t_r``.
+
+Method (``CameraStamper``), for a camera frame arriving at wall time ``a``:
+
+* **Bracket** (arrival order). Let ``T_b`` be the ``Tms`` of the last SensorFrame that arrived before ``a``
+  (at ``a_b``). Normally the frame arrives before the SensorFrame that follows it, so it belongs to the cycle
+  ending ``T_b + P``: ``t_r`` in ``(T_b, T_b + P]``. But a 1.2 MB frame takes longer to deliver than a 3 KB
+  datagram sent just after it, so when ``a - a_b <= overtake_window`` (default 5 ms) the SensorFrame is taken
+  to have overtaken the frame, which then belongs to the cycle ending ``T_b``: ``t_r`` in ``(T_b - P, T_b]``.
+  The bracket is right when the camera's delivery latency is below ``overtake_window`` and the simulator
+  needs longer than ``overtake_window`` (wall) between sending a SensorFrame and publishing the next
+  cycle's camera frame (reply, physics, rendering): both hold on one machine, in real time or in lockstep.
+* **Render grid**. Published frames sit on the ticks ``k / render_fps`` with ``k = phase (mod decimation)``.
+  A 40 ms bracket holds two or three render ticks but (since ``P < decimation / render_fps`` = 66.7 ms) at
+  most one tick of each phase. Each frame therefore allows a set of phases; the phases allowed by every one
+  of the last ``window`` frames are kept. Once exactly one phase remains (after at least ``min_frames``
+  frames) the frame's render tick is identified: the stamp is exact (``method = "grid"``, error 0).
+  With several phases left, the stamp is the middle of the remaining candidate ticks (``"grid-partial"``,
+  error at most half their spread, <= 20 ms). Before ``min_frames`` frames, or when no phase is consistent
+  with all recent frames (a render clock that is not locked to simulation time, as in SimTwo's wall-paced
+  GUI), or with ``use_grid=False``, the stamp is the middle of the bracket (``"interval"``, error at most
+  P/2 = 20 ms). The grid's bounds assume render ticks on simulation time; a free-running render clock can
+  pass the consistency test by chance for a while, so set ``use_grid=False`` for such a simulator. One inconsistent frame (a wrong bracket) does not
+  unlock a learned phase; that frame itself is stamped ``"interval"`` and counted in ``bracket_misses``.
+
+Stamps are kept strictly increasing; a frame that cannot be (a wrong bracket) is counted as ``conflicts``.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+
+def _fraction(x: float | int) -> Fraction:
+    return Fraction(x).limit_denominator(100000) if isinstance(x, float) else Fraction(x)
+
+
+@dataclass(frozen=True)
+class StampEstimate:
+    """Estimated render time of one camera frame."""
+
+    stamp: float  # s, simulation time
+    lo: float  # s: the bracket, lo < t_render <= hi
+    hi: float
+    error_bound: float  # s: |stamp - t_render| <= error_bound when the bracket is right
+    method: str  # "grid" | "grid-partial" | "interval"
+    phase: int | None = None  # the render-clock phase used (grid), else None
+
+
+@dataclass
+class StampCounters:
+    grid: int = 0
+    grid_partial: int = 0
+    interval: int = 0
+    overtaken: int = 0  # frames whose bracket was moved back one cycle (SensorFrame arrived just before)
+    conflicts: int = 0  # stamp not after the previous one: nudged forward
+    bracket_misses: int = 0  # the learned phase has no render tick in the bracket (stamped "interval")
+    no_clock: int = 0  # frames before any SensorFrame: not stamped
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+class CameraStamper:
+    """Stamps camera frames with the simulation time they were rendered at (see the module docstring).
+
+    Thread-safe: the UDP receiver calls :meth:`on_sensor_frame`, the camera receiver :meth:`stamp`.
+    """
+
+    def __init__(self, period_ms: int = 40, render_fps: float = 60.0, decimation: int = 4,
+                 overtake_window: float = 0.005, window: int = 16, min_frames: int = 8, history: int = 512,
+                 use_grid: bool = True):
+        if period_ms <= 0 or render_fps <= 0 or decimation < 1:
+            raise ValueError(f"period_ms {period_ms}, render_fps {render_fps} must be > 0, decimation >= 1")
+        if overtake_window < 0:
+            raise ValueError("overtake_window must be >= 0")
+        self.period_ms = int(period_ms)
+        self.fps = _fraction(render_fps)
+        self.decimation = int(decimation)
+        self.overtake_window = float(overtake_window)
+        self.window = int(window)
+        self.min_frames = int(min_frames)
+        self.use_grid = bool(use_grid)
+        self.counters = StampCounters()
+        self._lock = threading.Lock()
+        self._arrivals: deque[float] = deque(maxlen=history)
+        self._tms: deque[int] = deque(maxlen=history)
+        self._phases: deque[frozenset] = deque(maxlen=self.window)
+        self._prev: float | None = None
+
+    @property
+    def grid_spacing(self) -> float:
+        """Seconds of simulation time between published frames."""
+        return float(self.decimation / self.fps)
+
+    def reset(self) -> None:
+        """Forget the stream (simulator restart): history, learned phase, monotonicity."""
+        with self._lock:
+            self._arrivals.clear()
+            self._tms.clear()
+            self._phases.clear()
+            self._prev = None
+
+    def on_sensor_frame(self, time_ms: int, arrival: float) -> None:
+        """Record an accepted SensorFrame (``Tms``) and its arrival (monotonic seconds)."""
+        with self._lock:
+            if self._arrivals and arrival < self._arrivals[-1]:
+                arrival = self._arrivals[-1]  # keep the history sorted (clock granularity)
+            self._arrivals.append(arrival)
+            self._tms.append(int(time_ms))
+
+    @property
+    def locked_phase(self) -> int | None:
+        with self._lock:
+            return self._locked()[0]
+
+    def _locked(self) -> tuple[int | None, set]:
+        """(the phase the recent frames agree on, or None; the phases allowed by all of them).
+
+        A phase is locked when it is the only one allowed by every frame in the window, or (one wrong
+        bracket tolerated) the only one allowed by all but one, and the window holds ``min_frames`` frames.
+        """
+        n = len(self._phases)
+        if n == 0:
+            return None, set(range(self.decimation))
+        score = [0] * self.decimation
+        for s in self._phases:
+            for p in s:
+                score[p] += 1
+        strict = {p for p in range(self.decimation) if score[p] == n}
+        if n >= self.min_frames:
+            if len(strict) == 1:
+                return next(iter(strict)), strict
+            if not strict:
+                loose = [p for p in range(self.decimation) if score[p] == n - 1]
+                if len(loose) == 1:
+                    return loose[0], strict
+        return None, strict
+
+    def _ticks(self, lo_ms: int, hi_ms: int) -> list[int]:
+        """Render ticks k with lo < k/fps <= hi (milliseconds, exact)."""
+        k_min = math.floor(Fraction(lo_ms, 1000) * self.fps) + 1
+        k_max = math.floor(Fraction(hi_ms, 1000) * self.fps)
+        return list(range(k_min, k_max + 1))
+
+    def bracket(self, arrival: float) -> tuple[int, int, bool] | None:
+        """(lo_ms, hi_ms, overtaken) for a frame arriving at ``arrival``; None before any SensorFrame."""
+        i = bisect.bisect_right(self._arrivals, arrival) - 1
+        if i < 0:
+            return None
+        t_b, a_b = self._tms[i], self._arrivals[i]
+        overtaken = arrival - a_b <= self.overtake_window
+        hi = t_b if overtaken else t_b + self.period_ms
+        return hi - self.period_ms, hi, overtaken
+
+    def stamp(self, arrival: float | None = None) -> StampEstimate | None:
+        """Estimate the render time of a camera frame that arrived at ``arrival`` (monotonic seconds)."""
+        if arrival is None:
+            arrival = time.monotonic()
+        with self._lock:
+            br = self.bracket(arrival)
+            c = self.counters
+            if br is None:
+                c.no_clock += 1
+                return None
+            lo, hi, overtaken = br
+            c.overtaken += overtaken
+            ticks = self._ticks(lo, hi)
+            d = self.decimation
+            self._phases.append(frozenset(k % d for k in ticks))
+            phase, strict = self._locked() if self.use_grid else (None, set())
+            if len(self._phases) < self.min_frames:
+                strict = set()  # too few frames to trust the render grid yet
+            lo_s, hi_s = lo / 1000, hi / 1000
+            est = None
+            cand = []
+            if phase is not None:
+                cand = [k for k in ticks if k % d == phase]
+                if not cand:
+                    c.bracket_misses += 1  # the learned phase has no tick in this bracket: a wrong bracket
+            elif strict:
+                cand = [k for k in ticks if k % d in strict]
+            if len(cand) == 1 and phase is not None:
+                est = StampEstimate(float(cand[0] / self.fps), lo_s, hi_s, 0.0, "grid", phase)
+            elif cand:  # several candidate ticks (phase not settled, or several published ticks per cycle)
+                t0, t1 = float(cand[0] / self.fps), float(cand[-1] / self.fps)
+                est = StampEstimate((t0 + t1) / 2, lo_s, hi_s, (t1 - t0) / 2, "grid-partial", phase)
+            if est is None:
+                est = StampEstimate((lo + hi) / 2000, lo_s, hi_s, self.period_ms / 2000, "interval")
+            if est.method == "grid":
+                c.grid += 1
+            elif est.method == "grid-partial":
+                c.grid_partial += 1
+            else:
+                c.interval += 1
+            if self._prev is not None and est.stamp <= self._prev:
+                c.conflicts += 1
+                nudged = self._prev + 1e-3
+                est = StampEstimate(nudged, est.lo, est.hi, est.error_bound + (nudged - est.stamp), est.method,
+                                    est.phase)
+            self._prev = est.stamp
+            return est
+
+
+@dataclass
+class SimClock:
+    """The simulation time known from the stream, and the real-time factor over a sliding window."""
+
+    window: float = 2.0  # s (wall)
+    _hist: deque = field(default_factory=lambda: deque(maxlen=4096))
+
+    def on_sensor_frame(self, time_ms: int, arrival: float) -> None:
+        self._hist.append((arrival, int(time_ms)))
+
+    def reset(self) -> None:
+        self._hist.clear()
+
+    @property
+    def time_ms(self) -> int | None:
+        return self._hist[-1][1] if self._hist else None
+
+    def real_time_factor(self, now: float | None = None) -> float:
+        """Simulation seconds per wall second over the window (0 when unknown)."""
+        h = self._hist
+        if len(h) < 2:
+            return 0.0
+        now = time.monotonic() if now is None else now
+        recent = [(a, t) for a, t in h if a >= now - self.window]
+        if len(recent) < 2:
+            return 0.0
+        (a0, t0), (a1, t1) = recent[0], recent[-1]
+        span = max(now - a0, a1 - a0) if now - a1 < 0.5 else now - a0
+        return (t1 - t0) / 1000 / span if span > 0 else 0.0

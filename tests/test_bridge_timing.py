@@ -1,0 +1,186 @@
+"""Camera stamping and the simulation clock (robotatfactory.simtwo.timing): pure, simulated streams."""
+from __future__ import annotations
+
+import math
+import random
+from fractions import Fraction
+
+import pytest
+
+from robotatfactory.simtwo.timing import CameraStamper, SimClock
+
+P = 40  # ms
+
+
+def simulate(n_cycles=300, phase=0, fps=60, dec=4, cam_latency=(0.0005, 0.003), realtime=True,
+             physics=0.002, render_cost=0.004, drop=0.0, on_grid=True, seed=1):
+    """Events (kind, arrival, payload) of a simulator that renders during each cycle and sends the cycle's
+    SensorFrame right after; camera frames are delivered with a random latency (they may be overtaken).
+
+    realtime: each cycle starts on the wall clock's 40 ms beat; else (fast lockstep) right after the reply.
+    """
+    rng = random.Random(seed)
+    events = []
+    k = phase
+    w = 1000.0
+    for j in range(n_cycles):
+        t_start, t_end = Fraction(P * j, 1000), Fraction(P * (j + 1), 1000)
+        if realtime:
+            w = max(w, 1000.0 + j * P / 1000)
+        while Fraction(k, fps) <= t_start:
+            k += dec
+        renders = []
+        if on_grid:
+            while Fraction(k, fps) <= t_end:
+                renders.append(Fraction(k, fps))
+                k += dec
+        elif rng.random() < 0.4:
+            renders.append(t_start + Fraction(rng.randint(1, P), 1000))
+        w += physics / 2
+        for tr in renders:
+            w += render_cost
+            if rng.random() >= drop:
+                events.append(("cam", w + rng.uniform(*cam_latency), float(tr)))
+        w += physics / 2
+        events.append(("udp", w + 0.00005, P * (j + 1)))
+        w += 0.0003  # the bridge's reply
+    events.sort(key=lambda e: e[1])
+    return events
+
+
+def run(stamper, events):
+    out = []
+    for kind, a, payload in events:
+        if kind == "udp":
+            stamper.on_sensor_frame(payload, a)
+        else:
+            est = stamper.stamp(a)
+            out.append((payload, est))
+    return out
+
+
+@pytest.mark.parametrize("phase", [0, 1, 2, 3])
+def test_realtime_stream_stamps_are_exact_once_the_phase_is_learned(phase):
+    st = CameraStamper(P, 60, 4, overtake_window=0.005)
+    res = run(st, simulate(phase=phase))
+    assert len(res) > 150
+    learned = [(t, e) for t, e in res[10:]]
+    assert all(e.method == "grid" for _, e in learned), {e.method for _, e in learned}
+    assert all(e.stamp == pytest.approx(t, abs=1e-9) for t, e in learned)
+    assert st.locked_phase == phase
+    # before the lock, every estimate still brackets the truth within its bound
+    for t, e in res:
+        assert e.lo < t + 1e-9 and t <= e.hi + 1e-9
+        assert abs(e.stamp - t) <= e.error_bound + 1e-9
+
+
+def test_overtaken_frames_are_assigned_to_the_cycle_that_overtook_them():
+    # every camera frame arrives 2-4 ms after the SensorFrame that was sent after it
+    ev = simulate(cam_latency=(0.0025, 0.0045))
+    st = CameraStamper(P, 60, 4, overtake_window=0.005)
+    res = run(st, ev)
+    assert st.counters.overtaken == len(res)
+    assert all(e.stamp == pytest.approx(t) for t, e in res[10:])
+
+
+def test_lockstep_fast_stream_with_short_cycles_and_render_cost():
+    # fast lockstep: 2 ms of physics per cycle, 4 ms per render, camera delivered in 0.5-2.5 ms; a frame is
+    # often overtaken by the SensorFrame sent 1 ms after it, and the next render is >= 4 ms later
+    ev = simulate(realtime=False, physics=0.002, render_cost=0.004, cam_latency=(0.0005, 0.0025), n_cycles=300)
+    st = CameraStamper(P, 60, 4, overtake_window=0.003)
+    res = run(st, ev)
+    exact = sum(e.method == "grid" and e.stamp == pytest.approx(t) for t, e in res[10:])
+    assert exact == len(res) - 10
+
+
+def test_dropped_frames_do_not_disturb_the_stamps():
+    st = CameraStamper(P, 60, 4)
+    res = run(st, simulate(drop=0.5, n_cycles=600, seed=3))
+    assert all(e.stamp == pytest.approx(t) for t, e in res[10:])
+    stamps = [e.stamp for _, e in res]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+
+
+def test_render_clock_off_the_grid_without_the_grid_stays_within_half_a_period():
+    st = CameraStamper(P, 60, 4, use_grid=False)
+    res = run(st, simulate(on_grid=False, n_cycles=600, seed=5))
+    assert len(res) > 100
+    assert all(e.method == "interval" for _, e in res)
+    for t, e in res:
+        assert abs(e.stamp - t) <= e.error_bound + 1e-9
+        assert e.error_bound == pytest.approx(0.020)
+
+
+def test_render_clock_off_the_grid_is_mostly_detected_by_the_consistency_test():
+    st = CameraStamper(P, 60, 4)
+    res = run(st, simulate(on_grid=False, n_cycles=1500, seed=5))
+    interval = sum(e.method == "interval" for _, e in res)
+    assert interval > 0.8 * len(res)
+    # whatever the method, the stamp stays inside the bracket, so within one period of the truth
+    assert all(abs(e.stamp - t) <= 0.040 + 1e-9 for t, e in res)
+
+
+def test_one_wrong_bracket_does_not_unlock_the_phase():
+    st = CameraStamper(P, 60, 4)
+    ev = simulate(n_cycles=200)
+    res = run(st, ev[:200])
+    assert st.locked_phase == 0
+    # a frame arriving 30 ms after a SensorFrame although it was rendered in that SensorFrame's cycle
+    last_udp = max((e for e in ev[:200] if e[0] == "udp"), key=lambda e: e[1])
+    est = st.stamp(last_udp[1] + 0.030)
+    assert st.locked_phase == 0
+    assert est is not None and est.method in ("interval", "grid")
+    res2 = run(st, ev[200:])
+    assert all(e.stamp == pytest.approx(t) for t, e in res2[2:])
+
+
+def test_no_stamp_before_the_first_sensor_frame_and_reset_forgets_everything():
+    st = CameraStamper(P, 60, 4)
+    assert st.stamp(5.0) is None
+    assert st.counters.no_clock == 1
+    run(st, simulate(n_cycles=100))
+    assert st.locked_phase == 0
+    st.reset()
+    assert st.locked_phase is None
+    assert st.stamp(1e6) is None
+    # after the reset the clock restarts from 0 and the stamps follow the new stream
+    res = run(st, [(k, a + 5000, p) for k, a, p in simulate(n_cycles=100, phase=2)])
+    assert all(e.stamp == pytest.approx(t) for t, e in res[10:])
+
+
+def test_every_render_tick_published_gives_partial_grid_estimates():
+    st = CameraStamper(P, 60, 1)
+    res = run(st, simulate(dec=1, n_cycles=50))
+    # several frames share a bracket: stamps are nudged to stay increasing and counted
+    assert all(e.method == "grid-partial" for _, e in res[10:])
+    assert res[0][1] is None  # rendered in the first cycle, before any SensorFrame: no clock yet
+    stamps = [e.stamp for _, e in res[1:]]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    assert st.counters.conflicts > 0
+
+
+def test_tick_enumeration_is_exact_at_bracket_edges():
+    st = CameraStamper(P, 60, 4)
+    # 1/15 s = 66.666.. ms: ticks 0, 4 at 0 and 66.67 ms; bracket (40, 80] holds 66.67 (k=4) only for phase 0
+    assert st._ticks(40, 80) == [3, 4]  # 50 ms, 66.67 ms
+    assert st._ticks(0, 40) == [1, 2]  # 0 excluded, 40 ms = 2.4 ticks
+    assert st._ticks(80, 120) == [5, 6, 7]  # 120 ms is tick 7.2 -> 7 = 116.67; 100 ms = tick 6 included
+
+
+def test_bad_settings_are_rejected():
+    with pytest.raises(ValueError):
+        CameraStamper(0, 60, 4)
+    with pytest.raises(ValueError):
+        CameraStamper(40, 60, 0)
+    with pytest.raises(ValueError):
+        CameraStamper(40, 60, 4, overtake_window=-1)
+
+
+def test_sim_clock_real_time_factor():
+    c = SimClock()
+    for j in range(50):
+        c.on_sensor_frame(40 * j, 100.0 + 0.01 * j)  # 40 ms sim per 10 ms wall: 4x
+    assert c.time_ms == 40 * 49
+    assert c.real_time_factor(now=100.49) == pytest.approx(4.0, rel=0.05)
+    c.reset()
+    assert c.time_ms is None and c.real_time_factor() == 0.0
