@@ -139,3 +139,36 @@ def test_report_text_is_a_readable_table():
     assert w.report().short().startswith("score 2/4 (outgoing 1, last at")
     idle = KinematicWorld(FIELD, RoundSetup.make(1))
     assert "not started" in str(idle.report()) and "not started" in idle.report().short()
+
+
+def test_rule_notes_false_start_and_start_area():
+    w = world("BXXX")  # the robot stood still at the start pose (inside the start area): nothing to note
+    fetch(w, 1, "outgoing", 1)
+    assert w.report().notes == () and "note:" not in str(w.report())
+
+    early = KinematicWorld(FIELD, RoundSetup.make(1, parts="BXXX"))
+    early.step()
+    early.robot_xy = (-0.725, -0.37)  # 3 cm before the start
+    early.step()
+    early.start()
+    early.step()
+    (note,) = early.report().notes
+    assert "moved 0.030 m before the run started" in note
+    assert "note: the robot moved" in str(early.report())
+    assert early.report().points == 0  # a note, not a penalty
+
+    away = KinematicWorld(FIELD, RoundSetup.make(1, parts="BXXX"), robot_xy=(0.0, 0.0))
+    away.start()
+    away.step()
+    (note,) = away.report().notes
+    assert "outside the start area" in note
+
+
+def test_small_jitter_before_the_start_is_not_a_false_start():
+    w = KinematicWorld(FIELD, RoundSetup.make(1, parts="BXXX"))
+    for dx in (0.0, 0.005, -0.01, 0.015):
+        w.robot_xy = (-0.725 + dx, -0.4)
+        w.step()
+    w.start()
+    w.step()
+    assert w.report().notes == ()

@@ -25,6 +25,7 @@ log = logging.getLogger(__name__)
 
 DEFAULT_TOLERANCE = 0.03  # m: a part is in a slot when its centre is this close (SimTwo's Lite scene)
 DEFAULT_ROBOT_CLEARANCE = 0.17  # m: a machine starts only when the robot is farther from the input slot
+FALSE_START_DISTANCE = 0.02  # m: the robot moving farther than this before the start is a false start
 
 ZONES = ("incoming", "outgoing", "machine_A", "machine_B")
 MACHINE_ACCEPTS = {"machine_A": PartType.RED, "machine_B": PartType.GREEN}
@@ -54,7 +55,9 @@ class FactoryEvent:
     kinds: ``start`` (the run started), ``placed`` (a free part came to rest in ``slot``), ``left`` (it left
     ``slot``: taken, pushed or picked up), ``processing`` (a machine took it), ``cancelled`` (it was taken
     away before the machine finished), ``processed`` (the machine gave it back at ``slot``, now
-    ``part_type``). ``part_type`` is the part's type at that moment.
+    ``part_type``). ``part_type`` is the part's type at that moment. Rule notes (no effect on the score):
+    ``false_start`` (the robot moved before the start), ``outside_start_area`` (the robot was not in the
+    start area when the run started).
     """
 
     t: float
@@ -156,6 +159,9 @@ class Factory:
         self._events: list[FactoryEvent] = []
         self._start: float | None = None
         self._last_t: float | None = None
+        self._robot_before: tuple[float, float] | None = None  # first robot position seen before the start
+        self._false_start = False
+        self._robot_checked = False
         self._counters = dict(steps=0, bad_time=0, bad_positions=0, bad_held=0, unknown_parts=0, missing_parts=0,
                               bad_robot=0, processing=0, processed=0, cancelled=0)
         self._rlog = RateLimitedLog(log)
@@ -289,12 +295,35 @@ class Factory:
                 self._counters["bad_robot"] += 1
                 self._rlog.warn("bad_robot", "bad robot position %r: machines wait", robot_xy)
             self._held = held_ids
+            if robot is not None:
+                self._check_robot(t, robot)
             self._update_slots(t, positions, held_ids)
             if not self.running(t):
                 return []
             return self._run_machines(t, robot)
 
     # ------------------------------------------------------------------------------------------ internals
+    def _check_robot(self, t: float, robot: tuple[float, float]) -> None:
+        """Rule notes: the robot must not move before the start and must start in the start area."""
+        if self._start is None or t < self._start:
+            if self._robot_before is None:
+                self._robot_before = robot
+            elif not self._false_start and math.dist(robot, self._robot_before) > FALSE_START_DISTANCE:
+                self._false_start = True
+                self._events.append(FactoryEvent(t, "false_start", note=(
+                    f"the robot moved {math.dist(robot, self._robot_before):.3f} m before the run started")))
+        elif not self._robot_checked:
+            self._robot_checked = True
+            if not self.field.start_area.contains(*robot):
+                self._events.append(FactoryEvent(t, "outside_start_area", note=(
+                    f"the robot was at ({robot[0]:.3f}, {robot[1]:.3f}) m when the run started, outside the "
+                    f"start area x {self.field.start_area.x}, y {self.field.start_area.y}")))
+
+    def rule_notes(self) -> list[str]:
+        """Breaches of the rules seen so far (they do not change the score; an organiser would rule)."""
+        with self._lock:
+            return [e.note for e in self._events if e.kind in ("false_start", "outside_start_area")]
+
     def _clean_held(self, held) -> set[int]:
         out = set()
         try:

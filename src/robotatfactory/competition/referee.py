@@ -47,7 +47,8 @@ class ScoreReport:
 
     ``points``: deliveries; ``outgoing``: parts delivered to the outgoing warehouse (first tie-break);
     ``last_score_time``: seconds from the start to the last scoring delivery (second tie-break, None when
-    nothing scored); ``events``: the deliveries in time order.
+    nothing scored); ``events``: the deliveries in time order; ``notes``: rule breaches seen (a false start,
+    the robot outside the start area), which do not change the score.
     """
 
     points: int
@@ -60,6 +61,7 @@ class ScoreReport:
     round_no: int
     layout: str
     max_points: int
+    notes: tuple[str, ...] = ()
 
     @property
     def started(self) -> bool:
@@ -83,7 +85,8 @@ class ScoreReport:
     def __str__(self) -> str:
         head = f"Round {self.round_no}, incoming {self.layout}: "
         if not self.started:
-            return head + f"run not started (t = {self.t:.2f} s), no score"
+            return "\n".join([head + f"run not started (t = {self.t:.2f} s), no score"]
+                             + [f"  note: {n}" for n in self.notes])
         lines = [head + f"run started at t = {self.start_time:.2f} s, report at t = {self.t:.2f} s, "
                         f"{self.time_left:.1f} s left"]
         if self.events:
@@ -96,6 +99,7 @@ class ScoreReport:
         last = f"{self.last_score_time:.2f} s" if self.last_score_time is not None else "-"
         lines.append(f"  total: {self.points} of {self.max_points} points; {self.outgoing} part(s) in the "
                      f"outgoing warehouse; time of the last score {last}")
+        lines.extend(f"  note: {n}" for n in self.notes)
         return "\n".join(lines)
 
 
@@ -113,7 +117,7 @@ class Referee:
         events = f.events
         setup = f.setup
         base = dict(t=t, start_time=start, time_left=f.time_left(t), round_no=setup.round_no,
-                    layout=setup.letters, max_points=setup.max_points)
+                    layout=setup.letters, max_points=setup.max_points, notes=tuple(f.rule_notes()))
         if start is None:
             return ScoreReport(0, 0, None, (), **base)
         end = min(t, start + setup.duration)
