@@ -84,3 +84,31 @@ def between2(a: tuple[float, float, float], b: tuple[float, float, float]) -> tu
     c, s = math.cos(a[2]), math.sin(a[2])
     dx, dy = b[0] - a[0], b[1] - a[1]
     return (c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2]))
+
+
+def se2_log(d: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Twist (vx, vy, w) whose exponential over unit time is the body increment d = (dx, dy, dtheta)."""
+    dx, dy, th = d
+    if abs(th) < 1e-9:
+        return (dx, dy, th)
+    a = th / 2
+    k = a / math.tan(a) if abs(math.tan(a)) > 1e-12 else 0.0  # th/2 * cot(th/2)
+    return (k * dx + a * dy, -a * dx + k * dy, th)
+
+
+def se2_exp(t: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Body increment reached by following the constant twist t = (vx, vy, w) for unit time."""
+    vx, vy, th = t
+    if abs(th) < 1e-9:
+        return (vx, vy, th)
+    s, c = math.sin(th), math.cos(th)
+    a, b = s / th, (1 - c) / th
+    return (a * vx - b * vy, b * vx + a * vy, th)
+
+
+def split_increment(d: tuple[float, float, float], f: float) -> tuple[tuple, tuple]:
+    """Split a body increment at fraction f of its (constant-twist) motion: (first, rest)."""
+    tw = se2_log(d)
+    first = se2_exp(tuple(f * v for v in tw))
+    rest = se2_exp(tuple((1 - f) * v for v in tw))
+    return first, rest

@@ -1,0 +1,209 @@
+"""LIDAR beacons: find the 0.09 m cylinders (the field's ``beacons``) in a 2D scan and measure their centres.
+
+A scan is N ranges at known angles in the ``laser`` frame (SimTwo's ranger2d: -1 or anything outside
+[range_min, range_max] means no return). Consecutive returns closer to each other than a jump threshold form
+a cluster; a cluster no wider than a beacon, standing in front of what is around it, is fitted with a circle
+of the known radius (Gauss-Newton); its centre's range and bearing, with a covariance from the fit (the
+range noise of the LIDAR model), are the measurement. Association with a known beacon is the EKF's job
+(:meth:`robotatfactory.localization.ekf.Ekf.beacons`, Mahalanobis-gated).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class BeaconConfig:
+    diameter_m: float = 0.09
+    min_points: int = 3
+    width_tolerance_m: float = 0.03  # a cluster may be this much wider than the diameter (noise)
+    jump_m: float = 0.05  # neighbours farther apart than this (plus 3 ray spacings) start a new cluster
+    foreground_m: float = 0.05  # returns next to the cluster must be this much farther (or none)
+    max_range_m: float = 3.0
+    max_fit_rms_m: float = 0.015
+    noise_a: float = 0.001524  # range noise sigma = a * exp(b * d) (the LIDAR's model)
+    noise_b: float = 1.3103
+    min_sigma_m: float = 0.002  # floor of the per-point sigma (model error, beam width)
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "BeaconConfig":
+        d = dict(d or {})
+        bad = sorted(set(d) - set(cls.__dataclass_fields__))
+        if bad:
+            from ..errors import ConfigError
+
+            raise ConfigError(f"unknown beacon settings {bad}; known: {sorted(cls.__dataclass_fields__)}")
+        return cls(**d)
+
+
+@dataclass(frozen=True)
+class BeaconObservation:
+    range_m: float  # laser origin to the cylinder's centre
+    bearing_rad: float  # in the laser frame, counter-clockwise from its x axis
+    var_range: float
+    var_bearing: float
+    n_points: int
+    fit_rms_m: float
+    center: tuple[float, float]  # in the laser frame
+
+    def as_tuple(self) -> tuple[float, float, float, float]:
+        return (self.range_m, self.bearing_rad, self.var_range, self.var_bearing)
+
+
+def _clusters(valid: np.ndarray, pts: np.ndarray, rng: np.ndarray, step: float, jump: float,
+              circular: bool) -> list[np.ndarray]:
+    n = len(valid)
+    out, cur = [], []
+    for i in range(n):
+        if not valid[i]:
+            if cur:
+                out.append(cur)
+                cur = []
+            continue
+        if cur:
+            j = cur[-1]
+            thr = jump + 3 * step * max(rng[i], rng[j])
+            if np.linalg.norm(pts[i] - pts[j]) > thr:
+                out.append(cur)
+                cur = []
+        cur.append(i)
+    if cur:
+        out.append(cur)
+    if circular and len(out) > 1 and out[0][0] == 0 and out[-1][-1] == n - 1:
+        i, j = out[-1][-1], out[0][0]
+        thr = jump + 3 * step * max(rng[i], rng[j])
+        if np.linalg.norm(pts[i] - pts[j]) <= thr:
+            out[0] = out[-1] + out[0]
+            out.pop()
+    return [np.array(c) for c in out]
+
+
+def fit_circle(pts: np.ndarray, radius: float, sigma: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """Centre (2,), its covariance (2x2) and the RMS residual of a circle of known radius through points
+    seen from the origin (the centre is behind the points)."""
+    m = pts.mean(axis=0)
+    nm = np.linalg.norm(m)
+    if nm < 1e-6:
+        return None
+    c = m + radius * m / nm * 0.8
+    for _ in range(10):
+        d = pts - c
+        dist = np.linalg.norm(d, axis=1)
+        if np.any(dist < 1e-9):
+            return None
+        r = dist - radius
+        J = -d / dist[:, None]
+        try:
+            step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        except np.linalg.LinAlgError:
+            return None
+        c = c + step
+        if np.linalg.norm(step) < 1e-7:
+            break
+    d = pts - c
+    dist = np.linalg.norm(d, axis=1)
+    r = dist - radius
+    J = -d / dist[:, None]
+    A = J.T @ J
+    if np.linalg.cond(A) > 1e8 or np.linalg.norm(c) < np.linalg.norm(m):
+        return None
+    cov = np.linalg.inv(A) * sigma ** 2
+    return c, cov, float(np.sqrt(np.mean(r ** 2)))
+
+
+def extract_beacons(ranges: np.ndarray, angles: np.ndarray, cfg: BeaconConfig | None = None,
+                    range_min: float = 0.02, range_max: float = 6.0) -> list[BeaconObservation]:
+    """Beacon candidates in one scan (laser frame)."""
+    cfg = cfg or BeaconConfig()
+    rng = np.asarray(ranges, dtype=float).ravel()
+    ang = np.asarray(angles, dtype=float).ravel()
+    if len(rng) != len(ang) or len(rng) < 3:
+        return []
+    # a full turn repeats one angle (SimTwo's ranger2d): drop the duplicate last ray
+    circular = abs(((ang[-1] - ang[0]) % (2 * math.pi))) < 1e-6 or \
+        abs(((ang[-1] - ang[0]) % (2 * math.pi)) - 2 * math.pi) < 1e-6
+    if circular:
+        rng, ang = rng[:-1], ang[:-1]
+    step = float(np.median(np.abs(np.diff(ang)))) if len(ang) > 1 else 0.0
+    circular = circular or abs(len(ang) * step - 2 * math.pi) < 1.5 * step
+    valid = np.isfinite(rng) & (rng >= range_min) & (rng <= min(range_max, cfg.max_range_m))
+    r0 = np.where(valid, rng, 0.0)
+    pts = np.stack([r0 * np.cos(ang), r0 * np.sin(ang)], axis=1)
+    out = []
+    n = len(rng)
+    radius = cfg.diameter_m / 2
+    for idx in _clusters(valid, pts, r0, step, cfg.jump_m, circular):
+        if len(idx) < cfg.min_points:
+            continue
+        p = pts[idx]
+        if np.linalg.norm(p[-1] - p[0]) > cfg.diameter_m + cfg.width_tolerance_m:
+            continue
+        near = float(r0[idx].min())
+        fg = True
+        for k in (idx[0] - 1, idx[-1] + 1):
+            if not circular and (k < 0 or k >= n):
+                continue
+            k %= n
+            if valid[k] and rng[k] < near + cfg.foreground_m:
+                fg = False
+        if not fg:
+            continue
+        sigma = max(cfg.min_sigma_m, cfg.noise_a * math.exp(cfg.noise_b * near))
+        fit = fit_circle(p, radius, sigma)
+        if fit is None:
+            continue
+        c, cov, rms = fit
+        if rms > max(cfg.max_fit_rms_m, 3 * sigma):
+            continue
+        rho = float(np.hypot(c[0], c[1]))
+        u = c / rho
+        # polar covariance: range along u, bearing across u / rho
+        var_r = float(u @ cov @ u)
+        v = np.array([-u[1], u[0]])
+        var_b = float(v @ cov @ v) / rho ** 2 + (step / math.sqrt(12)) ** 2 / len(idx)
+        out.append(BeaconObservation(rho, math.atan2(c[1], c[0]), max(var_r, 1e-8), max(var_b, 1e-10),
+                                     len(idx), rms, (float(c[0]), float(c[1]))))
+    return out
+
+
+def simulate_scan(pose: tuple[float, float, float], beacons, diameter: float, angles: np.ndarray,
+                  laser_xy=(0.0, 0.0), noise: tuple[float, float] = (0.001524, 1.3103),
+                  range_max: float = 6.0, rng: np.random.Generator | None = None,
+                  segments: list[tuple[tuple[float, float], tuple[float, float]]] = ()) -> np.ndarray:
+    """Ranges of a 2D LIDAR at pose seeing cylinders (and optional wall segments); -1 for no return.
+    For tests and examples."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    ox = pose[0] + c * laser_xy[0] - s * laser_xy[1]
+    oy = pose[1] + s * laser_xy[0] + c * laser_xy[1]
+    out = np.full(len(angles), np.inf)
+    R = diameter / 2
+    for i, a in enumerate(angles):
+        dx, dy = math.cos(pose[2] + a), math.sin(pose[2] + a)
+        best = np.inf
+        for bx, by in beacons:
+            fx, fy = ox - bx, oy - by
+            b = fx * dx + fy * dy
+            cc = fx * fx + fy * fy - R * R
+            disc = b * b - cc
+            if disc >= 0:
+                t = -b - math.sqrt(disc)
+                if t > 0:
+                    best = min(best, t)
+        for (x1, y1), (x2, y2) in segments:
+            ex, ey = x2 - x1, y2 - y1
+            den = dx * ey - dy * ex
+            if abs(den) < 1e-12:
+                continue
+            t = ((x1 - ox) * ey - (y1 - oy) * ex) / den
+            u = ((x1 - ox) * dy - (y1 - oy) * dx) / den
+            if t > 0 and 0 <= u <= 1:
+                best = min(best, t)
+        out[i] = best
+    if rng is not None:
+        fin = np.isfinite(out)
+        out[fin] += rng.normal(0, noise[0] * np.exp(noise[1] * out[fin]))
+    out[~np.isfinite(out) | (out > range_max)] = -1.0
+    return out

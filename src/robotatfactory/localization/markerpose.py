@@ -1,0 +1,175 @@
+"""Per-marker poses (IPPE, both solutions), the camera-mount check and the corner noise model.
+
+Frames: ``T_cam_marker`` maps marker-frame points into ``camera_optical`` (x right, y down, z forward);
+``T_world_cam = T_world_marker @ inv(T_cam_marker)`` (the paper's equation 1); the robot's ``base_link`` is
+``T_world_base = T_world_cam @ inv(T_base_cam)`` with the camera mount ``T_base_cam`` from the robot file.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ..field.model import Field, Marker
+from . import reasons
+from .detect import Detection
+from .geometry import inv, rt_matrix, tilt_angle
+
+
+@dataclass
+class PoseConfig:
+    """Settings of the pose estimators (units in the names; angles in degrees)."""
+
+    # corner noise model, pixels (1 sigma per coordinate):
+    #   sigma = min(sigma_max_px, sigma_min_px + sigma_px_per_m * d / max(cos a, 0.1) ** sigma_cos_exp)
+    # d = camera-to-marker distance (m), a = angle between the marker's normal and the line of sight.
+    sigma_min_px: float = 0.05
+    sigma_px_per_m: float = 0.62
+    sigma_cos_exp: float = 0.85
+    sigma_max_px: float = 0.95
+    # mount check: base_link implied by a camera pose must be on the floor and level
+    mount_max_height_m: float = 0.04
+    mount_max_tilt_deg: float = 8.0
+    mount_sigma_height_m: float = 0.01  # for ranking solutions
+    mount_sigma_tilt_deg: float = 2.0
+    # per-marker sanity
+    min_side_px: float = 4.0
+    min_area_px2: float = 20.0
+    max_side_ratio: float = 12.0
+    max_marker_distance_m: float = 2.5
+    # frame-level
+    lone_marker_max_distance_m: float = 0.45  # one marker only and farther: rejected (ambiguity zone)
+    marker_outlier_chi2: float = 60.0  # per marker (8 residuals), normalised by the noise model
+    max_rms_px: float = 3.0
+    field_margin_m: float = 0.15
+    max_position_sigma_m: float = 0.10
+    max_heading_sigma_deg: float = 10.0
+    # model-error floor added to every planar covariance (camera model, mount, timing within a frame)
+    floor_position_sigma_m: float = 0.0015
+    floor_heading_sigma_deg: float = 0.15
+    # consensus: a marker agrees with a hypothesis when its RMS reprojection error is under this (pixels)
+    consensus_px: float = 10.0
+    # how many of the best-supported hypotheses seed the LM of the planar fit
+    refine_seeds: int = 2
+    # how many of the closest markers' mount-checked IPPE solutions seed the all-marker PnP refinement
+    seed_markers: int = 2
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "PoseConfig":
+        d = dict(d or {})
+        bad = sorted(set(d) - set(cls.__dataclass_fields__))
+        if bad:
+            from ..errors import ConfigError
+
+            raise ConfigError(f"unknown pose settings {bad}; known: {sorted(cls.__dataclass_fields__)}")
+        return cls(**d)
+
+    def corner_sigma(self, distance: float, cos_view: float) -> float:
+        s = self.sigma_min_px + self.sigma_px_per_m * distance / max(cos_view, 0.1) ** self.sigma_cos_exp
+        return min(self.sigma_max_px, s) if self.sigma_max_px > 0 else s
+
+
+@dataclass
+class MountCheck:
+    height_m: float  # base_link's z implied by the camera pose (0 on the floor)
+    tilt_rad: float  # angle between base_link's z and the world's z (camera tilt or roll error)
+    ok: bool
+    score: float  # (height/sigma)^2 + (tilt/sigma)^2, smaller is better
+
+
+def mount_check(T_world_cam: np.ndarray, T_cam_base: np.ndarray, cfg: PoseConfig) -> MountCheck:
+    """Is a camera pose consistent with the camera on a robot standing on the floor?"""
+    T_wb = T_world_cam @ T_cam_base
+    h = float(T_wb[2, 3])
+    tilt = tilt_angle(T_wb[:3, :3])
+    ok = abs(h) <= cfg.mount_max_height_m and tilt <= math.radians(cfg.mount_max_tilt_deg)
+    score = (h / cfg.mount_sigma_height_m) ** 2 + (tilt / math.radians(cfg.mount_sigma_tilt_deg)) ** 2
+    return MountCheck(h, tilt, ok, score)
+
+
+@dataclass
+class MarkerObservation:
+    """A detected field marker with its IPPE poses. ``solutions[0]`` is IPPE's best (lowest error)."""
+
+    marker: Marker
+    corners: np.ndarray  # 4x2 pixels
+    solutions: list[np.ndarray]  # T_cam_marker candidates (4x4)
+    errors_px: list[float]  # RMS reprojection error of each solution
+    mount: list[MountCheck]  # mount check of each solution
+    distance_m: float  # camera to marker centre (best solution)
+    cos_view: float  # cos of the angle between the marker's normal and the line of sight
+    sigma_px: float  # corner noise (1 sigma per coordinate) from the model
+    checked: int | None = None  # index of the solution the mount check picks (None: none passes)
+
+    @property
+    def id(self) -> int:
+        return self.marker.id
+
+    def T_world_cam(self, i: int = 0) -> np.ndarray:
+        return self.marker.pose @ inv(self.solutions[i])
+
+
+def _degenerate(c: np.ndarray, cfg: PoseConfig) -> bool:
+    if not np.all(np.isfinite(c)):
+        return True
+    e = np.roll(c, -1, axis=0) - c
+    sides = np.linalg.norm(e, axis=1)
+    if sides.min() < cfg.min_side_px or sides.max() > cfg.max_side_ratio * sides.min():
+        return True
+    cross = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
+    if not (np.all(cross > 0) or np.all(cross < 0)):  # not strictly convex
+        return True
+    x, y = c[:, 0], c[:, 1]
+    area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    return area < cfg.min_area_px2
+
+
+def observe(detections: list[Detection], field: Field, K: np.ndarray, T_cam_base: np.ndarray,
+            cfg: PoseConfig, rejected: list[tuple[int, str]] | None = None) -> list[MarkerObservation]:
+    """Per-marker IPPE for every usable detection; unusable ones go to ``rejected`` as (id, reason)."""
+    rejected = rejected if rejected is not None else []
+    ids = [d.id for d in detections]
+    out = []
+    for d in detections:
+        if not field.has_marker(d.id):
+            rejected.append((d.id, reasons.UNKNOWN_ID))
+            continue
+        if ids.count(d.id) > 1:
+            rejected.append((d.id, reasons.DUPLICATE_ID))
+            continue
+        c = np.asarray(d.corners, dtype=np.float64).reshape(4, 2)
+        if _degenerate(c, cfg):
+            rejected.append((d.id, reasons.DEGENERATE))
+            continue
+        m = field.marker(d.id)
+        try:
+            n, rvecs, tvecs, errs = cv2.solvePnPGeneric(m.corners_local, c, K, None,
+                                                        flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        except cv2.error:
+            n = 0
+        if not n:
+            rejected.append((d.id, reasons.PNP_FAILED))
+            continue
+        sols = [rt_matrix(r, t) for r, t in zip(rvecs, tvecs)]
+        errs = [float(e) for e in np.asarray(errs).ravel()] if errs is not None else [0.0] * len(sols)
+        keep = [i for i, T in enumerate(sols) if np.all(np.isfinite(T)) and T[2, 3] > 0]
+        if not keep:
+            rejected.append((d.id, reasons.PNP_FAILED))
+            continue
+        sols, errs = [sols[i] for i in keep], [errs[i] for i in keep]
+        dist = float(np.linalg.norm(sols[0][:3, 3]))
+        if dist > cfg.max_marker_distance_m:
+            rejected.append((d.id, reasons.TOO_FAR))
+            continue
+        T_wc = [m.pose @ inv(T) for T in sols]
+        mounts = [mount_check(T, T_cam_base, cfg) for T in T_wc]
+        passing = [i for i, mc in enumerate(mounts) if mc.ok]
+        checked = min(passing, key=lambda i: mounts[i].score) if passing else None
+        cam_pos = T_wc[0][:3, 3]
+        los = cam_pos - m.position
+        cos_view = abs(float(np.dot(los, m.normal))) / max(float(np.linalg.norm(los)), 1e-9)
+        out.append(MarkerObservation(m, c, sols, errs, mounts, dist, cos_view,
+                                     cfg.corner_sigma(dist, cos_view), checked))
+    return out
