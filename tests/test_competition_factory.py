@@ -294,3 +294,22 @@ def test_random_movements_never_produce_an_invalid_state(parts, delay, moves):
         assert tp.new_type is (G if tp.slot.zone == "machine_A" else B)
     rep = w.report()
     assert 0 <= rep.points <= w.factory.setup.max_points
+
+
+_junk = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(-5, 10), st.floats(allow_nan=True),
+                               st.text(max_size=3)),
+                     lambda inner: st.one_of(st.lists(inner, max_size=4), st.tuples(inner, inner),
+                                             st.dictionaries(st.integers(-2, 6), inner, max_size=4)),
+                     max_leaves=10)
+
+
+@settings(max_examples=300, deadline=None)
+@given(t=_junk, part_xy=_junk, robot_xy=_junk, held=_junk)
+def test_step_survives_any_input(t, part_xy, robot_xy, held):
+    f = Factory(FIELD, RoundSetup.make(3, parts="RGBB", processing_delay=0.0))
+    f.start(0.0)
+    out = f.step(t, part_xy, robot_xy, held)
+    assert isinstance(out, list)
+    assert f.counters["internal_errors"] == 0  # handled as bad input, not caught as a bug
+    for zone in ("incoming", "outgoing", "machine_A", "machine_B"):
+        assert len(f.letters(zone)) == 4

@@ -163,8 +163,10 @@ class Factory:
         self._false_start = False
         self._robot_checked = False
         self._counters = dict(steps=0, bad_time=0, bad_positions=0, bad_held=0, unknown_parts=0, missing_parts=0,
-                              bad_robot=0, processing=0, processed=0, cancelled=0)
+                              bad_robot=0, processing=0, processed=0, cancelled=0,
+                              internal_errors=0)
         self._rlog = RateLimitedLog(log)
+        self._warned_unknown: set = set()
 
     # ----------------------------------------------------------------------------------------------- setup
     def initial_parts(self) -> list[tuple[int, PartType, Slot]]:
@@ -260,8 +262,8 @@ class Factory:
 
     @property
     def counters(self) -> dict[str, int]:
-        """steps, rejected inputs (bad_time, bad_positions, bad_held, unknown_parts, missing_parts, bad_robot) and
-        machine activity (processing, processed, cancelled)."""
+        """steps, rejected inputs (bad_time, bad_positions, bad_held, unknown_parts, missing_parts, bad_robot),
+        machine activity (processing, processed, cancelled) and internal_errors (bugs caught in step)."""
         with self._lock:
             return dict(self._counters)
 
@@ -277,30 +279,39 @@ class Factory:
         with self._lock:
             self._counters["steps"] += 1
             try:
-                t = float(t)
-            except (TypeError, ValueError):
-                t = math.nan
-            if not math.isfinite(t):
-                self._counters["bad_time"] += 1
-                self._rlog.warn("bad_time", "factory step with a bad time %r ignored", t)
+                return self._step(t, part_xy, robot_xy, held)
+            except Exception as e:  # a bug must not stop the simulator: count, log, carry on
+                self._counters["internal_errors"] += 1
+                self._rlog.warn("internal", "factory step failed (state kept): %r", e)
                 return []
-            if self._last_t is not None and t < self._last_t:
-                self._counters["bad_time"] += 1
-                self._rlog.warn("time_back", "factory time went back from %.3f to %.3f s", self._last_t, t)
-            self._last_t = t
-            held_ids = self._clean_held(held)
-            positions = self._clean_positions(part_xy)
-            robot = self._clean_xy(robot_xy)
-            if robot is None:
-                self._counters["bad_robot"] += 1
-                self._rlog.warn("bad_robot", "bad robot position %r: machines wait", robot_xy)
-            self._held = held_ids
-            if robot is not None:
-                self._check_robot(t, robot)
-            self._update_slots(t, positions, held_ids)
-            if not self.running(t):
-                return []
-            return self._run_machines(t, robot)
+
+    def _step(self, t, part_xy, robot_xy, held) -> list[Teleport]:
+        """:meth:`step` without the safety net (runs under the lock)."""
+        try:
+            t = float(t)
+        except (TypeError, ValueError, OverflowError):
+            t = math.nan
+        if not math.isfinite(t):
+            self._counters["bad_time"] += 1
+            self._rlog.warn("bad_time", "factory step with a bad time %r ignored", t)
+            return []
+        if self._last_t is not None and t < self._last_t:
+            self._counters["bad_time"] += 1
+            self._rlog.warn("time_back", "factory time went back from %.3f to %.3f s", self._last_t, t)
+        self._last_t = t
+        held_ids = self._clean_held(held)
+        positions = self._clean_positions(part_xy)
+        robot = self._clean_xy(robot_xy)
+        if robot is None:
+            self._counters["bad_robot"] += 1
+            self._rlog.warn("bad_robot", "bad robot position %r: machines wait", robot_xy)
+        self._held = held_ids
+        if robot is not None:
+            self._check_robot(t, robot)
+        self._update_slots(t, positions, held_ids)
+        if not self.running(t):
+            return []
+        return self._run_machines(t, robot)
 
     # ------------------------------------------------------------------------------------------ internals
     def _check_robot(self, t: float, robot: tuple[float, float]) -> None:
@@ -333,7 +344,11 @@ class Factory:
             self._rlog.warn("bad_held", "held parts must be a collection of ids, got %r", held)
             return out
         for pid in items:
-            if pid in self._types:
+            try:
+                known = pid in self._types
+            except TypeError:  # unhashable junk
+                known = False
+            if known:
                 out.add(pid)
             else:
                 self._counters["unknown_parts"] += 1
@@ -351,7 +366,9 @@ class Factory:
         for pid, xy in items:
             if pid not in self._types:
                 self._counters["unknown_parts"] += 1
-                self._rlog.warn("unknown_part", "position of unknown part id %r ignored", pid)
+                if pid not in self._warned_unknown and len(self._warned_unknown) < 100:
+                    self._warned_unknown.add(pid)  # once per id: a simulator may hold extra parts
+                    log.warning("part id %r is not a part of this round: the factory ignores it", pid)
                 continue
             p = self._clean_xy(xy)
             if p is None:
@@ -368,7 +385,7 @@ class Factory:
     def _clean_xy(xy) -> tuple[float, float] | None:
         try:
             x, y = float(xy[0]), float(xy[1])
-        except (TypeError, ValueError, IndexError, KeyError):
+        except (TypeError, ValueError, IndexError, KeyError, OverflowError):
             return None
         if not (math.isfinite(x) and math.isfinite(y)):
             return None
