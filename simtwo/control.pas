@@ -1,0 +1,730 @@
+// robotatfactory -- SimTwo scene script for the RobotAtFactory 4.0 scene (RobotFactoryPro2022).
+//
+// Every control cycle (the script period, 40 ms) this script
+//   1. reads both encoders (GetAxisOdo: ticks since the previous cycle), the ground truth
+//      (GetRobotX/Y/Theta), the contact switch, the LIDAR (GetSensorValues of a ranger2d);
+//   2. sends them to the ROS bridge (`raf bridge`) as one SensorFrame datagram, exactly as
+//      docs/protocol.md (protocol version 1) defines it: labelled strings, CR LF line ends,
+//      integers %d, reals %.6g with a '.' decimal point whatever the Windows locale;
+//   3. reads the bridge's Command reply (V, W, S; the first occurrence of a label wins, as
+//      ReadUDPData concatenates everything received since the previous call), checks its
+//      protocol version and Seq, turns V and W into wheel speed references for SimTwo's own
+//      speed controller (SetAxisSpeedRef) and switches the electromagnet (SetSensorVin).
+// A missing or garbled reply keeps the last command; no valid command for COMMAND_TIMEOUT_MS
+// of simulation time stops the wheels. Nothing here ever waits longer than LOCKSTEP_WAIT_MS.
+//
+// Plain procedural PascalScript: no classes, no nested routines, no reliance on short-circuit
+// evaluation (PascalScript evaluates both sides of `and`/`or`). Settings: the constants below.
+// docs/simtwo.md explains the installation; tests/test_simtwo_pascal.py compiles this very file
+// with Free Pascal against a stand-in of SimTwo's script API (simtwo/test/) and runs it.
+
+const
+  // ---- where the bridge is ----------------------------------------------------------------
+  BRIDGE_IP = '127.0.0.1';     // the machine running `raf bridge` (its IPv4 address)
+  BRIDGE_PORT = 9810;          // the bridge's UDP port (SimTwo itself listens on 9808, I/O tab)
+
+  // ---- waiting for the reply --------------------------------------------------------------
+  LOCKSTEP = 0;                // 1: after sending, poll for the reply for up to LOCKSTEP_WAIT_MS
+                               // 0: free running, apply what arrived since the previous cycle
+  LOCKSTEP_WAIT_MS = 30;       // the most one cycle ever waits (wall-clock milliseconds)
+  COMMAND_TIMEOUT_MS = 500;    // no valid command for this long (simulation ms): stop the wheels
+
+  // ---- the robot (AGV.xml of RobotFactoryPro2022) -----------------------------------------
+  ROBOT_ID = 'AGV';            // the robot's ID in scene.xml
+  LEFT_AXIS_ID = 'LeftAxis';   // axis 0
+  RIGHT_AXIS_ID = 'RightAxis'; // axis 1
+  CONTACT_ID = 'MicroSwitch';  // IRSharp beam: a value > 0 means something touches it
+  MAGNET_ID = 'solenoid1';     // solenoid sensor, switched with SetSensorVin
+  LIDAR_ID = 'ranger2d';       // the ranger2d of simtwo/AGV_lidar.xml
+  WHEEL_RADIUS = 0.0325;       // m
+  TRACK = 0.135;               // m, between the wheels
+  MAGNET_VIN_ON = 1;           // SetSensorVin value for "on" (force 0.5 * Vin * fmax)
+
+  // ---- wheel speed control: SimTwo's PID (every 10 ms, inside the physics loop) ---------------
+  SET_SPEED_GAINS = 1;         // 1: set the gains below at Initialize; 0: keep the scene's
+  SPEED_KP = 1.0;              // V per rad/s of error
+  SPEED_KI = 0.1;              // V per rad/s of error, per controller period (SimTwo sums errors)
+  SPEED_KD = 0.0;
+  SPEED_KF = 0.2585;           // V per rad/s of reference: the motors' back-EMF constant
+
+  // ---- LIDAR range noise, sigma = A * exp(B * d) metres (A = 0: SimTwo's ranges unchanged) ----
+  LIDAR_NOISE_A = 0.001524;
+  LIDAR_NOISE_B = 1.3103;
+  LIDAR_NOISE_EVERY = 5;       // a ray gets a new noise sample every 5 cycles (one 0.2 s sweep)
+
+  // ---- protocol -----------------------------------------------------------------------------
+  PROTOCOL_VERSION = 1;
+  MAX_PARSE_CHARS = 2048;      // a reply is about 50 bytes; longer input is cut here
+  MAX_LINES = 2048;
+  LOG_EVERY = 250;             // repeated warnings: the first 3, then every 250th
+  STATUS_EVERY = 1500;         // a status line every 1500 cycles (one minute)
+  EOL = #13#10;
+
+var
+  // settings in effect: Initialize copies the constants (a test harness may change them after)
+  CfgBridgeIP: string;
+  CfgBridgePort: integer;
+  CfgLockstep: integer;
+  CfgLockstepWaitMs: integer;
+  CfgCommandTimeoutMs: integer;
+  CfgLidarNoiseA, CfgLidarNoiseB: double;
+
+  iRobot, iAxisLeft, iAxisRight, iContact, iMagnet, iLidar: integer;
+  DecSep: string;              // this Windows locale's decimal separator, as Format writes it
+
+  FrameSeq: integer;           // Seq of the frame this cycle sends: 0 for the first
+  TimeMs: integer;             // simulation time at the end of this cycle, ms
+  OdoLeft, OdoRight: integer;  // running encoder totals since Initialize
+
+  CmdV, CmdW: double;          // the command in effect (m/s, rad/s)
+  CmdMagnet: integer;          // 0/1
+  MagnetApplied: integer;      // what SetSensorVin applied during the cycle that just ended
+  LastAppliedSeq: integer;     // Seq of the last accepted reply (-1: none yet)
+  LastValidMs: integer;        // TimeMs when a valid reply was last accepted
+  TimedOut: integer;           // 1 while the wheels are stopped for lack of commands
+
+  NFrames, NAccepted, NRejected, NTimeouts, NWaitTimeouts: integer;
+
+  // the reply being decoded
+  RLines: array[0..2047] of string;
+  RCount: integer;
+  RNonAscii: integer;
+  RepSeq, RepMagnet: integer;
+  RepV, RepW: double;
+  RepError: string;
+
+  // LIDAR noise per ray: the raw value it was drawn for, the noisy value sent
+  LidarRaw, LidarNoisy: array[0..1023] of double;
+
+
+// ---------------------------------------------------------------------------------------------
+// Text helpers (locale-free)
+// ---------------------------------------------------------------------------------------------
+
+function FmtReal(x: double): string;
+var s: string;
+    p: integer;
+begin
+  s := Format('%.6g', [x]);
+  if DecSep <> '.' then begin
+    p := Pos(DecSep, s);
+    if p > 0 then s := Copy(s, 1, p - 1) + '.' + Copy(s, p + Length(DecSep), Length(s));
+  end;
+  result := s;
+end;
+
+function LabelLine(lbl, value: string): string;
+begin
+  result := lbl + EOL + value + EOL + EOL;
+end;
+
+// Python's str.strip() blanks among ASCII: TAB LF VT FF CR, 28..31 and space
+function IsBlank(c: char): boolean;
+var o: integer;
+begin
+  o := Ord(c);
+  result := ((o >= 9) and (o <= 13)) or ((o >= 28) and (o <= 32));
+end;
+
+function StripBlanks(s: string): string;
+var a, b: integer;
+    go: boolean;
+begin
+  a := 1;
+  b := Length(s);
+  go := true;
+  while go do begin
+    if a > b then go := false
+    else if IsBlank(s[a]) then a := a + 1
+    else go := false;
+  end;
+  go := true;
+  while go do begin
+    if b < a then go := false
+    else if IsBlank(s[b]) then b := b - 1
+    else go := false;
+  end;
+  result := Copy(s, a, b - a + 1);
+end;
+
+function IsDigit(c: char): boolean;
+begin
+  result := (c >= '0') and (c <= '9');
+end;
+
+// An integer: optional sign, decimal digits, blanks around. At most 9 significant digits.
+function ParseIntStr(s: string; var v: integer): boolean;
+var i, n, nd, d: integer;
+    neg, go: boolean;
+begin
+  result := false;
+  v := 0;
+  s := StripBlanks(s);
+  n := Length(s);
+  if n = 0 then exit;
+  i := 1;
+  neg := false;
+  if (s[1] = '+') or (s[1] = '-') then begin
+    neg := (s[1] = '-');
+    i := 2;
+  end;
+  if i > n then exit;
+  nd := 0;
+  go := true;
+  while go do begin
+    if i > n then go := false
+    else if IsDigit(s[i]) then begin
+      d := Ord(s[i]) - Ord('0');
+      if (v > 0) or (d > 0) then nd := nd + 1;
+      if nd > 9 then exit;
+      v := v * 10 + d;
+      i := i + 1;
+    end else exit;           // anything else: not an integer
+  end;
+  if neg then v := -v;
+  result := true;
+end;
+
+// A real as Python's float() reads it (without inf/nan/underscores): [sign] digits [. digits]
+// [e|E [sign] digits], or [sign] . digits [...]. Magnitudes of 1e15 and more are refused.
+function ParseRealStr(s: string; var v: double): boolean;
+var i, n, nd, e10, ev, ae, k: integer;
+    m, p: double;
+    neg, eneg, sawDigit, sawExpDigit, go: boolean;
+    c: char;
+begin
+  result := false;
+  v := 0;
+  s := StripBlanks(s);
+  n := Length(s);
+  if n = 0 then exit;
+  i := 1;
+  neg := false;
+  if (s[1] = '+') or (s[1] = '-') then begin
+    neg := (s[1] = '-');
+    i := 2;
+  end;
+  m := 0;
+  nd := 0;                   // significant digits kept in m (at most 18)
+  e10 := 0;                  // value = m * 10^e10
+  sawDigit := false;
+  // integer part
+  go := true;
+  while go do begin
+    if i > n then go := false
+    else if IsDigit(s[i]) then begin
+      sawDigit := true;
+      if nd < 18 then begin
+        m := m * 10 + (Ord(s[i]) - Ord('0'));
+        if m > 0 then nd := nd + 1;
+      end else e10 := e10 + 1;
+      i := i + 1;
+    end else go := false;
+  end;
+  // fraction
+  if i <= n then begin
+    if s[i] = '.' then begin
+      i := i + 1;
+      go := true;
+      while go do begin
+        if i > n then go := false
+        else if IsDigit(s[i]) then begin
+          sawDigit := true;
+          if nd < 18 then begin
+            m := m * 10 + (Ord(s[i]) - Ord('0'));
+            if m > 0 then nd := nd + 1;
+            e10 := e10 - 1;
+          end;
+          i := i + 1;
+        end else go := false;
+      end;
+    end;
+  end;
+  if not sawDigit then exit;
+  // exponent
+  if i <= n then begin
+    c := s[i];
+    if (c = 'e') or (c = 'E') then begin
+      i := i + 1;
+      eneg := false;
+      if i <= n then begin
+        if (s[i] = '+') or (s[i] = '-') then begin
+          eneg := (s[i] = '-');
+          i := i + 1;
+        end;
+      end;
+      ev := 0;
+      sawExpDigit := false;
+      go := true;
+      while go do begin
+        if i > n then go := false
+        else if IsDigit(s[i]) then begin
+          sawExpDigit := true;
+          if ev < 100000 then ev := ev * 10 + (Ord(s[i]) - Ord('0'));
+          i := i + 1;
+        end else go := false;
+      end;
+      if not sawExpDigit then exit;
+      if eneg then e10 := e10 - ev else e10 := e10 + ev;
+    end;
+  end;
+  if i <= n then exit;       // trailing characters
+  if m = 0 then begin
+    v := 0;
+    result := true;
+    exit;
+  end;
+  if nd + e10 > 15 then exit;           // 1e15 or more: no speed is that large
+  if e10 < -300 then begin
+    v := 0;
+    result := true;
+    exit;
+  end;
+  ae := e10;
+  if ae < 0 then ae := -ae;
+  p := 1;
+  for k := 1 to ae do p := p * 10;
+  if e10 >= 0 then v := m * p else v := m / p;
+  if neg then v := -v;
+  result := true;
+end;
+
+
+// ---------------------------------------------------------------------------------------------
+// Reading a reply: lines split on CR, LF or CR LF; a label's value is the line after the FIRST
+// line equal to it (as SimTwo scripts and robotatfactory.simtwo.LabelledValues read it)
+// ---------------------------------------------------------------------------------------------
+
+procedure SplitReply(txt: string);
+var i, n, start: integer;
+    c: char;
+begin
+  RCount := 0;
+  RNonAscii := 0;
+  n := Length(txt);
+  start := 1;
+  i := 1;
+  while i <= n do begin
+    c := txt[i];
+    if Ord(c) > 127 then RNonAscii := 1;
+    if (c = #13) or (c = #10) then begin
+      if RCount < MAX_LINES then begin
+        RLines[RCount] := Copy(txt, start, i - start);
+        RCount := RCount + 1;
+      end;
+      if c = #13 then begin
+        if i < n then begin
+          if txt[i + 1] = #10 then i := i + 1;
+        end;
+      end;
+      start := i + 1;
+    end;
+    i := i + 1;
+  end;
+  if start <= n then begin     // a last line without a line end
+    if RCount < MAX_LINES then begin
+      RLines[RCount] := Copy(txt, start, n - start + 1);
+      RCount := RCount + 1;
+    end;
+  end;
+end;
+
+function FindLabel(lbl: string; var value: string): boolean;
+var i: integer;
+begin
+  result := false;
+  value := '';
+  for i := 0 to RCount - 1 do begin
+    if RLines[i] = lbl then begin
+      if i + 1 < RCount then begin
+        value := RLines[i + 1];
+        result := true;
+      end;
+      exit;
+    end;
+  end;
+end;
+
+// Decodes a Command (RAF, Seq, V, W, S) into RepSeq, RepV, RepW, RepMagnet; false and RepError
+// when anything is missing or malformed (the whole reply is then ignored)
+function DecodeReply(txt: string): boolean;
+var s: string;
+    raf: integer;
+begin
+  result := false;
+  RepError := '';
+  if Length(txt) > MAX_PARSE_CHARS then txt := Copy(txt, 1, MAX_PARSE_CHARS);
+  SplitReply(txt);
+  if RNonAscii = 1 then begin
+    RepError := 'bytes that are not ASCII';
+    exit;
+  end;
+  if not FindLabel('RAF', s) then begin
+    RepError := 'no RAF label (not a RobotAtFactory command)';
+    exit;
+  end;
+  if not ParseIntStr(s, raf) then begin
+    RepError := 'RAF is not an integer';
+    exit;
+  end;
+  if raf <> PROTOCOL_VERSION then begin
+    RepError := 'protocol version ' + IntToStr(raf) + '; this script speaks version ' + IntToStr(PROTOCOL_VERSION);
+    exit;
+  end;
+  if not FindLabel('V', s) then begin
+    RepError := 'label V is missing';
+    exit;
+  end;
+  if not ParseRealStr(s, RepV) then begin
+    RepError := 'V is not a real number';
+    exit;
+  end;
+  if not FindLabel('W', s) then begin
+    RepError := 'label W is missing';
+    exit;
+  end;
+  if not ParseRealStr(s, RepW) then begin
+    RepError := 'W is not a real number';
+    exit;
+  end;
+  if not FindLabel('S', s) then begin
+    RepError := 'label S is missing';
+    exit;
+  end;
+  if not ParseIntStr(s, RepMagnet) then begin
+    RepError := 'S is not an integer';
+    exit;
+  end;
+  if (RepMagnet <> 0) and (RepMagnet <> 1) then begin
+    RepError := 'S is not 0 or 1';
+    exit;
+  end;
+  if not FindLabel('Seq', s) then begin
+    RepError := 'label Seq is missing';
+    exit;
+  end;
+  if not ParseIntStr(s, RepSeq) then begin
+    RepError := 'Seq is not an integer';
+    exit;
+  end;
+  result := true;
+end;
+
+// A reply answers a frame already sent (Seq <= FrameSeq) and newer than the last one applied;
+// Seq -1 is an unsolicited command (e.g. the bridge's watchdog stop) and always accepted
+function SeqAcceptable(seq: integer): boolean;
+begin
+  result := false;
+  if seq = -1 then result := true
+  else if (seq >= 0) and (seq <= FrameSeq) and (seq > LastAppliedSeq) then result := true;
+end;
+
+
+// ---------------------------------------------------------------------------------------------
+// Logging (SimTwo's script output window), rate-limited for repeated events
+// ---------------------------------------------------------------------------------------------
+
+procedure LogMsg(msg: string);
+begin
+  WriteLn('raf: ' + msg);
+end;
+
+procedure LogRepeated(count: integer; msg: string);
+begin
+  if (count <= 3) or (count mod LOG_EVERY = 0) then
+    LogMsg(msg + ' (' + IntToStr(count) + ' so far)');
+end;
+
+
+// ---------------------------------------------------------------------------------------------
+// UDP
+// ---------------------------------------------------------------------------------------------
+
+// SimTwo keeps every datagram twice: in ReadUDPData's buffer and in ReadUDPPacket's list.
+// This script reads with ReadUDPData, so it empties the list to keep it from growing.
+procedure DrainPacketList;
+var s: string;
+    k: integer;
+begin
+  k := 0;
+  while (GetUDPPacketCount() > 0) and (k < 10000) do begin
+    s := ReadUDPPacket();
+    k := k + 1;
+  end;
+end;
+
+// Polls ReadUDPData for at most waitMs wall-clock milliseconds; '' when nothing arrived
+function WaitForReply(waitMs: integer): string;
+var t0: LongWord;
+    elapsed: integer;
+    s: string;
+    go: boolean;
+begin
+  t0 := GetTickCount();
+  s := ReadUDPData();
+  go := (s = '');
+  while go do begin
+    elapsed := GetTickCount() - t0;
+    if (elapsed >= waitMs) or (elapsed < 0) then go := false
+    else begin
+      s := ReadUDPData();
+      if s <> '' then go := false;
+    end;
+  end;
+  result := s;
+end;
+
+
+// ---------------------------------------------------------------------------------------------
+// Sensors
+// ---------------------------------------------------------------------------------------------
+
+// One LIDAR range as sent: -1 for no return (SimTwo's -1, or anything not >= 0), else the range
+// plus noise of sigma A * exp(B * d), redrawn when the ray changes or every LIDAR_NOISE_EVERY cycles
+function NoisyRange(i: integer; d: double): double;
+var r: double;
+    ok, redraw: boolean;
+begin
+  // written so that NaN fails the test whatever a compiler does with `not (d >= 0)`
+  ok := false;
+  if d >= 0 then begin
+    if d < 1.0e9 then ok := true;
+  end;
+  if not ok then begin
+    result := -1;
+    exit;
+  end;
+  if CfgLidarNoiseA <= 0 then begin
+    result := d;
+    exit;
+  end;
+  if i <= 1023 then begin
+    redraw := (d <> LidarRaw[i]) or ((FrameSeq mod LIDAR_NOISE_EVERY) = 0);
+    if redraw then begin
+      LidarRaw[i] := d;
+      LidarNoisy[i] := d + RandG(0, CfgLidarNoiseA * Exp(CfgLidarNoiseB * d));
+    end;
+    r := LidarNoisy[i];
+  end else
+    r := d + RandG(0, CfgLidarNoiseA * Exp(CfgLidarNoiseB * d));
+  if r < 0 then r := 0;
+  result := r;
+end;
+
+// The Lidar value line ('' without a LIDAR) and the number of rays in it
+function LidarLine(var n: integer): string;
+var M: Matrix;
+    i: integer;
+    d: double;
+    s: string;
+begin
+  s := '';
+  n := 0;
+  if iLidar >= 0 then begin
+    M := GetSensorValues(iRobot, iLidar);
+    n := MNumRows(M);
+    for i := 0 to n - 1 do begin
+      d := NoisyRange(i, Mgetv(M, i, 0));
+      if i > 0 then s := s + ';';
+      if d < 0 then s := s + '-1' else s := s + FmtReal(d);
+    end;
+  end;
+  result := s;
+end;
+
+
+// ---------------------------------------------------------------------------------------------
+// Actuators
+// ---------------------------------------------------------------------------------------------
+
+procedure ApplyCommand;
+var wl, wr: double;
+begin
+  wl := (CmdV - CmdW * TRACK / 2) / WHEEL_RADIUS;     // rad/s, axis 0
+  wr := (CmdV + CmdW * TRACK / 2) / WHEEL_RADIUS;     // rad/s, axis 1
+  SetMotorControllerState(iRobot, iAxisLeft, true);
+  SetMotorControllerState(iRobot, iAxisRight, true);
+  SetAxisSpeedRef(iRobot, iAxisLeft, wl);
+  SetAxisSpeedRef(iRobot, iAxisRight, wr);
+  if iMagnet >= 0 then SetSensorVin(iRobot, iMagnet, CmdMagnet * MAGNET_VIN_ON);
+  MagnetApplied := CmdMagnet;
+end;
+
+
+// ---------------------------------------------------------------------------------------------
+// SimTwo's entry points
+// ---------------------------------------------------------------------------------------------
+
+// this procedure is called periodically (the script period, 40 ms)
+procedure Control;
+var pending, fresh, txt, frame, lidar: string;
+    encL, encR, contact, nRays: integer;
+    accepted: boolean;
+begin
+  TimeMs := TimeMs + Round(ScriptPeriod() * 1000);
+
+  // 1. sensors
+  encL := GetAxisOdo(iRobot, iAxisLeft);
+  encR := GetAxisOdo(iRobot, iAxisRight);
+  OdoLeft := OdoLeft + encL;
+  OdoRight := OdoRight + encR;
+  contact := 0;
+  if iContact >= 0 then begin
+    if GetSensorVal(iRobot, iContact) > 0 then contact := 1;
+  end;
+  lidar := LidarLine(nRays);
+
+  // 2. replies that arrived since the previous cycle (they answer earlier frames)
+  pending := ReadUDPData();
+
+  // 3. the SensorFrame
+  frame := LabelLine('RAF', IntToStr(PROTOCOL_VERSION))
+         + LabelLine('Seq', IntToStr(FrameSeq))
+         + LabelLine('Tms', IntToStr(TimeMs))
+         + LabelLine('Enc1', IntToStr(encL))
+         + LabelLine('Enc2', IntToStr(encR))
+         + LabelLine('Odo1', IntToStr(OdoLeft))
+         + LabelLine('Odo2', IntToStr(OdoRight))
+         + LabelLine('X', FmtReal(GetRobotX(iRobot)))
+         + LabelLine('Y', FmtReal(GetRobotY(iRobot)))
+         + LabelLine('Theta', FmtReal(GetRobotTheta(iRobot)))
+         + LabelLine('Contact', IntToStr(contact))
+         + LabelLine('Magnet', IntToStr(MagnetApplied))
+         + LabelLine('LidarN', IntToStr(nRays))
+         + LabelLine('Lidar', lidar);
+  WriteUDPData(CfgBridgeIP, CfgBridgePort, frame);
+  NFrames := NFrames + 1;
+
+  // 4. the reply
+  txt := pending;
+  if CfgLockstep = 1 then begin
+    fresh := WaitForReply(CfgLockstepWaitMs);
+    if fresh <> '' then txt := fresh
+    else begin
+      NWaitTimeouts := NWaitTimeouts + 1;
+      LogRepeated(NWaitTimeouts, 'lockstep: no reply within ' + IntToStr(CfgLockstepWaitMs) + ' ms');
+    end;
+  end;
+  DrainPacketList;
+
+  accepted := false;
+  if txt <> '' then begin
+    if DecodeReply(txt) then begin
+      if SeqAcceptable(RepSeq) then begin
+        CmdV := RepV;
+        CmdW := RepW;
+        CmdMagnet := RepMagnet;
+        if RepSeq >= 0 then LastAppliedSeq := RepSeq;
+        accepted := true;
+        NAccepted := NAccepted + 1;
+      end else begin
+        NRejected := NRejected + 1;
+        LogRepeated(NRejected, 'reply ignored: Seq ' + IntToStr(RepSeq) + ' is not newer than '
+                    + IntToStr(LastAppliedSeq) + ' and at most ' + IntToStr(FrameSeq));
+      end;
+    end else begin
+      NRejected := NRejected + 1;
+      LogRepeated(NRejected, 'reply ignored: ' + RepError);
+    end;
+  end;
+
+  // 5. no valid command for too long: stop the wheels (the magnet stays as it is)
+  if accepted then begin
+    LastValidMs := TimeMs;
+    if TimedOut = 1 then LogMsg('commands again: wheels released');
+    TimedOut := 0;
+  end;
+  if TimeMs - LastValidMs > CfgCommandTimeoutMs then begin
+    if TimedOut = 0 then begin
+      NTimeouts := NTimeouts + 1;
+      LogMsg('no valid command for ' + IntToStr(TimeMs - LastValidMs) + ' ms: wheels stopped');
+    end;
+    TimedOut := 1;
+    CmdV := 0;
+    CmdW := 0;
+  end;
+
+  // 6. actuators
+  ApplyCommand;
+
+  if (FrameSeq > 0) and (FrameSeq mod STATUS_EVERY = 0) then
+    LogMsg('frames ' + IntToStr(NFrames) + ', replies applied ' + IntToStr(NAccepted)
+           + ', ignored ' + IntToStr(NRejected) + ', timeouts ' + IntToStr(NTimeouts)
+           + ', lockstep waits that ran out ' + IntToStr(NWaitTimeouts));
+  FrameSeq := FrameSeq + 1;
+end;
+
+// this procedure is called once when the script is started
+procedure Initialize;
+var i: integer;
+    s: string;
+begin
+  CfgBridgeIP := BRIDGE_IP;
+  CfgBridgePort := BRIDGE_PORT;
+  CfgLockstep := LOCKSTEP;
+  CfgLockstepWaitMs := LOCKSTEP_WAIT_MS;
+  CfgCommandTimeoutMs := COMMAND_TIMEOUT_MS;
+  CfgLidarNoiseA := LIDAR_NOISE_A;
+  CfgLidarNoiseB := LIDAR_NOISE_B;
+
+  // the decimal separator Format uses in this locale (',' on a Portuguese Windows)
+  s := Format('%.1f', [1.5]);
+  DecSep := Copy(s, 2, Length(s) - 2);
+
+  iRobot := GetRobotIndex(ROBOT_ID);
+  if iRobot < 0 then begin
+    LogMsg('robot ' + ROBOT_ID + ' not found in the scene: using robot 0');
+    iRobot := 0;
+  end;
+  iAxisLeft := GetAxisIndex(iRobot, LEFT_AXIS_ID, 0);
+  if iAxisLeft < 0 then begin
+    LogMsg('axis ' + LEFT_AXIS_ID + ' not found: using axis 0');
+    iAxisLeft := 0;
+  end;
+  iAxisRight := GetAxisIndex(iRobot, RIGHT_AXIS_ID, 0);
+  if iAxisRight < 0 then begin
+    LogMsg('axis ' + RIGHT_AXIS_ID + ' not found: using axis 1');
+    iAxisRight := 1;
+  end;
+  iContact := GetSensorIndex(iRobot, CONTACT_ID);
+  if iContact < 0 then LogMsg('sensor ' + CONTACT_ID + ' not found: Contact will be 0');
+  iMagnet := GetSensorIndex(iRobot, MAGNET_ID);
+  if iMagnet < 0 then LogMsg('sensor ' + MAGNET_ID + ' not found: the electromagnet cannot be switched');
+  iLidar := GetSensorIndex(iRobot, LIDAR_ID);
+  if iLidar < 0 then LogMsg('sensor ' + LIDAR_ID + ' not found: LidarN will be 0 (see simtwo/AGV_lidar.xml)');
+
+  FrameSeq := 0;
+  TimeMs := 0;
+  OdoLeft := 0;
+  OdoRight := 0;
+  CmdV := 0;
+  CmdW := 0;
+  CmdMagnet := 0;
+  MagnetApplied := 0;
+  LastAppliedSeq := -1;
+  LastValidMs := 0;
+  TimedOut := 0;
+  NFrames := 0;
+  NAccepted := 0;
+  NRejected := 0;
+  NTimeouts := 0;
+  NWaitTimeouts := 0;
+  RCount := 0;
+  for i := 0 to 1023 do begin
+    LidarRaw[i] := -1;
+    LidarNoisy[i] := -1;
+  end;
+
+  if SET_SPEED_GAINS = 1 then begin
+    SetMotorControllerPars(iRobot, iAxisLeft, SPEED_KI, SPEED_KD, SPEED_KP, SPEED_KF);
+    SetMotorControllerPars(iRobot, iAxisRight, SPEED_KI, SPEED_KD, SPEED_KP, SPEED_KF);
+  end;
+  ApplyCommand;
+
+  // whatever was queued before this start answers frames of an earlier run
+  s := ReadUDPData();
+  DrainPacketList;
+
+  LogMsg('streaming to ' + BRIDGE_IP + ':' + IntToStr(BRIDGE_PORT) + ', lockstep ' + IntToStr(LOCKSTEP)
+         + ', command timeout ' + IntToStr(COMMAND_TIMEOUT_MS) + ' ms');
+end;
