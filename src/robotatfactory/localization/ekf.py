@@ -191,6 +191,9 @@ class Ekf:
 
     def odometry_wheels(self, t: float, d_left: float, d_right: float) -> bool:
         """Wheel travel (m) since the previous odometry time: an arc."""
+        if not (math.isfinite(d_left) and math.isfinite(d_right)):
+            self.counts[reasons.BAD_INPUT] += 1
+            return False
         ds, dth = (d_left + d_right) / 2, (d_right - d_left) / self.cfg.track_m
         if abs(dth) < 1e-9:
             return self.odometry_increment(t, (ds, 0.0, dth))

@@ -114,6 +114,12 @@ def fit_circle(pts: np.ndarray, radius: float, sigma: float) -> tuple[np.ndarray
     return c, cov, float(np.sqrt(np.mean(r ** 2)))
 
 
+def _line_rms(pts: np.ndarray) -> float:
+    """RMS distance of points to their best-fitting line."""
+    d = pts - pts.mean(axis=0)
+    return float(np.sqrt(np.linalg.eigvalsh(d.T @ d)[0] / len(pts)))
+
+
 def extract_beacons(ranges: np.ndarray, angles: np.ndarray, cfg: BeaconConfig | None = None,
                     range_min: float = 0.02, range_max: float = 6.0) -> list[BeaconObservation]:
     """Beacon candidates in one scan (laser frame)."""
@@ -158,6 +164,10 @@ def extract_beacons(ranges: np.ndarray, angles: np.ndarray, cfg: BeaconConfig | 
         c, cov, rms = fit
         if rms > max(cfg.max_fit_rms_m, 3 * sigma):
             continue
+        half = min(radius, float(np.linalg.norm(p[-1] - p[0])) / 2)
+        sagitta = radius - math.sqrt(radius ** 2 - half ** 2)
+        if sagitta > 2 * sigma and _line_rms(p) < rms:
+            continue  # a flat face (a wall, a box side) that fits a line better than the cylinder
         rho = float(np.hypot(c[0], c[1]))
         u = c / rho
         # polar covariance: range along u, bearing across u / rho
