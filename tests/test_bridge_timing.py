@@ -184,3 +184,82 @@ def test_sim_clock_real_time_factor():
     assert c.real_time_factor(now=100.49) == pytest.approx(4.0, rel=0.05)
     c.reset()
     assert c.time_ms is None and c.real_time_factor() == 0.0
+
+
+# ---- LIDAR sweeps -------------------------------------------------------------------------------------
+
+import numpy as np  # noqa: E402
+
+from robotatfactory.simtwo.timing import SweepAssembler  # noqa: E402
+
+
+class Ranger:
+    """SimTwo's ranger2d schedule, as the stand-in simulator runs it: ray value = its global counter."""
+
+    def __init__(self, n=360, period=0.2, dt=0.001):
+        self.n, self.period_ns, self.dt_ns = n, int(period * 1e9), int(dt * 1e9)
+        self.arr = np.full(n, -1.0)
+        self.step = 0
+        self.measured_at = {}  # global ray counter -> step
+
+    def cycle(self, steps=40):
+        for _ in range(steps):
+            prev = (self.step * self.n * self.dt_ns) // self.period_ns
+            self.step += 1
+            c = (self.step * self.n * self.dt_ns) // self.period_ns
+            for g in range(prev, c):
+                self.arr[g % self.n] = g
+                self.measured_at[g] = self.step
+        return self.step, self.arr.copy()
+
+
+def test_sweeps_are_reassembled_in_time_order():
+    rg = Ranger()
+    sa = SweepAssembler(360, 0.2, 0.001)
+    sweeps = []
+    for _ in range(26):  # 1.04 s
+        step, arr = rg.cycle()
+        sweeps += sa.add(step, arr)
+    assert [s.index for s in sweeps] == [0, 1, 2, 3, 4]
+    for s in sweeps:
+        assert s.missing == 0
+        assert np.array_equal(s.ranges, s.index * 360 + np.arange(360))  # every ray of that sweep, in order
+        assert s.t0 == pytest.approx(s.index * 0.2 + 0.001)
+        assert s.time_increment == pytest.approx(0.2 / 360, rel=0.01)
+        # ray i measured within one physics step of t0 + i * increment
+        i = np.arange(360)
+        truth = np.array([rg.measured_at[s.index * 360 + k] * 0.001 for k in i])
+        assert np.allclose(truth, [sa.ray_time(s.index * 360 + k) for k in i])
+        assert np.max(np.abs(truth - (s.t0 + i * s.time_increment))) <= 0.001 + 1e-12
+
+
+def test_lost_frames_leave_nan_rays_and_a_long_gap_skips_sweeps():
+    rg = Ranger()
+    sa = SweepAssembler(360, 0.2, 0.001)
+    got = []
+    for j in range(40):
+        step, arr = rg.cycle()
+        if j in (7, 20, 21, 22, 23, 24, 25, 26, 27):  # lose one frame, then eight in a row
+            continue
+        got += sa.add(step, arr)
+    # losing one 40 ms frame loses nothing (its rays are still in the next array, until overwritten a sweep later)
+    by = {s.index: s for s in got}
+    assert by[1].missing == 0
+    assert sum(s.missing for s in got) > 0  # the long gap
+    for s in got:
+        ok = ~np.isnan(s.ranges)
+        assert np.array_equal(s.ranges[ok], (s.index * 360 + np.arange(360))[ok])
+    idx = [s.index for s in got]
+    assert idx == sorted(set(idx))
+
+
+def test_joining_mid_sweep_publishes_only_complete_sweeps():
+    rg = Ranger()
+    for _ in range(7):
+        rg.cycle()
+    sa = SweepAssembler(360, 0.2, 0.001)
+    got = []
+    for _ in range(12):
+        got += sa.add(*rg.cycle())
+    assert got and all(s.missing == 0 for s in got)
+    assert got[0].index == 1

@@ -1,0 +1,121 @@
+"""``raf bridge``: run the ROS bridge node (SimTwo or ``raf sim`` <-> ROS topics and TF)."""
+from __future__ import annotations
+
+import argparse
+
+NAME = "bridge"
+HELP = "run the ROS bridge: SimTwo's UDP/ZMQ streams as ROS topics and TF, cmd_vel back (needs a roscore)"
+ORDER = 30
+DESCRIPTION = """\
+Run the bridge node. Settings are ROS parameters (defaults: config/bridge.yaml, every one listed in
+docs/bridge.md); --config FILE overrides them from a YAML file of the same shape, --set NAME=VALUE one by
+one (e.g. --set camera/fx=283.5 --set simulator/host=192.168.1.20), and the options below the usual ones.
+The node needs a ROS master (ROS_MASTER_URI); --roscore starts a private one on a free port.
+
+examples:
+  raf bridge                                     # raf sim on this machine, default ports
+  raf bridge --sim-host 192.168.1.20 --camera tcp://192.168.1.20:9899   # SimTwo on another machine
+  raf bridge --ns robot1 --frame-prefix robot1 --port 9811              # a second robot
+"""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", metavar="FILE", help="YAML parameter file (same shape as config/bridge.yaml)")
+    parser.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
+                        help="set one parameter, e.g. udp/port=9811 (repeatable)")
+    parser.add_argument("--sim-host", metavar="HOST", help="accept SensorFrames from this host only ('*': any)")
+    parser.add_argument("--port", type=int, metavar="PORT", help="UDP port to listen on (default 9810)")
+    cam = parser.add_mutually_exclusive_group()
+    cam.add_argument("--camera", metavar="ENDPOINT", help="ZMQ endpoint of the camera (default tcp://127.0.0.1:9899)")
+    cam.add_argument("--no-camera", action="store_true", help="do not subscribe to the camera")
+    parser.add_argument("--ns", metavar="NS", default="", help="ROS namespace of the node and its topics")
+    parser.add_argument("--frame-prefix", metavar="PREFIX", help="prefix of the robot's TF frames (robot1/base_link)")
+    parser.add_argument("--name", default="raf_bridge", help="node name (default raf_bridge)")
+    parser.add_argument("--no-sim-time", action="store_true",
+                        help="do not set /use_sim_time (the bridge publishes /clock in any case)")
+    parser.add_argument("--roscore", action="store_true", help="start a private roscore on a free port")
+    parser.add_argument("--print-params", action="store_true", help="print the resolved parameters as YAML and exit")
+
+
+def build_params(args) -> dict:
+    """The override tree from --config, the global --field, the options and --set (in that order)."""
+    import yaml
+
+    from ..errors import ConfigError
+    from ..field import DEFAULT_FIELD
+    from ..ros.config import deep_update, parse_set
+
+    params: dict = {}
+    if args.config:
+        try:
+            with open(args.config) as fh:
+                loaded = yaml.safe_load(fh) or {}
+        except OSError as e:
+            raise ConfigError(f"--config {args.config}: {e}") from None
+        except yaml.YAMLError as e:
+            raise ConfigError(f"--config {args.config}: not valid YAML: {e}") from None
+        if not isinstance(loaded, dict):
+            raise ConfigError(f"--config {args.config}: expected a mapping of parameters, got {type(loaded).__name__}")
+        params = loaded
+    if getattr(args, "field", DEFAULT_FIELD) != DEFAULT_FIELD:
+        params["field"] = args.field
+    opts = {}
+    if args.sim_host is not None:
+        opts.setdefault("simulator", {})["host"] = args.sim_host
+    if args.port is not None:
+        opts.setdefault("udp", {})["port"] = args.port
+    if args.camera:
+        opts.setdefault("camera", {})["endpoint"] = args.camera
+    if args.no_camera:
+        opts.setdefault("camera", {})["enabled"] = False
+    if args.frame_prefix is not None:
+        opts["frame_prefix"] = args.frame_prefix
+    deep_update(params, opts)
+    deep_update(params, parse_set(args.set))
+    return params
+
+
+def run(args) -> int:
+    import os
+    import sys
+
+    import yaml
+
+    from ..errors import ConfigError
+    from ..ros.config import load_config
+
+    cfg = load_config(build_params(args))
+    if args.print_params:
+        print(yaml.safe_dump(cfg.params, sort_keys=False), end="")
+        return 0
+    master = None
+    if args.roscore:
+        from ..ros.master import PrivateMaster
+
+        master = PrivateMaster().start()
+        os.environ["ROS_MASTER_URI"] = master.uri
+        print(f"raf bridge: started roscore at {master.uri} (export ROS_MASTER_URI={master.uri})", flush=True)
+    import rosgraph
+    import rospy
+
+    if not rosgraph.is_master_online():
+        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore (or pass --roscore)")
+    from ..ros.bridge_node import Bridge
+
+    ns = args.ns.strip("/")
+    node = f"/{ns}/{args.name}" if ns else f"/{args.name}"
+    if not args.no_sim_time:
+        rosgraph.Master("/raf_bridge_cli").setParam("/use_sim_time", True)
+    for k, v in cfg.flat_params().items():  # visible with rosparam, as if loaded from a launch file
+        rosgraph.Master("/raf_bridge_cli").setParam(f"{node}/{k}", list(v) if isinstance(v, tuple) else v)
+    argv = [sys.argv[0]] + ([f"__ns:=/{ns}"] if ns else [])
+    rospy.init_node(args.name, argv=argv)
+    bridge = Bridge(cfg).start()
+    print(f"raf bridge: {rospy.get_name()} listening on udp {cfg.bind_host}:{bridge.bound_port}", flush=True)
+    try:
+        rospy.spin()
+    finally:
+        bridge.stop()
+        if master is not None:
+            master.stop()
+    return 0

@@ -1,0 +1,533 @@
+"""The bridge node: SimTwo's streams (UDP SensorFrames, ZMQ camera) to ROS topics and TF, commands back.
+
+Threads (none of them ever blocks another):
+
+* **UDP** (the control path): receive a datagram, check its source, decode it, classify it (stream
+  bookkeeping), answer it at once with one ``Command`` (``Seq`` echoed, watchdog applied) to its source,
+  then publish ``/clock``, ``odom`` (+ TF), ``ground_truth``, ``joint_states``, ``scan``, ``contact`` and
+  ``electromagnet/state`` stamped with the frame's ``Tms``.
+* **camera receive**: ZMQ SUB; keeps only the newest frame (older ones are counted as skipped) with its
+  arrival time in a one-slot mailbox.
+* **camera publish**: checks the size, estimates the render time (``simtwo.timing.CameraStamper``),
+  flips and converts to bgr8, publishes ``camera/image_raw`` and ``camera/camera_info``.
+* **diagnostics**: every ``~diagnostics/period`` wall seconds (so it keeps reporting when the simulator, and
+  with it simulation time, stops).
+
+The algorithms are in ``robotatfactory.simtwo.stream``, ``robotatfactory.simtwo.timing`` and
+``robotatfactory.localization.odometry``; this module is wiring. See docs/bridge.md.
+"""
+from __future__ import annotations
+
+import math
+import socket
+import sys
+import threading
+import time
+
+import numpy as np
+import rospy
+import tf2_ros
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan
+from std_msgs.msg import Bool
+from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
+
+from ..errors import ConfigError
+from ..localization.odometry import DiffDriveOdometry
+from ..simtwo import Command, ProtocolError, SensorFrame, decode_frame
+from ..simtwo.labels import LabelledValues
+from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
+from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
+from ..simtwo.timing import CameraStamper, SimClock, SweepAssembler
+from . import messages as rm
+from .config import BridgeConfig, load_config
+
+JOINT_NAMES = ("left_wheel_joint", "right_wheel_joint")
+
+
+def classify_protocol_error(data: bytes) -> str:
+    """'foreign_protocol' for a datagram that is not ours (no RAF label, other version), else 'malformed'."""
+    try:
+        v = LabelledValues(data)
+    except ProtocolError:
+        return "malformed"
+    if VERSION_LABEL not in v:
+        return "foreign_protocol"
+    try:
+        return "malformed" if v.get_int(VERSION_LABEL) == PROTOCOL_VERSION else "foreign_protocol"
+    except ProtocolError:
+        return "malformed"
+
+
+class Bridge:
+    """One robot's bridge. ``start()`` opens the sockets and threads, ``stop()`` ends them."""
+
+    def __init__(self, cfg: BridgeConfig, field=None):
+        self.cfg = cfg
+        if field is None:
+            from ..field import load_field
+
+            field = load_field(cfg.field)
+        self.field = field
+        self.tracker = StreamTracker(cfg.reorder_window, cfg.restart_confirm)
+        self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, cfg.overtake_window,
+                                     use_grid=cfg.use_grid)
+        self.clock = SimClock()
+        self.odo = DiffDriveOdometry(wheel_radius=cfg.wheel_radius, track=cfg.track, ticks_per_rev=cfg.ticks_per_rev,
+                                     slip_var_per_m=cfg.slip_var_per_m)
+        self.sweeps: SweepAssembler | None = None
+        self.log = LogLimiter(cfg.log_period)
+        self.datagram_rate = RateMeter()
+        self.camera_rate = RateMeter()
+        self.counts = {"replies": 0, "reply_errors": 0, "cmd_vel": 0, "cmd_vel_rejected": 0, "magnet_cmds": 0,
+                       "watchdog_stops": 0, "camera_received": 0, "camera_skipped": 0, "camera_wrong_size": 0,
+                       "camera_published": 0, "scans": 0, "publish_errors": 0}
+        self._cmd_lock = threading.Lock()
+        self._v = self._w = 0.0
+        self._have_cmd = False
+        self._cmd_ms: int | None = None  # simulation time (Tms) when the last cmd_vel arrived
+        self._magnet = False
+        self._watchdog_active = False
+        self._gt_prev = None
+        self._map_odom_sent = False
+        self._mail = None
+        self._mail_cv = threading.Condition()
+        self._running = False
+        self._threads: list[threading.Thread] = []
+        self._rejects_at_last_diag = 0
+        self.sock: socket.socket | None = None
+        self.bound_port: int | None = None
+
+    # ---- setup -----------------------------------------------------------------------------------------
+    def start(self) -> "Bridge":
+        cfg, t = self.cfg, self.cfg.topics
+        self.sock = s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        try:
+            s.bind((cfg.bind_host, cfg.port))
+        except OSError as e:
+            s.close()
+            raise ConfigError(f"cannot listen on UDP {cfg.bind_host}:{cfg.port} (~udp/bind_host, ~udp/port): {e}")
+        s.settimeout(0.2)
+        self.bound_port = s.getsockname()[1]
+        self.pub_clock = rospy.Publisher(t["clock"], Clock, queue_size=10)
+        self.pub_odom = rospy.Publisher(t["odom"], Odometry, queue_size=10)
+        self.pub_gt = rospy.Publisher(t["ground_truth"], Odometry, queue_size=10)
+        self.pub_joints = rospy.Publisher(t["joint_states"], JointState, queue_size=10)
+        self.pub_scan = rospy.Publisher(t["scan"], LaserScan, queue_size=10)
+        self.pub_contact = rospy.Publisher(t["contact"], Bool, queue_size=10)
+        self.pub_magnet = rospy.Publisher(t["magnet_state"], Bool, queue_size=10)
+        self.pub_image = rospy.Publisher(t["image"], Image, queue_size=2)
+        self.pub_info = rospy.Publisher(t["camera_info"], CameraInfo, queue_size=2)
+        self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=10)
+        self.pub_tf = rospy.Publisher("/tf", TFMessage, queue_size=100)
+        self.static_tf = tf2_ros.StaticTransformBroadcaster()
+        self.sub_cmd = rospy.Subscriber(t["cmd_vel"], Twist, self._on_cmd_vel, queue_size=1, tcp_nodelay=True)
+        self.sub_magnet = rospy.Subscriber(t["magnet"], Bool, self._on_magnet, queue_size=1, tcp_nodelay=True)
+        self._send_static()
+        if cfg.publish_field:
+            from .field_markers import field_marker_array
+
+            self.pub_markers = rospy.Publisher(t["field_markers"], MarkerArray, queue_size=1, latch=True)
+            self.pub_markers.publish(field_marker_array(self.field, cfg.frames["map"]))
+        self._running = True
+        self._spawn(self._udp_loop, "udp")
+        if cfg.camera_enabled:
+            self._spawn(self._camera_rx, "camera-rx")
+            self._spawn(self._camera_pub, "camera-pub")
+        self._spawn(self._diag_loop, "diagnostics")
+        rospy.loginfo(f"bridge: SensorFrames on udp {cfg.bind_host}:{self.bound_port} from "
+                      f"{'any host' if cfg.sim_host == '*' else cfg.sim_host}, camera "
+                      f"{cfg.camera_endpoint if cfg.camera_enabled else 'off'}, field {self.field.name}, "
+                      f"frame prefix {cfg.frame_prefix or '(none)'}")
+        return self
+
+    def _spawn(self, fn, name):
+        th = threading.Thread(target=self._guard, args=(fn,), name=f"raf-bridge-{name}", daemon=True)
+        th.start()
+        self._threads.append(th)
+
+    def _guard(self, fn):
+        """Run a thread body; an unexpected exception is logged and the loop restarts (never dies)."""
+        while self._running and not rospy.is_shutdown():
+            try:
+                fn()
+                return
+            except Exception as e:  # noqa: BLE001 - a bridge thread must not die
+                if self._running:
+                    rospy.logerr(f"bridge: {fn.__name__} failed: {e!r}; restarting it")
+                    time.sleep(0.2)
+
+    def stop(self) -> None:
+        self._running = False
+        with self._mail_cv:
+            self._mail_cv.notify_all()
+        for th in self._threads:
+            th.join(timeout=2.0)
+        if self.sock is not None:
+            self.sock.close()
+
+    def _send_static(self, map_odom=None) -> None:
+        from .field_markers import marker_transforms, robot_static_transforms
+
+        cfg = self.cfg
+        tfs = robot_static_transforms(cfg)
+        if cfg.publish_field:
+            tfs += marker_transforms(self.field, cfg.frames["map"], cfg.frames["marker_prefix"])
+        if cfg.map_to_odom == "identity":
+            tfs.append(rm.transform(cfg.frames["map"], cfg.frames["odom"], np.eye(4)))
+        elif map_odom is not None:
+            tfs.append(rm.planar_transform(cfg.frames["map"], cfg.frames["odom"], *map_odom, rospy.Time(0)))
+        self.static_tf.sendTransform(tfs)
+
+    # ---- commands ----------------------------------------------------------------------------------------
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        v, w = msg.linear.x, msg.angular.z
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.counts["cmd_vel_rejected"] += 1
+            self._warn("cmd_vel", f"bridge: ignoring cmd_vel with a non-finite value (v={v}, w={w})")
+            return
+        with self._cmd_lock:
+            self._v, self._w = v, w
+            self._have_cmd = True
+            self._cmd_ms = self.tracker.last_time_ms  # None before the first frame: fresh at the next one
+            self.counts["cmd_vel"] += 1
+
+    def _on_magnet(self, msg: Bool) -> None:
+        with self._cmd_lock:
+            self._magnet = bool(msg.data)
+            self.counts["magnet_cmds"] += 1
+
+    def command_for(self, seq: int, time_ms: int) -> Command:
+        """The reply to a frame: the latest cmd_vel unless older than the watchdog timeout (simulation time)."""
+        with self._cmd_lock:
+            fresh = False
+            if self._have_cmd:
+                if self._cmd_ms is None:
+                    self._cmd_ms = time_ms
+                age = time_ms - self._cmd_ms
+                fresh = 0 <= age <= self.cfg.watchdog_timeout * 1000
+                if not fresh and not self._watchdog_active:
+                    self._watchdog_active = True
+                    self.counts["watchdog_stops"] += 1
+                    self._warn("watchdog", f"bridge: cmd_vel is {age / 1000:.2f} s old (simulation time) > "
+                                           f"{self.cfg.watchdog_timeout} s: sending V = W = 0")
+                elif fresh:
+                    self._watchdog_active = False
+            v, w = (self._v, self._w) if fresh else (0.0, 0.0)
+            return Command(v, w, self._magnet, seq)
+
+    def _reset_commands(self) -> None:
+        with self._cmd_lock:
+            self._v = self._w = 0.0
+            self._have_cmd = False
+            self._cmd_ms = None
+            self._magnet = False
+            self._watchdog_active = False
+
+    def _warn(self, key: str, text: str) -> None:
+        suffix = self.log(key)
+        if suffix is not None:
+            rospy.logwarn(text + suffix)
+
+    # ---- the control path --------------------------------------------------------------------------------
+    def _udp_loop(self) -> None:
+        sock, cfg = self.sock, self.cfg
+        buf = bytearray(65536)
+        view = memoryview(buf)
+        while self._running and not rospy.is_shutdown():
+            try:
+                n, addr = sock.recvfrom_into(buf)
+            except socket.timeout:
+                continue
+            except OSError as e:
+                if not self._running:
+                    return
+                self._warn("recv", f"bridge: UDP receive error: {e}")
+                continue
+            arrival = time.monotonic()
+            self.handle_datagram(bytes(view[:n]), addr, arrival)
+
+    def handle_datagram(self, data: bytes, addr, arrival: float) -> None:
+        cfg, tr = self.cfg, self.tracker
+        if cfg.sim_host != "*" and addr[0] != cfg.sim_host:
+            tr.reject("foreign_source")
+            self._warn("foreign_source", f"bridge: ignoring a datagram from {addr[0]}:{addr[1]} (accepted "
+                                         f"simulator host: {cfg.sim_host}, parameter ~simulator/host)")
+            return
+        if len(data) > cfg.max_datagram:
+            tr.reject("oversized")
+            self._warn("oversized", f"bridge: ignoring a {len(data)}-byte datagram from {addr[0]}:{addr[1]} "
+                                    f"(over ~udp/max_datagram = {cfg.max_datagram})")
+            return
+        try:
+            frame = SensorFrame.decode(data)
+        except ProtocolError as e:
+            kind = classify_protocol_error(data)
+            tr.reject(kind)
+            self._warn(kind, f"bridge: rejected datagram from {addr[0]}:{addr[1]} ({kind}): {e}")
+            return
+        ev = tr.offer(frame.seq, frame.time_ms, arrival)
+        if ev.verdict is Verdict.RESTART:
+            self._reset_commands()
+        t_eval = frame.time_ms if ev.accepted else (tr.last_time_ms if tr.last_time_ms is not None else frame.time_ms)
+        cmd = self.command_for(frame.seq, t_eval)
+        try:
+            self.sock.sendto(cmd.encode(), (addr[0], cfg.reply_port or addr[1]))
+            self.counts["replies"] += 1
+        except OSError as e:
+            self.counts["reply_errors"] += 1
+            self._warn("send", f"bridge: cannot reply to {addr[0]}:{cfg.reply_port or addr[1]}: {e}")
+        self.datagram_rate.tick(arrival)
+        if not ev.accepted:
+            self._warn(ev.verdict.value, f"bridge: dropped a {ev.verdict.value} frame (Seq {frame.seq}, last "
+                                         f"accepted {tr.last_seq})")
+            return
+        if ev.verdict in (Verdict.FIRST, Verdict.RESTART):
+            self._start_stream(ev, frame)
+        elif ev.verdict is Verdict.GAP:
+            self._warn("gap", f"bridge: {ev.lost} frame(s) lost before Seq {frame.seq} (ticks are kept: "
+                              "odometry uses the cumulative totals)")
+        self.stamper.on_sensor_frame(frame.time_ms, arrival)
+        self.clock.on_sensor_frame(frame.time_ms, arrival)
+        try:
+            self.publish_frame(frame)
+        except (rospy.ROSException, ValueError) as e:
+            self.counts["publish_errors"] += 1
+            self._warn("publish", f"bridge: publishing frame Seq {frame.seq} failed: {e}")
+
+    def _start_stream(self, ev, frame: SensorFrame) -> None:
+        if ev.verdict is Verdict.RESTART:
+            rospy.logwarn(f"bridge: the simulator restarted (Seq {frame.seq}, Tms {frame.time_ms}): resetting "
+                          "odometry, clock and camera stamping")
+        self.stamper.reset()
+        self.clock.reset()
+        if self.sweeps is not None:
+            self.sweeps.reset()
+        self._gt_prev = None
+        if ev.from_zero:
+            self.odo.reset(baseline=(0, 0), t=0.0)
+        else:
+            self.odo.reset()
+        if self.cfg.map_to_odom == "first_ground_truth":
+            self._send_static(map_odom=(frame.x, frame.y, frame.theta))
+
+    def publish_frame(self, f: SensorFrame) -> None:
+        cfg, fr = self.cfg, self.cfg.frames
+        stamp = rm.stamp_ms(f.time_ms)
+        t = f.time_ms / 1000.0
+        self.pub_clock.publish(Clock(stamp))
+        s = self.odo.update(f.enc_total[0], f.enc_total[1], t)
+        self.pub_odom.publish(rm.odometry(stamp, fr["odom"], fr["base_link"], s.x, s.y, s.theta, s.v, s.w,
+                                          s.pose_cov, s.twist_cov))
+        tfs = [rm.wheel_transform(fr["base_link"], fr["left_wheel"], cfg.track / 2, cfg.wheel_radius,
+                                  s.left_angle, stamp),
+               rm.wheel_transform(fr["base_link"], fr["right_wheel"], -cfg.track / 2, cfg.wheel_radius,
+                                  s.right_angle, stamp)]
+        if cfg.publish_odom_tf:
+            tfs.insert(0, rm.planar_transform(fr["odom"], fr["base_link"], s.x, s.y, s.theta, stamp))
+        self.pub_tf.publish(TFMessage(tfs))
+        # ground truth, with its twist (body frame) from consecutive poses
+        v = w = 0.0
+        if self._gt_prev is not None:
+            pt, px, py, pth = self._gt_prev
+            dt = t - pt
+            if dt > 0:
+                v = ((f.x - px) * math.cos(pth) + (f.y - py) * math.sin(pth)) / dt
+                w = math.remainder(f.theta - pth, 2 * math.pi) / dt
+        self._gt_prev = (t, f.x, f.y, f.theta)
+        self.pub_gt.publish(rm.odometry(stamp, fr["map"], fr["base_link"], f.x, f.y, f.theta, v, w,
+                                        np.zeros((3, 3)), np.zeros((2, 2))))
+        self.pub_joints.publish(rm.joint_states(stamp, JOINT_NAMES, (s.left_angle, s.right_angle),
+                                                (s.left_rate, s.right_rate)))
+        self.pub_contact.publish(Bool(f.contact))
+        self.pub_magnet.publish(Bool(f.magnet))
+        if cfg.lidar_enabled and len(f.ranges):
+            self._publish_scan(f, stamp)
+
+    def _publish_scan(self, f: SensorFrame, stamp) -> None:
+        cfg = self.cfg
+        n = len(f.ranges)
+        if cfg.lidar_mode == "cycle":
+            self.pub_scan.publish(rm.laser_scan(stamp, cfg.frames["laser"], f.ranges, cfg.lidar_fov_deg,
+                                                cfg.lidar_range_min, cfg.lidar_range_max, cfg.control_period, 0.0))
+            self.counts["scans"] += 1
+            return
+        if self.sweeps is None or self.sweeps.n != n:
+            self.sweeps = SweepAssembler(n, cfg.lidar_period, cfg.physics_step)
+        for sw in self.sweeps.add(f.time_ms, f.ranges):
+            self.pub_scan.publish(rm.laser_scan(rm.stamp_s(sw.t0), cfg.frames["laser"], sw.ranges, cfg.lidar_fov_deg,
+                                                cfg.lidar_range_min, cfg.lidar_range_max, cfg.lidar_period,
+                                                sw.time_increment))
+            self.counts["scans"] += 1
+
+    # ---- camera --------------------------------------------------------------------------------------------
+    def _camera_rx(self) -> None:
+        import zmq
+
+        ctx = zmq.Context.instance()
+        sock = ctx.socket(zmq.SUB)
+        sock.setsockopt(zmq.RCVHWM, 2)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.SUBSCRIBE, b"")
+        sock.connect(self.cfg.camera_endpoint)
+        try:
+            while self._running and not rospy.is_shutdown():
+                if not sock.poll(200):
+                    continue
+                msg = sock.recv(copy=False)
+                arrival = time.monotonic()
+                self.counts["camera_received"] += 1
+                while sock.poll(0):  # keep only the newest frame
+                    msg = sock.recv(copy=False)
+                    arrival = time.monotonic()
+                    self.counts["camera_received"] += 1
+                    self.counts["camera_skipped"] += 1
+                with self._mail_cv:
+                    if self._mail is not None:
+                        self.counts["camera_skipped"] += 1
+                    self._mail = (arrival, msg)
+                    self._mail_cv.notify()
+        finally:
+            sock.close(0)
+
+    def _camera_pub(self) -> None:
+        cfg = self.cfg
+        w, h = cfg.width, cfg.height
+        expected = w * h * 4
+        info_template = rm.camera_info(rospy.Time(0), cfg.frames["camera_optical"], w, h, cfg.fx, cfg.fy, cfg.cx,
+                                       cfg.cy)
+        while self._running and not rospy.is_shutdown():
+            with self._mail_cv:
+                while self._mail is None and self._running:
+                    self._mail_cv.wait(0.2)
+                if self._mail is None:
+                    continue
+                arrival, msg = self._mail
+                self._mail = None
+            buf = msg.buffer
+            if buf.nbytes != expected:
+                self.counts["camera_wrong_size"] += 1
+                self._warn("camera_size", f"bridge: ignoring a camera frame of {buf.nbytes} bytes (expected "
+                                          f"{w}x{h}x4 = {expected}; ~camera/width, ~camera/height)")
+                continue
+            est = self.stamper.stamp(arrival)
+            if est is None:
+                self._warn("camera_clock", "bridge: camera frame before any SensorFrame: no simulation time to "
+                                           "stamp it with, dropped")
+                continue
+            img = decode_frame(buf, w, h, cfg.bottom_up)
+            stamp = rm.stamp_s(est.stamp)
+            self.pub_image.publish(rm.image_bgr8(stamp, cfg.frames["camera_optical"], img.tobytes(), w, h))
+            info_template.header.stamp = stamp
+            self.pub_info.publish(info_template)
+            self.counts["camera_published"] += 1
+            self.camera_rate.tick(arrival)
+
+    # ---- diagnostics ---------------------------------------------------------------------------------------
+    def _diag_loop(self) -> None:
+        period = self.cfg.diag_period
+        next_t = time.monotonic()
+        while self._running and not rospy.is_shutdown():
+            next_t += period
+            try:
+                self.pub_diag.publish(self.diagnostics())
+            except rospy.ROSException:
+                pass
+            time.sleep(max(0.0, next_t - time.monotonic()))
+
+    def diagnostics(self, now: float | None = None) -> DiagnosticArray:
+        now = time.monotonic() if now is None else now
+        cfg, tr, c = self.cfg, self.tracker, self.counts
+        name = rospy.get_name()
+        hw = f"simtwo@{cfg.sim_host}->udp:{self.bound_port}"
+        arr = DiagnosticArray()
+        ms = self.clock.time_ms
+        arr.header.stamp = rm.stamp_ms(ms) if ms is not None else rospy.Time(0)
+
+        def kv(d):
+            return [KeyValue(str(k), f"{v:.3f}" if isinstance(v, float) else str(v)) for k, v in d.items()]
+
+        # the SensorFrame stream
+        stale = tr.staleness(now)
+        rejects = tr.counters.rejected_total
+        new_rejects = rejects - self._rejects_at_last_diag
+        self._rejects_at_last_diag = rejects
+        if stale is None:
+            level, text = DiagnosticStatus.WARN, f"waiting for SensorFrames on udp port {self.bound_port}"
+        elif stale > cfg.stale_error:
+            level, text = DiagnosticStatus.ERROR, f"stale: no SensorFrame for {stale:.1f} s"
+        elif stale > cfg.stale_warn:
+            level, text = DiagnosticStatus.WARN, f"stale: no SensorFrame for {stale:.1f} s"
+        elif new_rejects:
+            level, text = DiagnosticStatus.WARN, f"{new_rejects} datagram(s) rejected since the last report"
+        else:
+            level, text = DiagnosticStatus.OK, "receiving"
+        vals = {"datagram_rate_hz": self.datagram_rate.rate(now), "staleness_s": -1.0 if stale is None else stale,
+                "sim_time_s": -1.0 if ms is None else ms / 1000, "real_time_factor": self.clock.real_time_factor(now),
+                "last_seq": tr.last_seq if tr.last_seq is not None else -1}
+        vals.update(tr.counters.as_dict())
+        vals.update({"replies_sent": c["replies"], "reply_errors": c["reply_errors"], "scans_published": c["scans"],
+                     "lidar_rays_missing": self.sweeps.missing_total if self.sweeps else 0,
+                     "publish_errors": c["publish_errors"]})
+        st1 = DiagnosticStatus(level=level, name=f"{name}: sensor stream", message=text, hardware_id=hw, values=kv(vals))
+        # camera
+        sc = self.stamper.counters
+        cam_age = self.camera_rate.age(now)
+        if not cfg.camera_enabled:
+            level, text = DiagnosticStatus.OK, "disabled (~camera/enabled)"
+        elif cam_age is None:
+            level, text = DiagnosticStatus.WARN, f"no camera frame yet from {cfg.camera_endpoint}"
+        elif cam_age > cfg.stale_error:
+            level, text = DiagnosticStatus.ERROR, f"stale: no camera frame for {cam_age:.1f} s"
+        elif cam_age > cfg.stale_warn * 4:  # 15 frames/s of simulation time: a slower sim is not stale yet
+            level, text = DiagnosticStatus.WARN, f"no camera frame for {cam_age:.1f} s"
+        else:
+            level, text = DiagnosticStatus.OK, "receiving"
+        vals = {"frame_rate_hz": self.camera_rate.rate(now), "staleness_s": -1.0 if cam_age is None else cam_age,
+                "received": c["camera_received"], "published": c["camera_published"], "skipped": c["camera_skipped"],
+                "rejected_wrong_size": c["camera_wrong_size"], "locked_render_phase": self.stamper.locked_phase
+                if self.stamper.locked_phase is not None else -1}
+        vals.update({f"stamps_{k}": v for k, v in sc.as_dict().items()})
+        st2 = DiagnosticStatus(level=level, name=f"{name}: camera", message=text, hardware_id=cfg.camera_endpoint,
+                               values=kv(vals))
+        # commands
+        with self._cmd_lock:
+            age = (ms - self._cmd_ms) / 1000 if (ms is not None and self._cmd_ms is not None) else -1.0
+            vals = {"cmd_vel_age_sim_s": age, "watchdog_active": self._watchdog_active,
+                    "watchdog_stops": c["watchdog_stops"], "cmd_vel_received": c["cmd_vel"],
+                    "cmd_vel_rejected": c["cmd_vel_rejected"], "magnet_on": self._magnet,
+                    "v": self._v, "w": self._w}
+            level = DiagnosticStatus.WARN if self._watchdog_active else DiagnosticStatus.OK
+            text = (f"watchdog: cmd_vel older than {cfg.watchdog_timeout} s, sending V = W = 0"
+                    if self._watchdog_active else ("following cmd_vel" if self._have_cmd else "no cmd_vel yet"))
+        st3 = DiagnosticStatus(level=level, name=f"{name}: commands", message=text, hardware_id=hw, values=kv(vals))
+        arr.status = [st1, st2, st3]
+        return arr
+
+
+def read_private_params() -> dict:
+    """The node's private parameters as a nested dict (``~udp/port`` -> ``{"udp": {"port": ...}}``)."""
+    p = rospy.get_param("~", {})
+    return p if isinstance(p, dict) else {}
+
+
+def main(argv: list[str] | None = None) -> int:
+    rospy.init_node("raf_bridge", argv=argv if argv is not None else sys.argv, disable_signals=False)
+    try:
+        cfg = load_config(read_private_params())
+        bridge = Bridge(cfg).start()
+    except ConfigError as e:
+        rospy.logfatal(f"bridge: {e}")
+        return 2
+    rospy.spin()
+    bridge.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

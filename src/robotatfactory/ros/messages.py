@@ -1,0 +1,168 @@
+"""ROS messages built from the bridge's pure objects. Stamps are simulation time (``Tms``), never wall time."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import rospy
+from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan
+
+COV_FLOOR = 1e-9  # variances never exactly zero (filters invert covariances)
+PLANAR_VAR = 1e-6  # z, roll, pitch of a robot on a flat floor: known, tiny
+
+
+def stamp_ms(ms: int) -> rospy.Time:
+    """Integer milliseconds of simulation time to a rospy.Time (exact)."""
+    ms = int(ms)
+    return rospy.Time(ms // 1000, (ms % 1000) * 1_000_000)
+
+
+def stamp_s(t: float) -> rospy.Time:
+    ns = int(round(t * 1e9))
+    return rospy.Time(ns // 1_000_000_000, ns % 1_000_000_000)
+
+
+def yaw_quaternion(theta: float) -> Quaternion:
+    return Quaternion(0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2))
+
+
+def matrix_quaternion(R: np.ndarray) -> Quaternion:
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(np.asarray(R)[:3, :3]).as_quat()
+    return Quaternion(float(x), float(y), float(z), float(w))
+
+
+def transform(parent: str, child: str, T: np.ndarray, stamp: rospy.Time | None = None) -> TransformStamped:
+    """A TransformStamped parent <- child from a 4x4 homogeneous matrix."""
+    m = TransformStamped()
+    m.header.stamp = stamp or rospy.Time(0)
+    m.header.frame_id = parent
+    m.child_frame_id = child
+    m.transform = Transform(Vector3(*map(float, T[:3, 3])), matrix_quaternion(T[:3, :3]))
+    return m
+
+
+def planar_transform(parent: str, child: str, x: float, y: float, theta: float, stamp: rospy.Time,
+                     z: float = 0.0) -> TransformStamped:
+    m = TransformStamped()
+    m.header.stamp = stamp
+    m.header.frame_id = parent
+    m.child_frame_id = child
+    m.transform.translation = Vector3(x, y, z)
+    m.transform.rotation = yaw_quaternion(theta)
+    return m
+
+
+def wheel_transform(parent: str, child: str, y: float, radius: float, angle: float, stamp) -> TransformStamped:
+    """base_link -> wheel: at (0, y, radius), turned by ``angle`` about the axle (the wheel's +y)."""
+    m = TransformStamped()
+    m.header.stamp = stamp
+    m.header.frame_id = parent
+    m.child_frame_id = child
+    m.transform.translation = Vector3(0.0, y, radius)
+    m.transform.rotation = Quaternion(0.0, math.sin(angle / 2), 0.0, math.cos(angle / 2))
+    return m
+
+
+def _pose_cov6(cov3: np.ndarray) -> list[float]:
+    """3x3 (x, y, yaw) to ROS's row-major 6x6 (x, y, z, roll, pitch, yaw)."""
+    c = np.zeros((6, 6))
+    ix = [0, 1, 5]
+    c[np.ix_(ix, ix)] = cov3
+    for i in ix:
+        c[i, i] = max(c[i, i], COV_FLOOR)
+    for i in (2, 3, 4):
+        c[i, i] = PLANAR_VAR
+    return c.ravel().tolist()
+
+
+def _twist_cov6(cov2: np.ndarray) -> list[float]:
+    """2x2 (v, w) to 6x6 (vx, vy, vz, wx, wy, wz)."""
+    c = np.zeros((6, 6))
+    ix = [0, 5]
+    c[np.ix_(ix, ix)] = cov2
+    for i in ix:
+        c[i, i] = max(c[i, i], COV_FLOOR)
+    for i in (1, 2, 3, 4):
+        c[i, i] = PLANAR_VAR  # non-holonomic: no sideways speed; flat floor
+    return c.ravel().tolist()
+
+
+def odometry(stamp, frame: str, child: str, x: float, y: float, theta: float, v: float, w: float,
+             pose_cov: np.ndarray, twist_cov: np.ndarray) -> Odometry:
+    m = Odometry()
+    m.header.stamp = stamp
+    m.header.frame_id = frame
+    m.child_frame_id = child
+    p = m.pose.pose
+    p.position.x, p.position.y = x, y
+    p.orientation = yaw_quaternion(theta)
+    m.pose.covariance = _pose_cov6(pose_cov)
+    m.twist.twist.linear.x = v
+    m.twist.twist.angular.z = w
+    m.twist.covariance = _twist_cov6(twist_cov)
+    return m
+
+
+def laser_scan(stamp, frame: str, ranges: np.ndarray, fov_deg: float, range_min: float, range_max: float,
+               scan_time: float, time_increment: float) -> LaserScan:
+    """SimTwo's ranger2d as a LaserScan: N rays from -fov/2 step fov/(N-1); -1 (no return) as +inf."""
+    n = len(ranges)
+    fov = math.radians(fov_deg)
+    m = LaserScan()
+    m.header.stamp = stamp
+    m.header.frame_id = frame
+    m.angle_min = -fov / 2
+    m.angle_increment = fov / (n - 1) if n > 1 else 0.0
+    m.angle_max = m.angle_min + m.angle_increment * (n - 1)
+    m.time_increment = time_increment
+    m.scan_time = scan_time
+    m.range_min = range_min
+    m.range_max = range_max
+    r = np.asarray(ranges, dtype=np.float64)
+    m.ranges = np.where(r < 0, np.inf, r).tolist()  # NaN (not received) stays NaN
+    return m
+
+
+def joint_states(stamp, names: tuple[str, str], angles: tuple[float, float], rates: tuple[float, float]) -> JointState:
+    m = JointState()
+    m.header.stamp = stamp
+    m.name = list(names)
+    m.position = [float(a) for a in angles]
+    m.velocity = [float(r) for r in rates]
+    return m
+
+
+def camera_info(stamp, frame: str, width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> CameraInfo:
+    m = CameraInfo()
+    m.header.stamp = stamp
+    m.header.frame_id = frame
+    m.width, m.height = width, height
+    m.distortion_model = "plumb_bob"
+    m.D = [0.0] * 5
+    m.K = [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]
+    m.R = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    m.P = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    return m
+
+
+def image_bgr8(stamp, frame: str, data: bytes, width: int, height: int) -> Image:
+    m = Image()
+    m.header.stamp = stamp
+    m.header.frame_id = frame
+    m.height, m.width = height, width
+    m.encoding = "bgr8"
+    m.is_bigendian = 0
+    m.step = width * 3
+    m.data = data
+    return m
+
+
+def image_to_bgr(msg: Image) -> np.ndarray:
+    """A bgr8 sensor_msgs/Image back to an HxWx3 uint8 array (tests, tools)."""
+    if msg.encoding != "bgr8":
+        raise ValueError(f"expected bgr8, got {msg.encoding}")
+    return np.frombuffer(msg.data, dtype=np.uint8).reshape(msg.height, msg.width, 3)
