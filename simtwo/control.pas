@@ -546,8 +546,11 @@ begin
   SetMotorControllerState(iRobot, iAxisRight, true);
   SetAxisSpeedRef(iRobot, iAxisLeft, wl);
   SetAxisSpeedRef(iRobot, iAxisRight, wr);
-  if iMagnet >= 0 then SetSensorVin(iRobot, iMagnet, CmdMagnet * MAGNET_VIN_ON);
-  MagnetApplied := CmdMagnet;
+  MagnetApplied := 0;
+  if iMagnet >= 0 then begin
+    SetSensorVin(iRobot, iMagnet, CmdMagnet * MAGNET_VIN_ON);
+    MagnetApplied := CmdMagnet;
+  end;
 end;
 
 
