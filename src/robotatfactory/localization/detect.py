@@ -19,8 +19,8 @@ class DetectorConfig:
     dictionary: str = "DICT_5X5_100"
     corner_refinement: str = "subpix"  # none | subpix | contour | apriltag
     adaptive_win_min: int = 5
-    adaptive_win_max: int = 21
-    adaptive_win_step: int = 8
+    adaptive_win_max: int = 15
+    adaptive_win_step: int = 10
     adaptive_constant: float = 7.0
     min_perimeter_rate: float = 0.02  # of the image's larger side; 0.02 * 640 = 12.8 px: 3.2 px sides
     polygonal_approx_rate: float = 0.05

@@ -100,7 +100,10 @@ def _cov_from_jac(J: np.ndarray, r: np.ndarray, sig: np.ndarray, n_params: int) 
     A = Wj.T @ Wj
     chi2 = float(np.sum((r / sig) ** 2))
     dof = len(r) - n_params
-    cov = np.linalg.pinv(A)
+    try:
+        cov = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(A)
     if dof > 0:
         cov = cov * max(1.0, chi2 / dof)
     return 0.5 * (cov + cov.T), chi2
@@ -225,30 +228,38 @@ class PlanarModel:
         x, y, th = p
         c, s = math.cos(th), math.sin(th)
         qx, qy = P[:, 0] - x, P[:, 1] - y
-        pb = np.stack([c * qx + s * qy, -s * qx + c * qy, P[:, 2]], axis=1)  # base-frame points
-        pc = pb @ self.R_cb.T + self.t_cb
-        X, Y, Z = pc[:, 0], pc[:, 1], pc[:, 2]
+        bx, by = c * qx + s * qy, -s * qx + c * qy  # base-frame points (z unchanged)
+        R, t = self.R_cb, self.t_cb
+        X = R[0, 0] * bx + R[0, 1] * by + R[0, 2] * P[:, 2] + t[0]
+        Y = R[1, 0] * bx + R[1, 1] * by + R[1, 2] * P[:, 2] + t[1]
+        Z = R[2, 0] * bx + R[2, 1] * by + R[2, 2] * P[:, 2] + t[2]
         bad = Z < 1e-3
-        if np.any(bad) and (behind is None or jac):
+        anybad = bool(bad.any())
+        if anybad and (behind is None or jac):
             return None, None
         fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
-        iz = 1.0 / np.where(bad, 1.0, Z)
-        r = np.stack([fx * X * iz + cx - uv[:, 0], fy * Y * iz + cy - uv[:, 1]], axis=1)
-        if np.any(bad):
+        iz = 1.0 / np.where(bad, 1.0, Z) if anybad else 1.0 / Z
+        n = len(P)
+        r = np.empty((n, 2))
+        r[:, 0] = fx * X * iz + cx - uv[:, 0]
+        r[:, 1] = fy * Y * iz + cy - uv[:, 1]
+        if anybad:
             r[bad] = behind
-        r = r.ravel()
+        r = r.reshape(-1)
         if not jac:
             return r, None
-        # d pb / d(x, y, th): columns
-        n = len(P)
-        dpb = np.zeros((n, 3, 3))
-        dpb[:, 0, 0], dpb[:, 1, 0] = -c, s  # d/dx
-        dpb[:, 0, 1], dpb[:, 1, 1] = -s, -c  # d/dy
-        dpb[:, 0, 2], dpb[:, 1, 2] = pb[:, 1], -pb[:, 0]  # d/dth
-        dpc = np.einsum("ij,njk->nik", self.R_cb, dpb)  # n x 3 x 3
+        # d(base point)/dx = (-c, s, 0), /dy = (-s, -c, 0), /dth = (by, -bx, 0); camera = R @ base
+        dX = np.empty((n, 3))
+        dY = np.empty((n, 3))
+        dZ = np.empty((n, 3))
+        for row, out in ((0, dX), (1, dY), (2, dZ)):
+            a, b = R[row, 0], R[row, 1]
+            out[:, 0] = -a * c + b * s
+            out[:, 1] = -a * s - b * c
+            out[:, 2] = a * by - b * bx
         J = np.empty((2 * n, 3))
-        J[0::2] = fx * (dpc[:, 0, :] * iz[:, None] - (X * iz * iz)[:, None] * dpc[:, 2, :])
-        J[1::2] = fy * (dpc[:, 1, :] * iz[:, None] - (Y * iz * iz)[:, None] * dpc[:, 2, :])
+        J[0::2] = fx * (dX - (X * iz)[:, None] * dZ) * iz[:, None]
+        J[1::2] = fy * (dY - (Y * iz)[:, None] * dZ) * iz[:, None]
         return r, J
 
 
@@ -275,7 +286,8 @@ def _lm(model: PlanarModel, p0: np.ndarray, P: np.ndarray, uv: np.ndarray, sig: 
         rn, Jn = model.residuals(pn, P, uv)
         cn = float(np.sum((rn * w) ** 2)) if rn is not None else math.inf
         if cn < cost:
-            small = abs(cost - cn) < 1e-9 * max(cost, 1e-12) or (abs(dp[0]) + abs(dp[1]) < 1e-7 and abs(dp[2]) < 1e-7)
+            # converged: the step is far below any accuracy we claim (0.1 um, 0.1 urad), or the cost stalls
+            small = abs(cost - cn) < 1e-8 * max(cost, 1e-12) or (abs(dp[0]) + abs(dp[1]) < 1e-7 and abs(dp[2]) < 1e-7)
             p, r, J, cost = pn, rn, Jn, cn
             lam = max(lam / 10, 1e-9)
             if small:
@@ -316,6 +328,8 @@ def consensus(obs: list[MarkerObservation], model: PlanarModel, T_cam_base: np.n
         rms = np.sqrt(np.mean(r.reshape(n, 8) ** 2, axis=1))
         inl = rms < cfg.consensus_px
         scored.append((-int(inl.sum()), float(np.sum(np.minimum(rms, cfg.consensus_px) ** 2)), k, inl))
+        if inl.all():
+            break  # every marker agrees: the least-squares fit takes it from here
     scored.sort(key=lambda x: (x[0], x[1], x[2]))
     best = scored[0][3]
     return [o for o, ok in zip(obs, best) if ok], [seeds[x[2]] for x in scored]
@@ -345,6 +359,7 @@ def planar_fit(obs: list[MarkerObservation], field: Field, K: np.ndarray, T_base
         P, uv, sig = _stack(active)
         best = None
         uniq: list[np.ndarray] = []
+        good_chi2 = cfg.marker_outlier_chi2 * len(active) / 2
         for s in seeds:
             if any(abs(s[0] - u[0]) + abs(s[1] - u[1]) < 1e-3 and abs(wrap_angle(s[2] - u[2])) < 1e-3 for u in uniq):
                 continue
@@ -352,6 +367,8 @@ def planar_fit(obs: list[MarkerObservation], field: Field, K: np.ndarray, T_base
             res = _lm(model, s, P, uv, sig)
             if res is not None and (best is None or res[1] < best[1]):
                 best = res
+            if best is not None and best[1] < good_chi2:
+                break  # a good fit: the other seeds could only find the same minimum
         if best is None:
             return _fail(method, reasons.NOT_FINITE, marker_ids=tuple(o.id for o in active))
         p, chi2 = best

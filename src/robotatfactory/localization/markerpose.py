@@ -114,15 +114,17 @@ class MarkerObservation:
 def _degenerate(c: np.ndarray, cfg: PoseConfig) -> bool:
     if not np.all(np.isfinite(c)):
         return True
-    e = np.roll(c, -1, axis=0) - c
-    sides = np.linalg.norm(e, axis=1)
+    nxt = [1, 2, 3, 0]
+    e = c[nxt] - c
+    sides = np.sqrt(e[:, 0] ** 2 + e[:, 1] ** 2)
     if sides.min() < cfg.min_side_px or sides.max() > cfg.max_side_ratio * sides.min():
         return True
-    cross = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
-    if not (np.all(cross > 0) or np.all(cross < 0)):  # not strictly convex
+    e2 = e[nxt]
+    cross = e[:, 0] * e2[:, 1] - e[:, 1] * e2[:, 0]
+    if not ((cross > 0).all() or (cross < 0).all()):  # not strictly convex
         return True
     x, y = c[:, 0], c[:, 1]
-    area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    area = 0.5 * abs(float(x @ y[nxt] - y @ x[nxt]))
     return area < cfg.min_area_px2
 
 
