@@ -1,0 +1,76 @@
+"""Settings of the stand-in simulator that affect physics, sensors and the competition (no I/O here)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..errors import ConfigError
+
+
+@dataclass(frozen=True)
+class PartPlacement:
+    """A free part put on the field by hand (tests, experiments): type letter R/G/B, pose in metres/rad.
+
+    ``facing`` is the world heading of the part's ferromagnetic plate, as :class:`field.Slot.facing`.
+    """
+
+    letter: str
+    x: float
+    y: float
+    facing: float = 0.0
+
+    def __post_init__(self):
+        if self.letter not in ("R", "G", "B"):
+            raise ConfigError(f"part type {self.letter!r}: expected R, G or B")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Everything that changes what :class:`~robotatfactory.sim.Simulator` computes.
+
+    Same config (seed included) and same commands: same sensor frames and camera images, bit for bit.
+
+    * ``start_pose``: (x, y, theta) in the field frame (m, rad); None = the field's start pose.
+    * ``camera``: render the robot camera during :meth:`Simulator.step_cycle` on SimTwo's 60 FPS render
+      clock decimated by 4 (frames at k/15 s of simulation time), collected with ``take_frames()``.
+    * ``lidar`` / ``lidar_noise``: cast the 2D LIDAR; add SimTwo's range noise a*exp(b*d) (seeded).
+    * ``competition``: place the round's parts and run the machines and the referee
+      (:mod:`robotatfactory.competition`); ``round_no``, ``parts`` (e.g. "RGBX"), ``processing_delay``
+      (s), ``start_after`` (s of simulation time before the run may start; the factory server says STOP
+      until then) and ``round_duration`` (s) configure it.
+    * ``extra_parts``: more parts placed by hand (they take part in physics, LIDAR, camera and magnet).
+    """
+
+    seed: int = 0
+    start_pose: tuple[float, float, float] | None = None
+    beacons: bool = False
+    camera: bool = True
+    lidar: bool = True
+    lidar_noise: bool = True
+    competition: bool = True
+    round_no: int = 1
+    parts: str | None = None
+    processing_delay: float = 10.0
+    start_after: float = 0.0
+    round_duration: float = 600.0
+    extra_parts: tuple[PartPlacement, ...] = field(default_factory=tuple)
+
+    def __post_init__(self):
+        if self.start_pose is not None:
+            if len(self.start_pose) != 3 or not all(math.isfinite(float(v)) for v in self.start_pose):
+                raise ConfigError(f"start pose {self.start_pose!r}: expected three finite numbers x,y,theta")
+        if self.start_after < 0 or not math.isfinite(self.start_after):
+            raise ConfigError(f"--start-after {self.start_after}: must be >= 0 seconds")
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError(f"seed {self.seed!r}: must be a non-negative integer")
+
+
+def parse_pose(text: str) -> tuple[float, float, float]:
+    """``"x,y,theta"`` (metres, radians) to a tuple; raises ConfigError with the reason."""
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"pose {text!r}: expected x,y,theta as three numbers (m, m, rad)") from None
+    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
+        raise ConfigError(f"pose {text!r}: expected x,y,theta as three finite numbers (m, m, rad)")
+    return vals  # type: ignore[return-value]

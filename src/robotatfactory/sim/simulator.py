@@ -1,0 +1,570 @@
+"""The stand-in simulator's core: MuJoCo physics, SimTwo's motor model, sensors and the competition.
+
+Deterministic and free of I/O: :meth:`Simulator.step_cycle` takes the :class:`~robotatfactory.simtwo.Command`
+to apply and returns the :class:`~robotatfactory.simtwo.SensorFrame` measured at the end of the control
+period (40 ms of 1 ms physics steps). Camera frames due in that period (SimTwo's 60 FPS render clock,
+every 4th tick) are rendered at the physics step they fall on and collected with :meth:`take_frames`; a
+caller that publishes them before sending the returned frame honours the frame ordering rule of
+``docs/dev/interfaces.md``.
+
+Units: metres, radians, seconds, volts, amperes, newton-metres. Poses are in the field frame.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..field import Field  # noqa: E402
+from ..robot import RobotSpec  # noqa: E402
+from ..simtwo import Command, SensorFrame  # noqa: E402
+from . import scene as sc  # noqa: E402
+from .camera import CameraFrame, Renderer  # noqa: E402
+from .config import SimConfig  # noqa: E402
+from .motor import DCMotor, MotorParams, SpeedControllerParams, SpeedPI  # noqa: E402
+from .parts import PartBodies  # noqa: E402
+from .sensors import Encoder, Lidar  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+SETTLE_STEPS = 300  # physics steps run before t = 0 so that wheels and parts rest on the floor
+MAGNET_CHECK_STEPS = 10  # while on and empty, the magnet looks for a plate every 10 ms
+MAGNET_GAP = 0.0005  # m left between the magnet's face and a held plate
+
+
+def _yaw(q) -> float:
+    w, x, y, z = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+class Simulator:
+    """One robot on the RobotAtFactory 4.0 field. See the module docstring.
+
+    Attributes worth reading: ``time`` (s), ``pose`` (x, y, theta), ``seq`` (cycles done), ``held`` (the
+    part id on the magnet or None), ``factory`` and ``referee`` (None without the competition),
+    ``wheel_speeds`` (rad/s), ``motor_voltages`` (V), ``motor_currents`` (A).
+    """
+
+    def __init__(self, field: Field, robot: RobotSpec, config: SimConfig | None = None, *,
+                 offscreen: tuple[int, int] | None = None, reference_drive: bool = False):
+        self.reference_drive = reference_drive  # True: the plain (slow) motor/controller loop, for tests
+        self.field = field
+        self.robot = robot
+        self.config = config = config or SimConfig()
+        self.factory = self.referee = self.setup = None
+        parts = self._initial_parts()
+        cam = robot.camera
+        off = offscreen or (cam.width, cam.height)
+        off = (max(off[0], cam.width), max(off[1], cam.height))
+        spec, self.info = sc.build_spec(field, robot, config, parts, offscreen=off)
+        self._eq_names = {}
+        for pid in self.info.parts:
+            name = f"magnet_weld_{pid}"
+            eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                                   name1="robot", name2=self.info.parts[pid], active=False)
+            eq.solref = [0.01, 1.0]
+            self._eq_names[pid] = name
+        self.spec = spec
+        self.model = m = spec.compile()
+        self.data = d = mujoco.MjData(m)
+        self.dt = float(m.opt.timestep)
+        self.steps_per_cycle = int(round(robot.control_period / self.dt))
+        if abs(self.steps_per_cycle * self.dt - robot.control_period) > 1e-9:
+            raise ValueError(f"control period {robot.control_period} s is not a multiple of the physics step {self.dt} s")
+
+        # ids
+        name2id = mujoco.mj_name2id
+        self._robot_body = name2id(m, mujoco.mjtObj.mjOBJ_BODY, self.info.robot_body)
+        j = name2id(m, mujoco.mjtObj.mjOBJ_JOINT, self.info.robot_joint)
+        self._qa = int(m.jnt_qposadr[j])
+        self._va = int(m.jnt_dofadr[j])
+        jl, jr = (name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in self.info.wheel_joints)
+        self._wq = (int(m.jnt_qposadr[jl]), int(m.jnt_qposadr[jr]))
+        self._wv = (int(m.jnt_dofadr[jl]), int(m.jnt_dofadr[jr]))
+        self._act = tuple(name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in self.info.actuators)
+        self.parts = PartBodies(m, self.info)
+        self._eq = {pid: name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, n) for pid, n in self._eq_names.items()}
+        self._plate_geoms = {name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"part_{pid}_plate"): pid for pid in self.info.parts}
+        for pid, letter, *_ in parts:
+            self.parts.set_letter(pid, letter)
+
+        # actuation
+        mp = MotorParams.from_spec(robot.motor)
+        self.motor_params = mp
+        self.motors = (DCMotor(mp, self.dt), DCMotor(mp, self.dt))
+        cp = SpeedControllerParams.from_spec(robot.speed_controller)
+        self.controller_params = cp
+        self.controllers = (SpeedPI(cp, mp.Vmax), SpeedPI(cp, mp.Vmax))
+        self._ctrl_every = max(1, int(round(cp.period / self.dt)))
+        self.command = Command.stop()
+        self.magnet_on = False
+        self.held: int | None = None
+
+        # sensors
+        self._lidar = Lidar(robot.lidar, self.dt, config.seed, config.lidar_noise, sc.LIDAR_GROUPS) \
+            if config.lidar else None
+        self._ray_gid = np.zeros(1, dtype=np.int32)
+        self._magnet_groups = np.asarray(sc.MAGNET_GROUPS, dtype=np.uint8)
+        self._contact_groups = np.asarray(sc.CONTACT_GROUPS, dtype=np.uint8)
+        self.contact = False
+
+        # camera clock: frames at index * decimation / render_fps seconds of simulation time
+        self._frame_period = cam.decimation / cam.render_fps
+        self._frame_index = 0
+        self._frames: list[CameraFrame] = []
+        self._renderer: Renderer | None = None
+        self.render_seconds = 0.0  # wall time spent rendering (for benchmarks)
+        self.frames_rendered = 0
+
+        # rest everything on the floor, then start the clock and the encoders at t = 0
+        mujoco.mj_forward(m, d)
+        for _ in range(SETTLE_STEPS):
+            mujoco.mj_step(m, d)
+        d.time = 0.0
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(m, d)
+        self._step = 0
+        self.seq = 0
+        self.encoders = (Encoder(robot.ticks_per_rev, float(d.qpos[self._wq[0]])),
+                         Encoder(robot.ticks_per_rev, float(d.qpos[self._wq[1]])))
+        self._start_factory_if_due()
+
+    # ------------------------------------------------------------------------------------------ setup
+    def _initial_parts(self) -> list[tuple[int, str, float, float, float]]:
+        cfg = self.config
+        parts = []
+        if cfg.competition:
+            from ..competition import Factory, Referee, RoundSetup
+
+            self.setup = RoundSetup.make(cfg.round_no, seed=cfg.seed, parts=cfg.parts,
+                                         processing_delay=cfg.processing_delay, duration=cfg.round_duration)
+            self.factory = Factory(self.field, self.setup)
+            self.referee = Referee(self.factory)
+            for pid, ptype, slot in self.factory.initial_parts():
+                parts.append((int(pid), ptype.letter, slot.xy[0], slot.xy[1], slot.facing))
+        next_id = max([p[0] for p in parts], default=0) + 1
+        for k, pp in enumerate(cfg.extra_parts):
+            parts.append((next_id + k, pp.letter, pp.x, pp.y, pp.facing))
+        return parts
+
+    def _start_factory_if_due(self) -> None:
+        f = self.factory
+        if f is not None and not f.started and self.time >= self.config.start_after - 1e-9:
+            f.start(self.time)
+
+    # ------------------------------------------------------------------------------------------ state
+    @property
+    def time(self) -> float:
+        """Simulation time (s): exact multiple of the physics step."""
+        return self._step * self.dt
+
+    @property
+    def time_ms(self) -> int:
+        return int(round(self._step * self.dt * 1000))
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """Ground truth (x, y, theta) of base_link in the field frame (m, m, rad in (-pi, pi])."""
+        q = self.data.qpos
+        a = self._qa
+        return float(q[a]), float(q[a + 1]), _yaw(q[a + 3:a + 7])
+
+    @property
+    def wheel_speeds(self) -> tuple[float, float]:
+        v = self.data.qvel
+        return float(v[self._wv[0]]), float(v[self._wv[1]])
+
+    @property
+    def wheel_angles(self) -> tuple[float, float]:
+        q = self.data.qpos
+        return float(q[self._wq[0]]), float(q[self._wq[1]])
+
+    @property
+    def motor_voltages(self) -> tuple[float, float]:
+        return self.motors[0].voltage, self.motors[1].voltage
+
+    @property
+    def motor_currents(self) -> tuple[float, float]:
+        return self.motors[0].current, self.motors[1].current
+
+    @property
+    def body_velocity(self) -> tuple[float, float]:
+        """Ground-truth (v forward m/s, w rad/s) of the robot body."""
+        v = self.data.qvel
+        a = self._va
+        _, _, th = self.pose
+        return float(v[a] * math.cos(th) + v[a + 1] * math.sin(th)), float(v[a + 5])
+
+    def set_pose(self, x: float, y: float, theta: float) -> None:
+        """Put the robot at rest at (x, y, theta); releases a held part. Encoders keep counting from here."""
+        self._release()
+        q = self.data.qpos
+        a = self._qa
+        q[a:a + 7] = (x, y, q[a + 2], math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2))
+        self.data.qvel[self._va:self._va + 6] = 0.0
+        for i in range(2):
+            self.data.qvel[self._wv[i]] = 0.0
+            self.motors[i].reset()
+            self.controllers[i].reset()
+        mujoco.mj_forward(self.model, self.data)
+
+    def place_part(self, part_id: int, x: float, y: float, facing: float) -> None:
+        """Teleport a part (at rest) to (x, y) with its plate towards ``facing``."""
+        if self.held == part_id:
+            self._release()
+        self.parts.place(self.data, part_id, x, y, facing)
+        mujoco.mj_forward(self.model, self.data)
+
+    def part_pose(self, part_id: int) -> tuple[float, float, float]:
+        return self.parts.pose(self.data, part_id)
+
+    def part_letter(self, part_id: int) -> str:
+        return self.parts.letter[part_id]
+
+    # ------------------------------------------------------------------------------------------ commands
+    def apply(self, cmd: Command) -> None:
+        """Make ``cmd`` the command in force: wheel speed references and the electromagnet."""
+        v, w = float(cmd.v), float(cmd.w)
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise ValueError(f"command with non-finite V/W: {cmd}")
+        self.command = cmd
+        wl, wr = self.robot.wheel_speeds(v, w)
+        self.controllers[0].target = wl
+        self.controllers[1].target = wr
+        if cmd.magnet and not self.magnet_on:
+            self.magnet_on = True
+        elif not cmd.magnet and self.magnet_on:
+            self.magnet_on = False
+            self._release()
+
+    # ------------------------------------------------------------------------------------------ the cycle
+    def step_cycle(self, cmd: Command | None = None) -> SensorFrame:
+        """Apply ``cmd`` (None: keep the present one) and advance one control period."""
+        if cmd is not None:
+            self.apply(cmd)
+        self._start_factory_if_due()
+        n = self.steps_per_cycle
+        s0 = self._step
+
+        # what happens after which step of this cycle (offset j: after step s0 + j + 1)
+        lidar_slot = [-1] * n
+        if self._lidar is not None:
+            for slot, j in enumerate(self._lidar.plan(s0, n)):
+                lidar_slot[j] = slot
+        events: dict[int, list] = {}
+        if self.config.camera:
+            while True:
+                fs = self._frame_step(self._frame_index)
+                if fs > s0 + n:
+                    break
+                if fs <= s0:  # due at the start of this cycle: render the state as it is now
+                    self._render_frame(self._frame_index)
+                else:
+                    events.setdefault(fs - s0 - 1, []).append(("camera", self._frame_index))
+                self._frame_index += 1
+        if self.magnet_on and self.held is None:
+            self._magnet_check()
+            for j in range(MAGNET_CHECK_STEPS - 1, n, MAGNET_CHECK_STEPS):
+                events.setdefault(j, []).append(("magnet", 0))
+        if self.reference_drive:
+            self._run_reference(s0, n, lidar_slot, events)
+        else:
+            self._run_fast(s0, n, lidar_slot, events)
+        self._step = s0 + n
+        return self._end_of_cycle()
+
+    def _on_events(self, step: int, ev: list) -> None:
+        self._step = step
+        for kind, arg in ev:
+            if kind == "camera":
+                self._render_frame(arg)
+            elif kind == "magnet" and self.held is None:
+                self._magnet_check()
+
+    def _log_lidar_pose(self, slot: int) -> None:
+        q = self.data.qpos
+        a = self._qa
+        self._lidar.log_pose(slot, q[a], q[a + 1], _yaw(q[a + 3:a + 7]))
+
+    def _run_reference(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
+        """The physics steps of one cycle, written plainly with :class:`DCMotor` and :class:`SpeedPI`."""
+        m, d = self.model, self.data
+        qvel, ctrl = d.qvel, d.ctrl
+        il, ir = self._wv
+        (ml, mr), (pl, pr) = self.motors, self.controllers
+        for j in range(n):
+            wl, wr = qvel[il], qvel[ir]
+            if (s0 + j) % self._ctrl_every == 0:
+                pl.update(wl)
+                pr.update(wr)
+            ctrl[self._act[0]] = ml.step(pl.output, wl)
+            ctrl[self._act[1]] = mr.step(pr.output, wr)
+            mujoco.mj_step(m, d)
+            if lidar_slot[j] >= 0:
+                self._log_lidar_pose(lidar_slot[j])
+            if j in events:
+                self._on_events(s0 + j + 1, events[j])
+
+    def _run_fast(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
+        """The same arithmetic as :meth:`_run_reference` inlined on local floats (the hot loop: Python's
+        call overhead would otherwise cost more than MuJoCo's step). Tests check both give identical runs."""
+        m, d = self.model, self.data
+        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+        il, ir = self._wv
+        al, ar = self._act
+        qa = self._qa
+        step = mujoco.mj_step
+        atan2 = math.atan2
+        log_pose = self._lidar.log_pose if self._lidar is not None else None
+        ml, mr = self.motors
+        pl, pr = self.controllers
+        mp, cp = self.motor_params, self.controller_params
+        # motor constants
+        a, b, ke, kt = ml.a, ml.b, ml.ke, ml.kt
+        slew, imax, vmax = mp.slew_A_per_step, mp.Imax, mp.Vmax
+        # controller constants
+        kp, kf, kc = cp.kp, cp.kf, cp.kc
+        kidt = pl._kidt
+        dv = pl._dv
+        every = self._ctrl_every
+        # state
+        Il, Ir = ml.current, mr.current
+        vl, vr = pl.output, pr.output
+        intl, intr = pl.integral, pr.integral
+        refl, refr = pl.ref, pr.ref
+        tgl, tgr = pl.target, pr.target
+        for j in range(n):
+            wl = qvel[il]
+            wr = qvel[ir]
+            if every == 1 or (s0 + j) % every == 0:
+                # left speed PI (SpeedPI.update)
+                if tgl - refl > dv:
+                    refl += dv
+                elif refl - tgl > dv:
+                    refl -= dv
+                else:
+                    refl = tgl
+                e = refl - wl
+                ii = intl + kidt * e
+                u = kf * refl + (kc if refl > 0.0 else (-kc if refl < 0.0 else 0.0)) + kp * e + ii
+                if u > vmax:
+                    if kidt * e > 0:
+                        ii = intl
+                    u = vmax
+                elif u < -vmax:
+                    if kidt * e < 0:
+                        ii = intl
+                    u = -vmax
+                intl = ii
+                vl = u
+                # right
+                if tgr - refr > dv:
+                    refr += dv
+                elif refr - tgr > dv:
+                    refr -= dv
+                else:
+                    refr = tgr
+                e = refr - wr
+                ii = intr + kidt * e
+                u = kf * refr + (kc if refr > 0.0 else (-kc if refr < 0.0 else 0.0)) + kp * e + ii
+                if u > vmax:
+                    if kidt * e > 0:
+                        ii = intr
+                    u = vmax
+                elif u < -vmax:
+                    if kidt * e < 0:
+                        ii = intr
+                    u = -vmax
+                intr = ii
+                vr = u
+            # left motor (DCMotor.step)
+            v = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
+            di = a * Il + b * (v - ke * wl) - Il
+            di = slew if di > slew else (-slew if di < -slew else di)
+            Il += di
+            Il = imax if Il > imax else (-imax if Il < -imax else Il)
+            ctrl[al] = kt * Il
+            # right motor
+            v = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
+            di = a * Ir + b * (v - ke * wr) - Ir
+            di = slew if di > slew else (-slew if di < -slew else di)
+            Ir += di
+            Ir = imax if Ir > imax else (-imax if Ir < -imax else Ir)
+            ctrl[ar] = kt * Ir
+            step(m, d)
+            slot = lidar_slot[j]
+            if slot >= 0:
+                w_, x_, y_, z_ = qpos[qa + 3], qpos[qa + 4], qpos[qa + 5], qpos[qa + 6]
+                log_pose(slot, qpos[qa], qpos[qa + 1], atan2(2.0 * (w_ * z_ + x_ * y_), 1.0 - 2.0 * (y_ * y_ + z_ * z_)))
+            if events and j in events:
+                self._on_events(s0 + j + 1, events[j])
+        # write the state back
+        ml.current, mr.current = Il, Ir
+        ml.voltage = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
+        mr.voltage = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
+        pl.output, pr.output = vl, vr
+        pl.integral, pr.integral = intl, intr
+        pl.ref, pr.ref = refl, refr
+
+    def _frame_step(self, index: int) -> int:
+        """The physics step (count since t = 0) at or after camera frame ``index``'s render tick."""
+        return math.ceil(index * self._frame_period / self.dt - 1e-6)
+
+    def _end_of_cycle(self) -> SensorFrame:
+        m, d = self.model, self.data
+        el, er = self.encoders
+        el.update(float(d.qpos[self._wq[0]]))
+        er.update(float(d.qpos[self._wq[1]]))
+        if self._lidar is not None:
+            self._lidar.cast(m, d, mujoco)
+        self.contact = self._contact_pressed()
+        x, y, th = self.pose
+        if self.factory is not None:
+            held = {self.held} if self.held is not None else set()
+            teleports = self.factory.step(self.time, self.parts.all_xy(d), (x, y), held)
+            if teleports:
+                for tp in teleports:
+                    self._teleport(tp)
+                mujoco.mj_forward(m, d)
+        frame = SensorFrame(
+            seq=self.seq, time_ms=self.time_ms, enc_delta=(el.delta, er.delta), enc_total=(el.total, er.total),
+            x=x, y=y, theta=th, contact=self.contact, magnet=self.magnet_on,
+            ranges=self._lidar.ranges.copy() if self._lidar is not None else np.empty(0))
+        self.seq += 1
+        return frame
+
+    def _teleport(self, tp) -> None:
+        pid = int(tp.part_id)
+        if pid not in self.parts.qadr:
+            log.warning("factory asked to teleport unknown part %r", pid)
+            return
+        if self.held == pid:
+            self._release()
+        x, y = tp.slot.xy
+        self.parts.place(self.data, pid, x, y, tp.slot.facing)
+        self.parts.set_letter(pid, tp.new_type.letter)
+
+    # ------------------------------------------------------------------------------------------ sensors
+    def _robot_frame(self):
+        d = self.data
+        return d.xpos[self._robot_body], d.xmat[self._robot_body].reshape(3, 3)
+
+    def _contact_pressed(self) -> bool:
+        c = self.robot.contact
+        p, R = self._robot_frame()
+        origin = p + R @ np.asarray(c["xyz"], dtype=np.float64)
+        direction = np.ascontiguousarray(R[:, 0])
+        dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._contact_groups, 1, -1, self._ray_gid)
+        return bool(self._ray_gid[0] >= 0 and 0.0 <= dist <= float(c["beam"]))
+
+    def _magnet_check(self) -> None:
+        """Attach a part whose plate is within the electromagnet's beam and faces it."""
+        em = self.robot.electromagnet
+        p, R = self._robot_frame()
+        origin = p + R @ np.array([float(em["x"]), 0.0, sc.MAGNET_Z])
+        direction = np.ascontiguousarray(R[:, 0])
+        dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._magnet_groups, 1, -1, self._ray_gid)
+        gid = int(self._ray_gid[0])
+        if gid < 0 or not 0.0 <= dist <= float(em["beam"]):
+            return
+        pid = self._plate_geoms.get(gid)
+        if pid is None:
+            return
+        d = self.data
+        part_R = d.xmat[self.parts.body[pid]].reshape(3, 3)
+        if float(part_R[:, 0] @ R[:, 0]) > -math.cos(math.radians(45)):
+            return  # the plate does not face the magnet
+        self._attach(pid)
+
+    def _attach(self, pid: int) -> None:
+        """Weld the part to the robot with its plate flat against the magnet (pulled in from the beam)."""
+        m, d = self.model, self.data
+        p, R = self._robot_frame()
+        part_p = d.xpos[self.parts.body[pid]]
+        rel = R.T @ (part_p - p)
+        fp = self.field.part
+        x_rel = float(self.robot.electromagnet["x"]) + MAGNET_GAP + sc.PLATE_THICKNESS + fp.depth / 2
+        y_lim = fp.plate[0] / 2
+        y_rel = float(np.clip(rel[1], -y_lim, y_lim))
+        eq = self._eq[pid]
+        # weld data: anchor (3), relpose of body1 (robot) in body2 (part) frame: pos (3), quat (4), torquescale
+        # the part frame is the robot frame turned by pi about z and shifted by (x_rel, y_rel, rel_z)
+        # robot origin in the part frame: R_z(pi)^T @ (-(x_rel, y_rel, z)) = (x_rel, y_rel, -z)
+        m.eq_data[eq, 0:3] = 0.0
+        m.eq_data[eq, 3:6] = (x_rel, y_rel, -float(rel[2]))
+        m.eq_data[eq, 6:10] = (0.0, 0.0, 0.0, 1.0)
+        m.eq_data[eq, 10] = 1.0
+        d.eq_active[eq] = 1
+        self.held = pid
+
+    def _release(self) -> None:
+        if self.held is not None:
+            self.data.eq_active[self._eq[self.held]] = 0
+            self.held = None
+
+    # ------------------------------------------------------------------------------------------ camera
+    def _get_renderer(self) -> Renderer:
+        if self._renderer is None:
+            c = self.robot.camera
+            self._renderer = Renderer(self.model, self.info.robot_camera, c.width, c.height)
+        return self._renderer
+
+    def _render_frame(self, index: int) -> None:
+        import time as _time
+
+        t0 = _time.perf_counter()
+        rgb = self._get_renderer().render(self.data).copy()
+        self.render_seconds += _time.perf_counter() - t0
+        self.frames_rendered += 1
+        dec = self.robot.camera.decimation
+        self._frames.append(CameraFrame(index=index, tick=index * dec, tick_time=index * self._frame_period,
+                                        time=self.time, rgb_bottom_up=rgb))
+
+    def take_frames(self) -> list[CameraFrame]:
+        """Camera frames rendered since the last call, oldest first (publish them before the next frame)."""
+        out, self._frames = self._frames, []
+        return out
+
+    def render_camera(self) -> np.ndarray:
+        """The robot camera's view of the present state: H x W x 3 uint8 BGR, top row first."""
+        return self._get_renderer().render_bgr(self.data)
+
+    def camera_pose(self) -> np.ndarray:
+        """4x4 world <- camera_optical (OpenCV: x right, y down, z forward) from the simulated state."""
+        m, d = self.model, self.data
+        cid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, self.info.robot_camera)
+        T = np.eye(4)
+        T[:3, :3] = d.cam_xmat[cid].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
+        T[:3, 3] = d.cam_xpos[cid]
+        return T
+
+    def snapshot(self, path=None, width: int = 1280, height: int = 960, camera: str = "overview") -> np.ndarray:
+        """An overview render (BGR, top row first) of the scene; written as PNG when ``path`` is given.
+        The model must have been built with ``offscreen`` at least (width, height)."""
+        import cv2
+
+        r = Renderer(self.model, camera, width, height)
+        try:
+            img = r.render_bgr(self.data)
+        finally:
+            r.close()
+        if path is not None:
+            if not cv2.imwrite(str(path), img):
+                raise OSError(f"cannot write {path}")
+        return img
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
