@@ -71,6 +71,9 @@ class FakeSim:
             else:
                 self.pub.bind(camera)
         self.received: list[Received] = []
+        self.loss = 0.0  # probability of not sending a SensorFrame (a lost datagram)
+        self.lost = 0
+        self._rng = np.random.default_rng(0)
         self.sent = 0
         self.frames_published = 0
         self.timeouts = 0
@@ -139,7 +142,11 @@ class FakeSim:
             self.seq += 1
         for k in renders:
             self.publish_camera(k)
-        self.send(frame.encode())
+        if self.loss and self._rng.random() < self.loss:
+            self.lost += 1
+            frame.lost = True
+        else:
+            self.send(frame.encode())
         return frame
 
     def publish_camera(self, tick: int, nbytes: int | None = None) -> None:
@@ -193,7 +200,7 @@ class FakeSim:
                 continue
             f = self.cycle()
             i += 1
-            if self.lockstep:
+            if self.lockstep and not getattr(f, "lost", False):
                 if not self.drain(f.seq, self.lockstep_timeout):
                     self.timeouts += 1
                     with self._lock:

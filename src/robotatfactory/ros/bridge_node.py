@@ -45,6 +45,7 @@ from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
 from ..simtwo.timing import CameraStamper, SimClock, SweepAssembler
 from . import messages as rm
 from .config import BridgeConfig, load_config
+from .udp import TimestampedUDP
 
 JOINT_NAMES = ("left_wheel_joint", "right_wheel_joint")
 
@@ -105,15 +106,15 @@ class Bridge:
     # ---- setup -----------------------------------------------------------------------------------------
     def start(self) -> "Bridge":
         cfg, t = self.cfg, self.cfg.topics
-        self.sock = s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         try:
-            s.bind((cfg.bind_host, cfg.port))
+            self.udp = TimestampedUDP(cfg.bind_host, cfg.port)
         except OSError as e:
-            s.close()
             raise ConfigError(f"cannot listen on UDP {cfg.bind_host}:{cfg.port} (~udp/bind_host, ~udp/port): {e}")
-        s.settimeout(0.2)
-        self.bound_port = s.getsockname()[1]
+        self.sock = self.udp.sock
+        self.bound_port = self.udp.port
+        # the GIL is handed between threads every 5 ms by default: a camera frame being converted would
+        # delay the control path (and the arrival times the camera stamping compares) by that much
+        sys.setswitchinterval(0.0005)
         self.pub_clock = rospy.Publisher(t["clock"], Clock, queue_size=10)
         self.pub_odom = rospy.Publisher(t["odom"], Odometry, queue_size=10)
         self.pub_gt = rospy.Publisher(t["ground_truth"], Odometry, queue_size=10)
@@ -236,12 +237,10 @@ class Bridge:
 
     # ---- the control path --------------------------------------------------------------------------------
     def _udp_loop(self) -> None:
-        sock, cfg = self.sock, self.cfg
-        buf = bytearray(65536)
-        view = memoryview(buf)
+        udp = self.udp
         while self._running and not rospy.is_shutdown():
             try:
-                n, addr = sock.recvfrom_into(buf)
+                data, addr, arrival = udp.recv()
             except socket.timeout:
                 continue
             except OSError as e:
@@ -249,8 +248,7 @@ class Bridge:
                     return
                 self._warn("recv", f"bridge: UDP receive error: {e}")
                 continue
-            arrival = time.monotonic()
-            self.handle_datagram(bytes(view[:n]), addr, arrival)
+            self.handle_datagram(data, addr, arrival)
 
     def handle_datagram(self, data: bytes, addr, arrival: float) -> None:
         cfg, tr = self.cfg, self.tracker

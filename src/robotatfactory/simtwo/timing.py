@@ -20,7 +20,9 @@ Method (``CameraStamper``), for a camera frame arriving at wall time ``a``:
   (at ``a_b``). Normally the frame arrives before the SensorFrame that follows it, so it belongs to the cycle
   ending ``T_b + P``: ``t_r`` in ``(T_b, T_b + P]``. But a 1.2 MB frame takes longer to deliver than a 3 KB
   datagram sent just after it, so when ``a - a_b <= overtake_window`` (default 5 ms) the SensorFrame is taken
-  to have overtaken the frame, which then belongs to the cycle ending ``T_b``: ``t_r`` in ``(T_b - P, T_b]``.
+  to have overtaken the frame, which then belongs to the cycle ending ``T_b``: ``t_r`` in ``(T_b - P, T_b]``
+  (the window is capped at half the median wall time between SensorFrames, for fast simulators). The
+  bridge takes a datagram's arrival from the kernel's receive timestamp, not from when a thread read it.
   The bracket is right when the camera's delivery latency is below ``overtake_window`` and the simulator
   needs longer than ``overtake_window`` (wall) between sending a SensorFrame and publishing the next
   cycle's camera frame (reply, physics, rendering): both hold on one machine, in real time or in lockstep.
@@ -162,13 +164,23 @@ class CameraStamper:
         k_max = math.floor(Fraction(hi_ms, 1000) * self.fps)
         return list(range(k_min, k_max + 1))
 
+    def effective_overtake_window(self) -> float:
+        """``overtake_window``, but at most half the recent median wall time between SensorFrames (a fast
+        simulator's next camera frame may follow a SensorFrame sooner than ``overtake_window``)."""
+        a = self._arrivals
+        if len(a) < 3:
+            return self.overtake_window
+        recent = list(a)[-17:]
+        gaps = sorted(b - x for x, b in zip(recent, recent[1:]))
+        return min(self.overtake_window, 0.5 * gaps[len(gaps) // 2])
+
     def bracket(self, arrival: float) -> tuple[int, int, bool] | None:
         """(lo_ms, hi_ms, overtaken) for a frame arriving at ``arrival``; None before any SensorFrame."""
         i = bisect.bisect_right(self._arrivals, arrival) - 1
         if i < 0:
             return None
         t_b, a_b = self._tms[i], self._arrivals[i]
-        overtaken = arrival - a_b <= self.overtake_window
+        overtaken = arrival - a_b <= self.effective_overtake_window()
         hi = t_b if overtaken else t_b + self.period_ms
         return hi - self.period_ms, hi, overtaken
 

@@ -1,0 +1,361 @@
+"""The bridge end to end against the fake simulator: a real roscore (free port), ``raf bridge`` as a process,
+the fake SimTwo (tests/fakesim.py) in a thread of this process, and an in-process rospy test node."""
+from __future__ import annotations
+
+import math
+import socket
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from fakesim import FakeSim, tick_of_image
+from rosutil import Collector, free_port, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+WATCHDOG = 0.5
+
+
+@pytest.fixture(scope="module")
+def rig(ros_master, tmp_path_factory):
+    """One bridge process and one fake simulator (lockstep, real time) shared by the tests of this file."""
+    port = free_port(socket.SOCK_DGRAM)
+    cam = f"tcp://127.0.0.1:{free_port()}"
+    log = tmp_path_factory.mktemp("bridge") / "bridge.log"
+    proc = raf_process(["bridge", "--port", str(port), "--camera", cam, "--set", f"watchdog/timeout={WATCHDOG}",
+                        "--set", "diagnostics/period=0.25", "--set", "log_period=1.0"], ros_master.env(), log)
+    rospy = test_node()
+    wait_until(lambda: any(n.endswith("raf_bridge") for n in __import__("rosnode").get_node_names()), 30,
+               what="the bridge node registering")
+    sim = FakeSim(("127.0.0.1", port), cam, lockstep=True, lockstep_timeout=0.3).start()
+    yield {"rospy": rospy, "sim": sim, "port": port, "cam": cam, "proc": proc, "log": log}
+    sim.stop()
+    code = stop_process(proc)
+    print(log.read_text()[-4000:])
+    assert code == 0, f"raf bridge exited with {code}"
+
+
+def diag_values(msg, suffix):
+    for st in msg.status:
+        if st.name.endswith(suffix):
+            return st, {kv.key: kv.value for kv in st.values}
+    raise KeyError(suffix)
+
+
+def latest_diag(diag: Collector, suffix: str, after: float = 0.0):
+    msgs = diag.wait(1, timeout=5, pred=lambda m: any(s.name.endswith(suffix) for s in m.status))
+    with diag._lock:
+        pairs = [(t, m) for t, m in zip(diag.times, diag.msgs) if t >= after]
+    if not pairs:
+        return diag_values(msgs[-1], suffix)
+    return diag_values(pairs[-1][1], suffix)
+
+
+def test_every_topic_arrives_with_types_frames_and_stamps(rig):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan
+    from std_msgs.msg import Bool
+    from visualization_msgs.msg import MarkerArray
+
+    topics = {"/clock": Clock, "/odom": Odometry, "/ground_truth": Odometry, "/joint_states": JointState,
+              "/scan": LaserScan, "/contact": Bool, "/electromagnet/state": Bool, "/camera/image_raw": Image,
+              "/camera/camera_info": CameraInfo, "/field/markers": MarkerArray, "/diagnostics": DiagnosticArray}
+    cols = {t: Collector(t, ty) for t, ty in topics.items()}
+    try:
+        for t, c in cols.items():
+            c.wait({"/field/markers": 1, "/scan": 3, "/camera/image_raw": 30, "/diagnostics": 1}.get(t, 5), timeout=20)
+    finally:
+        for c in cols.values():
+            c.close()
+    m = {t: c.msgs for t, c in cols.items()}
+    # /clock follows Tms: whole control periods, increasing
+    clocks = [c.clock.to_nsec() for c in m["/clock"]]
+    assert all(b > a for a, b in zip(clocks, clocks[1:]))
+    assert all(c % 40_000_000 == 0 for c in clocks)
+    od = m["/odom"][-1]
+    assert (od.header.frame_id, od.child_frame_id) == ("odom", "base_link")
+    assert od.header.stamp.to_nsec() % 40_000_000 == 0
+    cov = np.array(od.pose.covariance).reshape(6, 6)
+    assert np.all(np.diag(cov) > 0)
+    gt = m["/ground_truth"][-1]
+    assert gt.header.frame_id == "map" and gt.child_frame_id == "base_link"
+    js = m["/joint_states"][-1]
+    assert list(js.name) == ["left_wheel_joint", "right_wheel_joint"] and len(js.position) == 2
+    assert js.header.stamp.to_nsec() % 40_000_000 == 0
+    sc = m["/scan"][-1]
+    assert sc.header.frame_id == "laser"
+    assert sc.angle_min == pytest.approx(-math.pi) and sc.angle_max == pytest.approx(math.pi)
+    assert sc.angle_increment == pytest.approx(2 * math.pi / 359)
+    assert sc.range_max == 6.0 and sc.scan_time == pytest.approx(0.2)
+    assert sc.time_increment == pytest.approx(0.2 / 360, rel=0.01)
+    assert len(sc.ranges) == 360 and math.isinf(sc.ranges[7])
+    assert sc.ranges[100] == pytest.approx(1.1, abs=1e-6)
+    # a sweep is stamped with the time of its first ray (1 ms after the sweep's start)
+    assert (sc.header.stamp.to_nsec() - 1_000_000) % 200_000_000 == 0
+    assert m["/contact"][-1].data is False
+    img = m["/camera/image_raw"]
+    for im in img:
+        assert (im.encoding, im.width, im.height, im.step, im.header.frame_id) == ("bgr8", 640, 480, 1920,
+                                                                                   "camera_optical")
+    # stamps: the render time of each frame (the fake simulator writes its render tick into the image)
+    from robotatfactory.ros.messages import image_to_bgr
+
+    truth = [tick_of_image(image_to_bgr(im)) / 60 for im in img]
+    stamps = [im.header.stamp.to_sec() for im in img]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    late = list(zip(truth, stamps))[-12:]  # after the render phase has been learned
+    assert all(s == pytest.approx(t, abs=1e-6) for t, s in late), late
+    # the image is right side up: the fake frame's tick lives in the TOP row, which arrived as the last row
+    bgr = image_to_bgr(img[-1])
+    assert tuple(bgr[240, 320]) == (200, 50, 20) and tuple(bgr[479, 639]) == (0, 80, 0)
+    info = m["/camera/camera_info"][-1]
+    assert list(info.K) == [226.8, 0, 319.5, 0, 226.8, 239.5, 0, 0, 1] and info.header.frame_id == "camera_optical"
+    infos = {i.header.stamp.to_nsec() for i in m["/camera/camera_info"]}
+    assert img[-1].header.stamp.to_nsec() in infos  # camera_info carries the image's stamp
+    arr = m["/field/markers"][0]
+    ns = {mk.ns for mk in arr.markers}
+    assert {"floor", "walls", "slots", "aruco", "aruco_ids"} <= ns
+    assert sum(mk.ns == "aruco" for mk in arr.markers) == 49
+    st, vals = diag_values(m["/diagnostics"][-1], "sensor stream")
+    assert int(vals["accepted"]) > 0 and float(vals["datagram_rate_hz"]) > 10
+
+
+def test_tf_resolves_markers_and_camera(rig):
+    import rospy
+    import tf2_ros
+
+    buf = tf2_ros.Buffer()
+    tf2_ros.TransformListener(buf)
+    t = buf.lookup_transform("map", "aruco_13", rospy.Time(0), rospy.Duration(10))
+    tr = t.transform.translation
+    assert (tr.x, tr.y, tr.z) == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    t = buf.lookup_transform("odom", "camera_optical", rospy.Time(0), rospy.Duration(10))
+    from robotatfactory.robot import load_robot
+
+    # with the robot at odom's origin-ish, the optical frame is the camera mount: z is forward-down
+    cam = load_robot().camera
+    b = buf.lookup_transform("base_link", "camera_optical", rospy.Time(0), rospy.Duration(5))
+    q = b.transform.rotation
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    assert np.allclose(R, cam.base_to_optical()[:3, :3], atol=1e-9)
+    assert (b.transform.translation.x, b.transform.translation.z) == pytest.approx((cam.xyz[0], cam.xyz[2]))
+    assert buf.can_transform("base_link", "left_wheel", rospy.Time(0), rospy.Duration(5))
+    assert buf.can_transform("base_link", "laser", rospy.Time(0), rospy.Duration(5))
+
+
+def test_cmd_vel_moves_the_robot_and_the_watchdog_stops_it(rig):
+    import rospy
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+
+    sim = rig["sim"]
+    pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
+    wait_until(lambda: pub.get_num_connections() > 0, 10, what="bridge subscribed to cmd_vel")
+    odom = Collector("/odom", Odometry)
+    x0 = sim.pose()[0]
+    tw = Twist()
+    tw.linear.x, tw.angular.z = 0.2, 0.5
+    end = time.monotonic() + 1.5
+    while time.monotonic() < end:
+        pub.publish(tw)
+        time.sleep(0.05)
+    x1, _, th1 = sim.pose()
+    assert x1 - x0 > 0.1  # 0.2 m/s for ~1.5 s, turning
+    got = [r for r in sim.received[-10:]]
+    assert all(r.v == pytest.approx(0.2) and r.w == pytest.approx(0.5) for r in got)
+    # odometry follows: speed and turn rate measured from the encoders
+    od = odom.wait(10)[-1]
+    assert od.twist.twist.linear.x == pytest.approx(0.2, abs=0.02)
+    assert od.twist.twist.angular.z == pytest.approx(0.5, abs=0.15)
+    # stop publishing: after the watchdog timeout (simulation time) the replies say V = W = 0
+    t_stop = time.monotonic()
+    wait_until(lambda: sim.received[-1].v == 0.0 and sim.received[-1].w == 0.0, 5, what="watchdog stop")
+    stopped_after = time.monotonic() - t_stop
+    assert WATCHDOG - 0.1 <= stopped_after <= WATCHDOG + 0.6
+    x2 = sim.pose()[0]
+    time.sleep(0.5)
+    assert sim.pose()[0] == pytest.approx(x2, abs=1e-9)
+    odom.close()
+
+
+def test_electromagnet_command_reaches_the_simulator(rig):
+    import rospy
+    from std_msgs.msg import Bool
+
+    sim = rig["sim"]
+    pub = rospy.Publisher("/electromagnet", Bool, queue_size=1, latch=True)
+    state = Collector("/electromagnet/state", Bool)
+    pub.publish(Bool(True))
+    wait_until(lambda: sim.received and sim.received[-1].magnet, 5, what="S = 1 in the replies")
+    state.wait(1, timeout=5, pred=lambda m: m.data)
+    pub.publish(Bool(False))
+    wait_until(lambda: not sim.received[-1].magnet, 5, what="S = 0 in the replies")
+    state.close()
+    pub.unregister()
+
+
+def test_exactly_one_reply_per_datagram_with_seq_echoed(rig):
+    sim = rig["sim"]
+    n0 = len(sim.received)
+    time.sleep(1.0)
+    new = sim.received[n0:]
+    seqs = [r.seq for r in new]
+    assert len(seqs) >= 20
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # one each, in order, none missing
+
+
+def test_bad_input_is_counted_and_good_frames_keep_flowing(rig):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+
+    from robotatfactory.simtwo import SensorFrame
+
+    sim, port = rig["sim"], rig["port"]
+    diag = Collector("/diagnostics", DiagnosticArray)
+    _, before = latest_diag(diag, "sensor stream")
+    _, cam_before = latest_diag(diag, "camera")
+    odom = Collector("/odom", Odometry)
+    # foreign source: 127.0.0.2 is loopback too, but not the accepted simulator host
+    foreign = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    foreign.bind(("127.0.0.2", 0))
+    good = SensorFrame(seq=5, time_ms=240, enc_delta=(0, 0), enc_total=(0, 0), x=0, y=0, theta=0, contact=False,
+                       magnet=False).encode()
+    foreign.sendto(good, ("127.0.0.1", port))
+    foreign.close()
+    sim.send(b"RAF\r\n1\r\n\r\nSeq\r\nbanana\r\n\r\n")  # malformed
+    sim.send(b"\xff\xfe garbage")  # malformed (not ASCII)
+    sim.send(b"V\r\n0.3\r\n\r\n")  # foreign protocol (no RAF label)
+    sim.send(b"RAF\r\n2\r\n\r\n")  # foreign protocol (another version)
+    sim.send(b"X" * 20000)  # oversized
+    sim.publish_camera(0, nbytes=1000)  # wrong-sized camera frame
+    last = sim.seq - 1
+    old = SensorFrame(seq=max(0, last - 3), time_ms=max(40, (last - 2) * 40), enc_delta=(0, 0), enc_total=(0, 0),
+                      x=0, y=0, theta=0, contact=False, magnet=False)
+    sim.send(old.encode())  # out of order
+    t_bad = time.monotonic()
+    odom.wait(10, timeout=10)  # good frames keep flowing
+    wait_until(lambda: latest_diag(diag, "sensor stream", t_bad + 0.3)[1].get("rejected_oversized") !=
+               before["rejected_oversized"], 5, what="diagnostics updated")
+    time.sleep(0.6)
+    st, after = latest_diag(diag, "sensor stream", time.monotonic() - 0.3)
+    d = {k: int(after[k]) - int(before[k]) for k in ("rejected_malformed", "rejected_foreign_source",
+                                                     "rejected_foreign_protocol", "rejected_oversized", "stale")}
+    assert d == {"rejected_malformed": 2, "rejected_foreign_source": 1, "rejected_foreign_protocol": 2,
+                 "rejected_oversized": 1, "stale": 1}
+    _, cam_after = latest_diag(diag, "camera", time.monotonic() - 0.3)
+    assert int(cam_after["rejected_wrong_size"]) - int(cam_before["rejected_wrong_size"]) == 1
+    # the node is alive and still publishing
+    n = len(odom.msgs)
+    odom.wait(n + 5, timeout=5)
+    assert rig["proc"].poll() is None
+    # the bad input is in the log, rate-limited
+    text = rig["log"].read_text()
+    assert "20000-byte" in text and "127.0.0.2" in text and "banana" in text
+    diag.close()
+    odom.close()
+
+
+def test_lost_datagrams_lose_no_ticks(rig):
+    import rospy
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+
+    sim = rig["sim"]
+    pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
+    wait_until(lambda: pub.get_num_connections() > 0, 10, what="bridge subscribed to cmd_vel")
+    odom = Collector("/odom", Odometry)
+    od0 = odom.wait(1)[-1]
+    wait_until(lambda: len(odom.msgs) > 1, 5)
+    lost0 = sim.lost
+    x0 = sim.pose()
+    tw = Twist()
+    tw.linear.x = 0.25
+    sim.loss = 0.3
+    end = time.monotonic() + 1.5
+    while time.monotonic() < end:
+        pub.publish(tw)
+        time.sleep(0.05)
+    sim.loss = 0.0
+    pub.publish(Twist())
+    time.sleep(0.3)
+    n = len(odom.msgs)
+    odom.wait(n + 3)
+    x1 = sim.pose()
+    assert sim.lost - lost0 >= 5
+    od1 = odom.msgs[-1]
+    dist_true = math.hypot(x1[0] - x0[0], x1[1] - x0[1])
+    dist_odom = math.hypot(od1.pose.pose.position.x - od0.pose.pose.position.x,
+                           od1.pose.pose.position.y - od0.pose.pose.position.y)
+    assert dist_true > 0.2
+    tick = 2 * math.pi * 0.0325 / 360
+    assert abs(dist_odom - dist_true) < 2 * tick  # every tick counted despite the lost datagrams
+    odom.close()
+    pub.unregister()
+
+
+def test_stale_simulator_is_reported_and_recovers_including_a_restart(rig):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from nav_msgs.msg import Odometry
+
+    sim = rig["sim"]
+    diag = Collector("/diagnostics", DiagnosticArray)
+    sim.pause()
+    t0 = time.monotonic()
+    wait_until(lambda: latest_diag(diag, "sensor stream", t0 + 2.2)[0].level == DiagnosticStatus.ERROR, 6,
+               what="stale ERROR")
+    _, vals = latest_diag(diag, "sensor stream")
+    assert float(vals["staleness_s"]) > 2.0
+    _, before = latest_diag(diag, "sensor stream")
+    # the simulator comes back restarted: Seq and time from 0
+    odom = Collector("/odom", Odometry)
+    sim.reset(0)
+    sim.resume()
+    t1 = time.monotonic()
+    wait_until(lambda: latest_diag(diag, "sensor stream", t1 + 0.3)[0].level == DiagnosticStatus.OK, 6,
+               what="OK after recovery")
+    _, after = latest_diag(diag, "sensor stream", t1 + 0.3)
+    assert int(after["restarts"]) == int(before["restarts"]) + 1
+    msgs = odom.wait(5)
+    # odometry restarted from the origin and the clock went back with the simulator
+    assert msgs[-1].header.stamp.to_sec() < 3.0
+    assert abs(msgs[-1].pose.pose.position.x) < 0.05
+    diag.close()
+    odom.close()
+
+
+def test_rosbag_record_plays_back(rig, tmp_path):
+    from nav_msgs.msg import Odometry
+
+    bag_path = tmp_path / "bridge.bag"
+    topics = ["/odom", "/scan", "/tf", "/tf_static", "/clock", "/camera/image_raw", "/camera/camera_info",
+              "/joint_states", "/ground_truth"]
+    env = __import__("rosutil").master().env()
+    rec = subprocess.Popen(["rosbag", "record", "-O", str(bag_path), *topics], env=env, stdout=subprocess.DEVNULL,
+                           stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        odom = Collector("/odom", Odometry)
+        time.sleep(4.0)
+        odom.close()
+    finally:
+        stop_process(rec)
+    import rosbag
+
+    with rosbag.Bag(str(bag_path)) as bag:
+        info = bag.get_type_and_topic_info()
+        counts = {t: v.message_count for t, v in info.topics.items()}
+        types = {t: v.msg_type for t, v in info.topics.items()}
+        odoms = [m for _, m, _ in bag.read_messages(topics=["/odom"])]
+        imgs = [m for _, m, _ in bag.read_messages(topics=["/camera/image_raw"])]
+    assert types["/odom"] == "nav_msgs/Odometry" and types["/scan"] == "sensor_msgs/LaserScan"
+    assert types["/camera/image_raw"] == "sensor_msgs/Image"
+    assert counts["/odom"] >= 40 and counts["/scan"] >= 5 and counts["/camera/image_raw"] >= 20
+    assert counts["/tf_static"] >= 1
+    stamps = [o.header.stamp.to_sec() for o in odoms]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    assert imgs[0].encoding == "bgr8" and len(imgs[0].data) == 640 * 480 * 3
