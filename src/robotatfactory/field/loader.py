@@ -7,7 +7,6 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .model import Area, Box, Field, Marker, PartSpec, Pose2D, Slot
 
@@ -27,6 +26,8 @@ def available_fields() -> list[str]:
 
 def marker_pose(x: float, y: float, z: float, rx: float, ry: float, rz: float) -> np.ndarray:
     """4x4 world <- marker transform from the rules' table (degrees; R = Rx * Ry * Rz)."""
+    from scipy.spatial.transform import Rotation
+
     T = np.eye(4)
     # intrinsic X-Y-Z in scipy is exactly Rx @ Ry @ Rz
     T[:3, :3] = Rotation.from_euler("XYZ", [rx, ry, rz], degrees=True).as_matrix()
