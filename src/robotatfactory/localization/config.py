@@ -24,11 +24,11 @@ DEFAULT_TOPICS = {
     "camera_info": "camera/camera_info",
     "odom": "odom",
     "scan": "scan",
-    "ground_truth": "ground_truth",
     "markers": "aruco/markers",
     "marker_poses": "aruco/poses",
     "debug_image": "aruco/debug_image",
     "camera_pose": "camera_pose",
+    "fixes": "aruco/fixes",
     "pose": "pose",
     "diagnostics": "/diagnostics",
 }

@@ -48,6 +48,7 @@ class BeaconObservation:
     n_points: int
     fit_rms_m: float
     center: tuple[float, float]  # in the laser frame
+    index: float = 0.0  # mean ray index of the cluster (its time within a sweep)
 
     def as_tuple(self) -> tuple[float, float, float, float]:
         return (self.range_m, self.bearing_rad, self.var_range, self.var_bearing)
@@ -174,8 +175,13 @@ def extract_beacons(ranges: np.ndarray, angles: np.ndarray, cfg: BeaconConfig | 
         var_r = float(u @ cov @ u)
         v = np.array([-u[1], u[0]])
         var_b = float(v @ cov @ v) / rho ** 2 + (step / math.sqrt(12)) ** 2 / len(idx)
+        # mean ray index, unwrapped across the end of a full turn
+        ii = np.asarray(idx, dtype=float)
+        if circular and ii.max() - ii.min() > n / 2:
+            ii = np.where(ii < n / 2, ii + n, ii)
+        mid = float(np.mean(ii)) % n
         out.append(BeaconObservation(rho, math.atan2(c[1], c[0]), max(var_r, 1e-8), max(var_b, 1e-10),
-                                     len(idx), rms, (float(c[0]), float(c[1]))))
+                                     len(idx), rms, (float(c[0]), float(c[1])), mid))
     return out
 
 

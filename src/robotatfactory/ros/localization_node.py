@@ -1,0 +1,427 @@
+"""The localization node (thin rospy wiring around :mod:`robotatfactory.localization`).
+
+Subscribes (relative names): ``camera/image_raw`` + ``camera/camera_info`` (stamped by the bridge with the
+estimated simulation time of the render), ``odom`` (nav_msgs/Odometry, ``base_link`` in ``odom``), ``scan``.
+Publishes: ``aruco/markers`` (visualization_msgs/MarkerArray: each detected marker in ``camera_optical``
+with its ID), ``aruco/poses`` (geometry_msgs/PoseArray, the same poses), ``aruco/debug_image`` (only while
+subscribed), ``camera_pose`` (PoseWithCovarianceStamped: ``camera_optical`` in ``map`` by the paper's
+closest-marker method), ``aruco/fixes/<method>`` (base_link in map per method), ``pose`` (the EKF,
+PoseWithCovarianceStamped, base_link in map), TF ``map -> odom`` (REP 105) and ``/diagnostics`` with the
+rejection counts by reason. Every callback survives bad input: it is counted, logged (rate-limited) and
+skipped.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import threading
+import time
+from collections import Counter
+
+import numpy as np
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped, TransformStamped
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import CameraInfo, Image, LaserScan
+from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ..errors import ConfigError
+from ..field import load_field
+from ..localization import reasons
+from ..localization.config import LocalizationConfig, from_dict
+from ..localization.ekf import Ekf
+from ..localization.geometry import inv, quaternion_xyzw, se2_matrix
+from ..localization.lidar import extract_beacons
+from ..localization.pipeline import FrameLocalizer
+from ..robot import load_robot
+
+PLANAR_VAR = 1e-6  # z, roll, pitch of base_link on a flat floor
+
+
+def stamp_of(t: float) -> rospy.Time:
+    ns = int(round(t * 1e9))
+    return rospy.Time(ns // 1_000_000_000, ns % 1_000_000_000)
+
+
+def pose_msg(T: np.ndarray) -> Pose:
+    p = Pose()
+    p.position.x, p.position.y, p.position.z = (float(v) for v in T[:3, 3])
+    q = quaternion_xyzw(T[:3, :3])
+    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (float(v) for v in q)
+    return p
+
+
+def planar_cov6(cov3: np.ndarray) -> list[float]:
+    """3x3 (x, y, yaw) covariance to ROS's row-major 6x6 (x, y, z, rot x, rot y, rot z)."""
+    c = np.zeros((6, 6))
+    ix = [0, 1, 5]
+    c[np.ix_(ix, ix)] = cov3
+    for i in (2, 3, 4):
+        c[i, i] = PLANAR_VAR
+    return c.ravel().tolist()
+
+
+def image_array(msg: Image) -> np.ndarray:
+    """sensor_msgs/Image (bgr8, rgb8, mono8, bgra8, rgba8) to an HxWx3 BGR or HxW grey uint8 array."""
+    import cv2
+
+    enc = msg.encoding.lower()
+    ch = {"bgr8": 3, "rgb8": 3, "mono8": 1, "8uc1": 1, "bgra8": 4, "rgba8": 4, "8uc3": 3}.get(enc)
+    if ch is None:
+        raise ValueError(f"unsupported image encoding {msg.encoding!r}")
+    if msg.height <= 0 or msg.width <= 0 or msg.step < msg.width * ch or len(msg.data) < msg.step * msg.height:
+        raise ValueError(f"image of {len(msg.data)} bytes does not hold {msg.height}x{msg.width}x{ch} "
+                         f"(step {msg.step})")
+    a = np.frombuffer(msg.data, dtype=np.uint8, count=msg.step * msg.height).reshape(msg.height, msg.step)
+    a = a[:, :msg.width * ch].reshape(msg.height, msg.width, ch) if ch > 1 else a[:, :msg.width]
+    if enc == "rgb8":
+        return cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
+    if enc == "bgra8":
+        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
+    if enc == "rgba8":
+        return cv2.cvtColor(a, cv2.COLOR_RGBA2BGR)
+    return a
+
+
+class LocalizationNode:
+    def __init__(self, cfg: LocalizationConfig):
+        self.cfg = cfg
+        self.field = load_field(cfg.field)
+        self.robot = load_robot(cfg.robot)
+        nc = cfg.node
+        self.loc = FrameLocalizer(self.field, self.robot, cfg.detector, cfg.pose, nc.methods())
+        ekf_cfg = cfg.ekf
+        if abs(ekf_cfg.track_m - self.robot.track) > 1e-12:
+            from dataclasses import replace
+
+            ekf_cfg = replace(ekf_cfg, track_m=self.robot.track)
+        self.ekf = Ekf(ekf_cfg)
+        self.beacon_xy = np.array(self.field.beacons, dtype=float).reshape(-1, 2)
+        self.laser_xy = tuple(self.robot.lidar.xyz[:2])
+        self.lock = threading.RLock()
+        self.counts: Counter = Counter()
+        self._last_warn: dict[str, float] = {}
+        self._odom: tuple[float, tuple[float, float, float]] | None = None
+        self._last_fix_t: float | None = None
+        self._last_fix_wall: float | None = None
+        self._frame_ms: list[float] = []
+        self._K_from_info = False
+        self._running = False
+        self.frames = {k: cfg.frame(k) for k in cfg.frames}
+
+    # ------------------------------------------------------------------ wiring
+    def start(self) -> "LocalizationNode":
+        t, nc = self.cfg.topics, self.cfg.node
+        self.pub_markers = rospy.Publisher(t["markers"], MarkerArray, queue_size=2)
+        self.pub_poses = rospy.Publisher(t["marker_poses"], PoseArray, queue_size=2)
+        self.pub_debug = rospy.Publisher(t["debug_image"], Image, queue_size=1)
+        self.pub_camera_pose = rospy.Publisher(t["camera_pose"], PoseWithCovarianceStamped, queue_size=5)
+        self.pub_fix = {m: rospy.Publisher(f"{t['fixes']}/{m}", PoseWithCovarianceStamped, queue_size=5)
+                        for m in nc.methods()}
+        self.pub_pose = rospy.Publisher(t["pose"], PoseWithCovarianceStamped, queue_size=10)
+        self.pub_tf = rospy.Publisher("/tf", TFMessage, queue_size=50)
+        self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=5)
+        self._running = True
+        self.subs = [
+            rospy.Subscriber(t["odom"], Odometry, self._guard(self.on_odom), queue_size=50, tcp_nodelay=True),
+            rospy.Subscriber(t["image"], Image, self._guard(self.on_image), queue_size=1, buff_size=1 << 24,
+                             tcp_nodelay=True),
+            rospy.Subscriber(t["camera_info"], CameraInfo, self._guard(self.on_camera_info), queue_size=1),
+        ]
+        if nc.use_lidar and len(self.beacon_xy):
+            self.subs.append(rospy.Subscriber(t["scan"], LaserScan, self._guard(self.on_scan), queue_size=5))
+        self._diag_thread = threading.Thread(target=self._diag_loop, name="raf-localize-diag", daemon=True)
+        self._diag_thread.start()
+        rospy.loginfo(f"localization: field {self.field.name}, camera fixes by '{nc.filter_method}', camera_pose "
+                      f"by '{nc.camera_pose_method}', {len(self.beacon_xy)} LIDAR beacons "
+                      f"{'used' if nc.use_lidar else 'ignored'}; waiting for "
+                      f"{'odometry' if nc.initial_pose == 'start' else 'a confident camera fix'}")
+        return self
+
+    def stop(self) -> None:
+        self._running = False
+        for s in getattr(self, "subs", []):
+            s.unregister()
+
+    def _guard(self, fn):
+        def run(msg):
+            try:
+                fn(msg)
+            except Exception as e:  # noqa: BLE001 - a callback must never take the node down
+                self.counts[f"callback_error:{fn.__name__}"] += 1
+                self._warn(fn.__name__, f"localization: {fn.__name__} failed on a message: {e!r}")
+        return run
+
+    def _warn(self, key: str, text: str) -> None:
+        now = time.monotonic()
+        if now - self._last_warn.get(key, -1e9) >= self.cfg.node.log_period:
+            self._last_warn[key] = now
+            rospy.logwarn(text)
+
+    # ------------------------------------------------------------------ callbacks
+    def on_camera_info(self, msg: CameraInfo) -> None:
+        if not self.cfg.node.use_camera_info:
+            return
+        K = np.array(msg.K, dtype=float).reshape(3, 3)
+        if np.allclose(K, self.loc.K):
+            self._K_from_info = True
+            return
+        try:
+            with self.lock:
+                self.loc.set_intrinsics(K)
+            self._K_from_info = True
+            rospy.loginfo(f"localization: camera matrix from camera_info: fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} "
+                          f"cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}")
+        except ConfigError as e:
+            self.counts["bad_camera_info"] += 1
+            self._warn("camera_info", f"localization: ignoring camera_info: {e}")
+
+    def on_odom(self, msg: Odometry) -> None:
+        t = msg.header.stamp.to_sec()
+        p = msg.pose.pose
+        q = p.orientation
+        theta = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+        pose = (p.position.x, p.position.y, theta)
+        if not all(math.isfinite(v) for v in (t,) + pose):
+            self.counts["bad_odom"] += 1
+            return
+        with self.lock:
+            if self._odom is not None and t < self._odom[0] - 1.0:  # the simulation restarted
+                rospy.logwarn("localization: odometry went back in time: restarting the filter")
+                self.ekf = Ekf(self.ekf.cfg)
+                self.counts["restarts"] += 1
+            if self._odom is not None and t <= self._odom[0]:
+                self.counts["odom_not_newer"] += 1
+                return
+            if not self.ekf.initialised and self.cfg.node.initial_pose == "start" and self.ekf.t == -math.inf:
+                sp = self.field.start_pose
+                s = self.cfg.node
+                self.ekf.initialise(t, (sp.x, sp.y, sp.theta), np.diag(
+                    [s.initial_sigma_xy ** 2, s.initial_sigma_xy ** 2, math.radians(s.initial_sigma_theta_deg) ** 2]))
+            self.ekf.odometry_pose(t, pose)
+            self._odom = (t, pose)
+            self.counts["odom"] += 1
+            self._publish_filter(t, pose)
+
+    def _publish_filter(self, t: float, odom_pose) -> None:
+        x, P = self.ekf.pose(), self.ekf.covariance()
+        if x is None:
+            return
+        stamp = stamp_of(t)
+        m = PoseWithCovarianceStamped()
+        m.header.stamp = stamp
+        m.header.frame_id = self.frames["map"]
+        m.pose.pose = pose_msg(se2_matrix(*x))
+        m.pose.covariance = planar_cov6(P)
+        self.pub_pose.publish(m)
+        if self.cfg.node.publish_tf:
+            T = se2_matrix(*x) @ inv(se2_matrix(*odom_pose))  # map <- odom
+            tf = TransformStamped()
+            tf.header.stamp = stamp_of(t + self.cfg.node.tf_future_s)
+            tf.header.frame_id = self.frames["map"]
+            tf.child_frame_id = self.frames["odom"]
+            tf.transform.translation.x, tf.transform.translation.y = float(T[0, 3]), float(T[1, 3])
+            yaw = math.atan2(T[1, 0], T[0, 0])
+            tf.transform.rotation.z, tf.transform.rotation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+            self.pub_tf.publish(TFMessage([tf]))
+
+    def on_image(self, msg: Image) -> None:
+        t = msg.header.stamp.to_sec()
+        try:
+            img = image_array(msg)
+        except ValueError as e:
+            self.counts["bad_image"] += 1
+            self._warn("image", f"localization: ignoring an image: {e}")
+            return
+        nc = self.cfg.node
+        with self.lock:
+            prior = self.ekf.pose() if nc.use_prior else None
+        t0 = time.perf_counter()
+        res = self.loc.process(img, prior=prior, stamp=t)
+        self._frame_ms.append((time.perf_counter() - t0) * 1e3)
+        self._frame_ms = self._frame_ms[-200:]
+        self.counts["frames"] += 1
+        header_cam = msg.header.frame_id or self.frames["camera_optical"]
+        self._publish_markers(res, msg.header.stamp, header_cam)
+        for name, e in res.estimates.items():
+            if e.ok and name in self.pub_fix:
+                self.pub_fix[name].publish(self._fix_msg(e, msg.header.stamp))
+        cp = res.estimates.get(nc.camera_pose_method)
+        if cp is not None and cp.ok and cp.cov6 is not None:
+            m = PoseWithCovarianceStamped()
+            m.header.stamp = msg.header.stamp
+            m.header.frame_id = self.frames["map"]
+            m.pose.pose = pose_msg(cp.T_world_cam)
+            m.pose.covariance = np.asarray(cp.cov6, dtype=float).ravel().tolist()
+            self.pub_camera_pose.publish(m)
+        fix = res.estimates.get(nc.filter_method)
+        if fix is not None and fix.ok:
+            self.counts["fixes"] += 1
+            with self.lock:
+                r = self.ekf.pose_fix(t, fix.base, fix.cov)
+            if r.accepted or r.reason == "pending":
+                self._last_fix_t, self._last_fix_wall = t, time.monotonic()
+            elif r.reason == reasons.TOO_OLD:
+                self._warn("too_old", f"localization: a camera frame stamped {t:.3f} s is older than the filter's "
+                                      f"history ({self.ekf.cfg.history_s} s): dropped")
+        if nc.debug_image and self.pub_debug.get_num_connections() > 0:
+            from ..localization.draw import draw_debug
+
+            with self.lock:
+                fp = self.ekf.pose()
+            out = draw_debug(img if img.ndim == 3 else img, res, self.loc.K, nc.debug_axis_m, fp, nc.filter_method)
+            d = Image()
+            d.header = msg.header
+            d.height, d.width = out.shape[:2]
+            d.encoding = "bgr8"
+            d.step = d.width * 3
+            d.data = out.tobytes()
+            self.pub_debug.publish(d)
+
+    def _fix_msg(self, e, stamp) -> PoseWithCovarianceStamped:
+        m = PoseWithCovarianceStamped()
+        m.header.stamp = stamp
+        m.header.frame_id = self.frames["map"]
+        m.pose.pose = pose_msg(se2_matrix(*e.base))
+        m.pose.covariance = planar_cov6(e.cov)
+        return m
+
+    def _publish_markers(self, res, stamp, frame: str) -> None:
+        arr = MarkerArray()
+        clear = Marker()
+        clear.action = Marker.DELETEALL
+        arr.markers.append(clear)
+        pa = PoseArray()
+        pa.header.stamp, pa.header.frame_id = stamp, frame
+        used = set()
+        fix = res.estimates.get(self.cfg.node.filter_method)
+        if fix is not None and fix.ok:
+            used = set(fix.marker_ids)
+        for o in res.observations:
+            T = o.solutions[o.checked if o.checked is not None else 0]
+            p = pose_msg(T)
+            pa.poses.append(p)
+            for kind in ("cube", "text"):
+                m = Marker()
+                m.header.stamp, m.header.frame_id = stamp, frame
+                m.ns = f"aruco_{kind}"
+                m.id = o.id
+                m.pose = p
+                m.lifetime = rospy.Duration(0.5)
+                if kind == "cube":
+                    m.type = Marker.CUBE
+                    m.scale.x = m.scale.y = o.marker.size
+                    m.scale.z = 0.002
+                    ok = o.id in used
+                    m.color.r, m.color.g, m.color.b, m.color.a = (0.1, 0.9, 0.1, 0.8) if ok else (0.9, 0.6, 0.1, 0.8)
+                else:
+                    m.type = Marker.TEXT_VIEW_FACING
+                    m.text = str(o.id)
+                    m.scale.z = 0.03
+                    m.color.r = m.color.g = m.color.b = m.color.a = 1.0
+                arr.markers.append(m)
+        self.pub_markers.publish(arr)
+        self.pub_poses.publish(pa)
+
+    def on_scan(self, msg: LaserScan) -> None:
+        n = len(msg.ranges)
+        if n < 3 or not (math.isfinite(msg.angle_increment) and msg.angle_increment != 0):
+            self.counts["bad_scan"] += 1
+            return
+        with self.lock:
+            if not self.ekf.initialised:
+                return
+        angles = msg.angle_min + msg.angle_increment * np.arange(n)
+        ranges = np.asarray(msg.ranges, dtype=float)
+        obs = extract_beacons(ranges, angles, self.cfg.beacons, range_min=msg.range_min,
+                              range_max=msg.range_max if msg.range_max > 0 else np.inf)
+        self.counts["scans"] += 1
+        t0 = msg.header.stamp.to_sec()
+        dt = msg.time_increment if math.isfinite(msg.time_increment) and msg.time_increment > 0 else 0.0
+        for o in obs:
+            with self.lock:
+                r = self.ekf.beacons(t0 + o.index * dt, [o.as_tuple()], self.beacon_xy, self.laser_xy)
+            self.counts["beacons_seen"] += 1
+            if r.accepted:
+                self.counts["beacons_used"] += 1
+
+    # ------------------------------------------------------------------ diagnostics
+    def _diag_loop(self) -> None:
+        period = self.cfg.node.diagnostics_period
+        nxt = time.monotonic()
+        while self._running and not rospy.is_shutdown():
+            nxt += period
+            try:
+                self.pub_diag.publish(self.diagnostics())
+            except Exception as e:  # noqa: BLE001
+                self._warn("diag", f"localization: diagnostics failed: {e!r}")
+            time.sleep(max(0.0, nxt - time.monotonic()))
+
+    def diagnostics(self) -> DiagnosticArray:
+        name = rospy.get_name()
+        arr = DiagnosticArray()
+        arr.header.stamp = rospy.Time.now()
+
+        def kv(d):
+            return [KeyValue(str(k), f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in sorted(d.items())]
+
+        with self.lock:
+            c = dict(self.counts)
+            lc = dict(self.loc.counts)
+            ec = dict(self.ekf.counts)
+            x, P = self.ekf.pose(), self.ekf.covariance()
+        age = None if self._last_fix_wall is None else time.monotonic() - self._last_fix_wall
+        frames = c.get("frames", 0)
+        if frames == 0:
+            level, text = DiagnosticStatus.WARN, "no camera image yet"
+        elif age is None or age > 5.0:
+            level, text = DiagnosticStatus.WARN, "no usable camera fix for a while (no markers in view?)"
+        else:
+            level, text = DiagnosticStatus.OK, "camera fixes coming in"
+        vals = {"frames": frames, "fixes": c.get("fixes", 0), "frame_ms_median":
+                float(np.median(self._frame_ms)) if self._frame_ms else -1.0,
+                "camera_matrix_from_camera_info": self._K_from_info,
+                "last_fix_age_wall_s": -1.0 if age is None else age, "bad_images": c.get("bad_image", 0)}
+        vals.update({f"rejected_{k}": v for k, v in lc.items()})
+        st1 = DiagnosticStatus(level=level, name=f"{name}: camera", message=text, hardware_id="aruco",
+                               values=kv(vals))
+        if x is None:
+            level, text = DiagnosticStatus.WARN, "not initialised: waiting for a confident camera fix"
+            vals = {}
+        else:
+            sx = math.sqrt(max(P[0, 0], P[1, 1]))
+            level = DiagnosticStatus.OK if sx < 0.05 else DiagnosticStatus.WARN
+            text = f"x {x[0]:+.3f} y {x[1]:+.3f} heading {math.degrees(x[2]):+.1f} deg, sigma {sx * 1000:.1f} mm"
+            vals = {"x": x[0], "y": x[1], "theta_deg": math.degrees(x[2]), "sigma_xy_m": sx,
+                    "sigma_theta_deg": math.degrees(math.sqrt(P[2, 2]))}
+        vals.update({f"filter_{k}": v for k, v in ec.items()})
+        vals.update({"odom_messages": c.get("odom", 0), "scans": c.get("scans", 0),
+                     "beacons_seen": c.get("beacons_seen", 0), "beacons_used": c.get("beacons_used", 0),
+                     "restarts": c.get("restarts", 0)})
+        vals.update({k: v for k, v in c.items() if k.startswith("callback_error") or k.startswith("bad_")})
+        st2 = DiagnosticStatus(level=level, name=f"{name}: filter", message=text, hardware_id="ekf", values=kv(vals))
+        arr.status = [st1, st2]
+        return arr
+
+
+def read_private_params() -> dict:
+    p = rospy.get_param("~", {})
+    return p if isinstance(p, dict) else {}
+
+
+def main(argv: list[str] | None = None) -> int:
+    rospy.init_node("raf_localization", argv=argv if argv is not None else sys.argv)
+    try:
+        node = LocalizationNode(from_dict(read_private_params())).start()
+    except ConfigError as e:
+        rospy.logfatal(f"localization: {e}")
+        return 2
+    rospy.spin()
+    node.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
