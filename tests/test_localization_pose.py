@@ -317,3 +317,41 @@ def test_a_prior_seeds_the_planar_fit(field, robot):
                    prior=(pose[0] + 0.03, pose[1] - 0.02, pose[2] + 0.1))
     assert a.ok and b.ok
     np.testing.assert_allclose(a.base, b.base, atol=1e-6)
+
+
+def test_jacobians_match_finite_differences(field, robot):
+    from robotatfactory.localization.estimators import PlanarModel, _exp_left, _jac6, _planar_from_cam
+
+    K = robot.camera.K
+    T_bc = robot.camera.base_to_optical()
+    pose = (0.1, 0.08, 0.3)
+    T = camera_world_pose(robot.camera, pose)
+    vis = visible_markers(field, robot.camera, T)
+    assert len(vis) >= 3
+    P = np.concatenate([field.marker(v.id).corners for v in vis])
+    uv, J = _jac6(T, P, K)
+    h = 1e-7
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = h
+        uv2, _ = _jac6(_exp_left(T, d), P, K)
+        np.testing.assert_allclose(J[:, i], (uv2 - uv) / h, rtol=1e-4, atol=1e-3)
+    model = PlanarModel(K, T_bc)
+    r, Jp = model.residuals(np.array(pose), P, np.zeros((len(P), 2)))
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = h
+        r2, _ = model.residuals(np.array(pose) + d, P, np.zeros((len(P), 2)))
+        np.testing.assert_allclose(Jp[:, i], (r2 - r) / h, rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(r, uv, atol=1e-9)  # both models project alike
+    A = np.random.default_rng(0).normal(size=(6, 6))
+    C = A @ A.T * 1e-4
+    T_cb = inv(T_bc)
+    base, cov = _planar_from_cam(T, C, T_cb)
+    G = np.zeros((3, 6))
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = h
+        b = matrix_se2(_exp_left(T, d) @ T_cb)
+        G[:, i] = [(b[0] - base[0]) / h, (b[1] - base[1]) / h, wrap_angle(b[2] - base[2]) / h]
+    np.testing.assert_allclose(cov, G @ C @ G.T, atol=1e-10)

@@ -66,24 +66,27 @@ def _fail(method: str, reason: str, **kw) -> PoseEstimate:
 
 
 def _jac6(T_wc: np.ndarray, P: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (2N) and their Jacobian (2N x 6) w.r.t. a world-frame perturbation (dt, dphi) of T_world_cam."""
+    """Pixels (2N) and their Jacobian (2N x 6) w.r.t. a world-frame perturbation (dt, dphi) of T_world_cam:
+    t' = t + dt, R' = Exp(dphi) R."""
     R_cw = T_wc[:3, :3].T
     q = P - T_wc[:3, 3]
     pc = q @ R_cw.T
     X, Y, Z = pc[:, 0], pc[:, 1], pc[:, 2]
     fx, fy = K[0, 0], K[1, 1]
-    u = fx * X / Z + K[0, 2]
-    v = fy * Y / Z + K[1, 2]
-    du = np.stack([fx / Z, np.zeros_like(Z), -fx * X / Z ** 2], axis=1)  # N x 3 (d u / d pc)
-    dv = np.stack([np.zeros_like(Z), fy / Z, -fy * Y / Z ** 2], axis=1)
-    J = np.zeros((2 * len(P), 6))
-    # d pc / d dt = -R_cw ; d pc / d dphi = R_cw [q]x
-    for k in range(len(P)):
-        qx = np.array([[0, -q[k, 2], q[k, 1]], [q[k, 2], 0, -q[k, 0]], [-q[k, 1], q[k, 0], 0]])
-        Dt = -R_cw
-        Dr = R_cw @ qx
-        J[2 * k, :3], J[2 * k, 3:] = du[k] @ Dt, du[k] @ Dr
-        J[2 * k + 1, :3], J[2 * k + 1, 3:] = dv[k] @ Dt, dv[k] @ Dr
+    iz = 1.0 / Z
+    u = fx * X * iz + K[0, 2]
+    v = fy * Y * iz + K[1, 2]
+    n = len(P)
+    # d pc / d dt = -R_cw (same for all points); d pc / d dphi = R_cw [q]x  (per point)
+    qx = np.zeros((n, 3, 3))
+    qx[:, 0, 1], qx[:, 0, 2], qx[:, 1, 2] = -q[:, 2], q[:, 1], -q[:, 0]
+    qx[:, 1, 0], qx[:, 2, 0], qx[:, 2, 1] = q[:, 2], -q[:, 1], q[:, 0]
+    D = np.empty((n, 3, 6))
+    D[:, :, :3] = -R_cw
+    D[:, :, 3:] = np.einsum("ij,njk->nik", R_cw, qx)
+    J = np.empty((2 * n, 6))
+    J[0::2] = fx * (D[:, 0, :] - (X * iz)[:, None] * D[:, 2, :]) * iz[:, None]
+    J[1::2] = fy * (D[:, 1, :] - (Y * iz)[:, None] * D[:, 2, :]) * iz[:, None]
     return np.stack([u, v], axis=1).ravel(), J
 
 
@@ -110,15 +113,22 @@ def _cov_from_jac(J: np.ndarray, r: np.ndarray, sig: np.ndarray, n_params: int) 
 
 
 def _planar_from_cam(T_wc: np.ndarray, cov6: np.ndarray, T_cam_base: np.ndarray) -> tuple[tuple, np.ndarray]:
-    """base (x, y, heading) of a camera pose and its 3x3 covariance (numerical Jacobian of the projection)."""
-    base = matrix_se2(T_wc @ T_cam_base)
+    """base (x, y, heading) of a camera pose and its 3x3 covariance (first order, through the same
+    world-frame perturbation as :func:`_jac6`)."""
+    T_wb = T_wc @ T_cam_base
+    base = matrix_se2(T_wb)
+    a = T_wc[:3, :3] @ T_cam_base[:3, 3]  # camera -> base offset in the world
+    c = T_wb[:3, 0]  # base x axis in the world
     G = np.zeros((3, 6))
-    h = 1e-6
-    for i in range(6):
-        d = np.zeros(6)
-        d[i] = h
-        b = matrix_se2(_exp_left(T_wc, d) @ T_cam_base)
-        G[:, i] = [(b[0] - base[0]) / h, (b[1] - base[1]) / h, wrap_angle(b[2] - base[2]) / h]
+    G[0, 0] = G[1, 1] = 1.0
+    # d t_b = dt + dphi x a ; rows x, y of -[a]x
+    G[0, 3:] = [0.0, a[2], -a[1]]
+    G[1, 3:] = [-a[2], 0.0, a[0]]
+    # d c = dphi x c ; yaw = atan2(c_y, c_x)
+    dcx = np.array([0.0, c[2], -c[1]])
+    dcy = np.array([-c[2], 0.0, c[0]])
+    h2 = c[0] ** 2 + c[1] ** 2
+    G[2, 3:] = (c[0] * dcy - c[1] * dcx) / max(h2, 1e-12)
     return base, G @ cov6 @ G.T
 
 
@@ -286,8 +296,8 @@ def _lm(model: PlanarModel, p0: np.ndarray, P: np.ndarray, uv: np.ndarray, sig: 
         rn, Jn = model.residuals(pn, P, uv)
         cn = float(np.sum((rn * w) ** 2)) if rn is not None else math.inf
         if cn < cost:
-            # converged: the step is far below any accuracy we claim (0.1 um, 0.1 urad), or the cost stalls
-            small = abs(cost - cn) < 1e-8 * max(cost, 1e-12) or (abs(dp[0]) + abs(dp[1]) < 1e-7 and abs(dp[2]) < 1e-7)
+            # converged: the step is far below any accuracy we claim (1 um, 1 urad), or the cost stalls
+            small = abs(cost - cn) < 1e-6 * max(cost, 1e-12) or (abs(dp[0]) + abs(dp[1]) < 1e-6 and abs(dp[2]) < 1e-6)
             p, r, J, cost = pn, rn, Jn, cn
             lam = max(lam / 10, 1e-9)
             if small:
