@@ -102,6 +102,7 @@ class Simulator:
         self.controllers = (SpeedPI(cp, mp.Vmax), SpeedPI(cp, mp.Vmax))
         self._ctrl_every = max(1, int(round(cp.period / self.dt)))
         self.command = Command.stop()
+        self.voltage_override: tuple[float, float] | None = None  # open-loop motor voltages (SetAxisVoltageRef)
         self.magnet_on = False
         self.held: int | None = None
 
@@ -233,6 +234,7 @@ class Simulator:
         if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"command with non-finite V/W: {cmd}")
         self.command = cmd
+        self.voltage_override = None
         wl, wr = self.robot.wheel_speeds(v, w)
         self.controllers[0].target = wl
         self.controllers[1].target = wr
@@ -241,6 +243,14 @@ class Simulator:
         elif not cmd.magnet and self.magnet_on:
             self.magnet_on = False
             self._release()
+
+    def drive_voltages(self, left: float, right: float) -> None:
+        """Drive the motors open loop at these voltages (SimTwo's ``SetAxisVoltageRef`` with the speed
+        controller off) until the next :meth:`apply`/:meth:`step_cycle` with a command. Volts, clamped to
+        +-Vmax by the motor model."""
+        if not (math.isfinite(left) and math.isfinite(right)):
+            raise ValueError("motor voltages must be finite")
+        self.voltage_override = (float(left), float(right))
 
     # ------------------------------------------------------------------------------------------ the cycle
     def step_cycle(self, cmd: Command | None = None) -> SensorFrame:
@@ -297,9 +307,12 @@ class Simulator:
         qvel, ctrl = d.qvel, d.ctrl
         il, ir = self._wv
         (ml, mr), (pl, pr) = self.motors, self.controllers
+        vo = self.voltage_override
         for j in range(n):
             wl, wr = qvel[il], qvel[ir]
-            if (s0 + j) % self._ctrl_every == 0:
+            if vo is not None:
+                pl.output, pr.output = vo
+            elif (s0 + j) % self._ctrl_every == 0:
                 pl.update(wl)
                 pr.update(wr)
             ctrl[self._act[0]] = ml.step(pl.output, wl)
@@ -332,6 +345,10 @@ class Simulator:
         kidt = pl._kidt
         dv = pl._dv
         every = self._ctrl_every
+        vo = self.voltage_override
+        if vo is not None:  # open loop: the controller does not run, its output is the voltage
+            pl.output, pr.output = vo
+            every = 0
         # state
         Il, Ir = ml.current, mr.current
         vl, vr = pl.output, pr.output
@@ -341,7 +358,7 @@ class Simulator:
         for j in range(n):
             wl = qvel[il]
             wr = qvel[ir]
-            if every == 1 or (s0 + j) % every == 0:
+            if every == 1 or (every and (s0 + j) % every == 0):
                 # left speed PI (SpeedPI.update)
                 if tgl - refl > dv:
                     refl += dv

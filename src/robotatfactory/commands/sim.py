@@ -1,0 +1,160 @@
+"""``raf sim``: the stand-in simulator (MuJoCo) speaking SimTwo's protocol, with the competition inside."""
+from __future__ import annotations
+
+import argparse
+
+from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
+
+NAME = "sim"
+HELP = "run the stand-in simulator: MuJoCo physics, SimTwo's UDP/ZMQ protocol, the competition and its server"
+ORDER = 20
+DESCRIPTION = """\
+The RobotAtFactory 4.0 scene in MuJoCo, talking to the outside world as SimTwo does: one SensorFrame
+datagram per 40 ms control cycle to the bridge, Commands received on --port, camera frames on a ZMQ PUB
+socket (raw B G R A, bottom-up, 15 frames per simulation second), the factory-state server on UDP 44832.
+
+examples:
+  raf sim                                  # real time, round 1, camera and server on
+  raf sim --fast --no-camera --duration 60 # as fast as possible, one simulated minute
+  raf sim --lockstep --on-timeout stop     # wait for the controller's reply every cycle
+  raf sim --round 3 --parts RGBX --seed 4  # round 3 with a given layout
+  raf sim --snapshot field.png             # an overview picture, then exit
+"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("endpoints")
+    g.add_argument("--host", default=LOCALHOST, help=f"address to receive commands on (default {LOCALHOST})")
+    g.add_argument("--port", type=int, default=SIMTWO_UDP_PORT,
+                   help=f"UDP port to receive commands on (default {SIMTWO_UDP_PORT})")
+    g.add_argument("--bridge", default=f"{LOCALHOST}:{BRIDGE_UDP_PORT}", metavar="HOST:PORT",
+                   help=f"where sensor frames go (default {LOCALHOST}:{BRIDGE_UDP_PORT})")
+    cam = g.add_mutually_exclusive_group()
+    cam.add_argument("--camera-bind", default=f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}", metavar="ENDPOINT",
+                     help=f"ZMQ PUB endpoint of the camera (default tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT})")
+    cam.add_argument("--no-camera", action="store_true", help="do not render or publish camera frames")
+    srv = g.add_mutually_exclusive_group()
+    srv.add_argument("--server-port", type=int, default=SERVER_UDP_PORT,
+                     help=f"UDP port of the factory-state server (default {SERVER_UDP_PORT}, on --host)")
+    srv.add_argument("--no-server", action="store_true", help="no factory-state server")
+
+    g = p.add_argument_group("timing")
+    mode = g.add_mutually_exclusive_group()
+    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
+                      help="pace simulation time to the wall clock (default)")
+    mode.add_argument("--fast", dest="mode", action="store_const", const="fast", help="run as fast as possible")
+    p.set_defaults(mode="realtime")
+    g.add_argument("--lockstep", action="store_true",
+                   help="wait each cycle for the controller's reply to the frame just sent")
+    g.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="S",
+                   help="wall seconds to wait for a reply in lockstep (default 1.0)")
+    g.add_argument("--on-timeout", choices=("stop", "hold", "exit"), default="stop",
+                   help="when no reply comes in time: stop the robot (V=W=0, magnet kept), hold the last "
+                        "command, or exit (code 3); always with a warning (default stop)")
+    g.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="simulation seconds to run, then print the score and exit (default: until Ctrl-C)")
+
+    g = p.add_argument_group("scene and competition")
+    g.add_argument("--seed", type=int, default=0, help="seed of the round draw and the sensor noise (default 0)")
+    g.add_argument("--round", type=int, choices=(1, 2, 3), default=1, dest="round_no", help="round (default 1)")
+    g.add_argument("--parts", default=None, metavar="RGBX",
+                   help="incoming warehouse layout, slot 1 first (R, G, B or X for empty) instead of the draw")
+    g.add_argument("--processing-delay", type=float, default=10.0, metavar="S",
+                   help="machine processing time in simulation seconds (default 10)")
+    g.add_argument("--start-after", type=float, default=0.0, metavar="S",
+                   help="simulation seconds before the run starts; the server says STOP until then (default 0)")
+    g.add_argument("--start-pose", default=None, metavar="X,Y,THETA",
+                   help="robot start pose in metres and radians (default: the field's start pose)")
+    g.add_argument("--beacons", action="store_true", help="put the LIDAR beacons in the team areas")
+    g.add_argument("--robot", default="simtwo", help="robot parameters: shipped name or a .json file (default simtwo)")
+
+    g = p.add_argument_group("output")
+    g.add_argument("--status-every", type=float, default=1.0, metavar="S",
+                   help="print a status line every S wall seconds (default 1.0; 0 = never)")
+    g.add_argument("--quiet", action="store_true", help="no status lines (warnings and the final score still)")
+    g.add_argument("--snapshot", default=None, metavar="FILE.png", help="render an overview of the scene and exit")
+    g.add_argument("--snapshot-camera", choices=("overview", "top", "robot_camera"), default="overview",
+                   help="the view --snapshot renders (default overview)")
+
+
+def run(args) -> int:
+    import logging
+    import signal
+    import sys
+
+    from ..errors import ConfigError
+    from ..field import load_field
+    from ..robot import load_robot
+    from ..sim import SimConfig, parse_pose
+    from ..sim.runner import RunnerConfig, parse_address
+
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, format="raf sim: %(levelname)s: %(message)s", stream=sys.stderr)
+        logging.getLogger("OpenGL").setLevel(logging.WARNING)
+    field = load_field(args.field)
+    robot = load_robot(args.robot)
+    start_pose = parse_pose(args.start_pose) if args.start_pose else None
+    snapshot = args.snapshot is not None
+    config = SimConfig(seed=args.seed, start_pose=start_pose, beacons=args.beacons,
+                       camera=not args.no_camera and not snapshot, round_no=args.round_no, parts=args.parts,
+                       processing_delay=args.processing_delay, start_after=args.start_after)
+    if args.status_every < 0:
+        raise ConfigError(f"--status-every {args.status_every}: must be >= 0")
+
+    from ..sim import Simulator
+
+    if snapshot:
+        size = (1280, 960)
+        sim = Simulator(field, robot, config, offscreen=size)
+        try:
+            if args.snapshot_camera == "robot_camera":
+                import cv2
+
+                cv2.imwrite(args.snapshot, sim.render_camera())
+            else:
+                sim.snapshot(args.snapshot, *size, camera=args.snapshot_camera)
+        finally:
+            sim.close()
+        print(f"wrote {args.snapshot} ({args.snapshot_camera} view, field {field.name}, "
+              f"{len(sim.parts.ids)} parts, round {args.round_no})")
+        return 0
+
+    runner_config = RunnerConfig(
+        host=args.host, port=args.port, bridge=parse_address(args.bridge),
+        camera_bind=None if args.no_camera else args.camera_bind,
+        server_host=args.host, server_port=None if args.no_server else args.server_port,
+        mode=args.mode, lockstep=args.lockstep, lockstep_timeout=args.lockstep_timeout,
+        on_timeout=args.on_timeout, duration=args.duration, status_every=args.status_every, quiet=args.quiet)
+    from ..sim.runner import SimRunner
+
+    sim = Simulator(field, robot, config)
+    runner = SimRunner(sim, runner_config)
+    old = {s: signal.signal(s, runner.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        runner.open()
+        c = runner_config
+        host, port = runner.address
+        extras = []
+        if c.camera_bind:
+            extras.append(f"camera {c.camera_bind}")
+        if runner.server is not None:
+            extras.append("factory server udp %s:%d" % runner.server.address)
+        if sim.setup is not None:
+            extras.append(sim.setup.describe())
+        print(f"raf sim: field {field.name}, commands on udp {host}:{port}, frames to udp {c.bridge[0]}:{c.bridge[1]}, "
+              f"{c.mode}{' lockstep' if c.lockstep else ''}; " + "; ".join(extras), flush=True)
+        result = runner.run()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        runner.close()
+        sim.close()
+    cnt = result.counters
+    print(f"raf sim: {result.reason} at t = {result.sim_time:.2f} s of simulation in {result.wall_time:.2f} s "
+          f"(real-time factor {result.real_time_factor:.2f}); frames sent {cnt['frames_sent']}, commands "
+          f"{cnt['commands']} (rejected {cnt['rejected']}: malformed {cnt['malformed']}, foreign "
+          f"{cnt['foreign']}, version {cnt['version']}), lockstep timeouts {cnt['timeouts']}, camera frames "
+          f"{cnt['camera_frames']}", flush=True)
+    if result.report is not None:
+        print(result.report, flush=True)
+    return result.exit_code

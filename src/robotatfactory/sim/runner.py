@@ -1,0 +1,399 @@
+"""``SimRunner``: the stand-in simulator's endpoints and pacing (what ``raf sim`` runs).
+
+Each control cycle (40 ms of simulation time):
+
+1. drain the command socket without blocking; the latest valid :class:`Command` wins (malformed and foreign
+   datagrams are counted and logged, rate-limited, with the sender and the reason; the last valid command
+   stays in force);
+2. ``Simulator.step_cycle`` with that command;
+3. publish the camera frames rendered during the cycle (ZMQ PUB, raw B G R A bottom-up, SNDHWM 2) --
+   before step 4, which is the frame ordering rule of docs/dev/interfaces.md;
+4. send the cycle's :class:`SensorFrame` to the bridge, from the command socket (so the bridge replies to
+   the frame's source address);
+5. with ``lockstep``, wait for the reply (the Command whose Seq is the frame's) up to ``lockstep_timeout``
+   wall seconds; on timeout apply the policy: ``stop`` (V = W = 0, magnet kept), ``hold`` (keep the last
+   command) or ``exit`` (end the run) -- always with a (rate-limited) warning, never a silent hang;
+6. pace: ``realtime`` sleeps so simulation time follows the wall clock, ``fast`` does not.
+
+SIGINT/SIGTERM (through :meth:`request_stop`) end the run after the current cycle; ``run`` returns a
+:class:`RunResult` with the counters and the referee's report.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import select
+import socket
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+
+from ..errors import ConfigError
+from ..simtwo import Command, ProtocolError
+from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
+
+log = logging.getLogger(__name__)
+
+TIMEOUT_POLICIES = ("stop", "hold", "exit")
+MODES = ("realtime", "fast")
+RECV_BUFFER = 65535
+MAX_BEHIND = 0.25  # s: a realtime run further behind the wall clock than this stops trying to catch up
+
+
+@dataclass(frozen=True)
+class RunnerConfig:
+    """Addresses, pacing and the lockstep policy. Seconds are wall-clock seconds unless said otherwise."""
+
+    host: str = LOCALHOST
+    port: int = SIMTWO_UDP_PORT
+    bridge: tuple[str, int] = (LOCALHOST, BRIDGE_UDP_PORT)
+    camera_bind: str | None = f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}"  # None: no camera stream
+    server_host: str = LOCALHOST
+    server_port: int | None = SERVER_UDP_PORT  # None: no factory-state server
+    mode: str = "realtime"
+    lockstep: bool = False
+    lockstep_timeout: float = 1.0
+    on_timeout: str = "stop"
+    duration: float | None = None  # simulation seconds; None: until stopped
+    status_every: float = 1.0
+    quiet: bool = False
+    log_period: float = 5.0  # rate limit of repeated warnings
+
+    def __post_init__(self):
+        if self.mode not in MODES:
+            raise ConfigError(f"mode {self.mode!r}: choose one of {', '.join(MODES)}")
+        if self.on_timeout not in TIMEOUT_POLICIES:
+            raise ConfigError(f"--on-timeout {self.on_timeout!r}: choose one of {', '.join(TIMEOUT_POLICIES)}")
+        if not (self.lockstep_timeout > 0 and math.isfinite(self.lockstep_timeout)):
+            raise ConfigError(f"--lockstep-timeout {self.lockstep_timeout}: must be a positive number of seconds")
+        if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
+            raise ConfigError(f"--duration {self.duration}: must be a positive number of simulation seconds")
+        for name, port in (("--port", self.port), ("--bridge port", self.bridge[1]),
+                           ("--server-port", self.server_port if self.server_port is not None else 0)):
+            if not (isinstance(port, int) and 0 <= port <= 65535):
+                raise ConfigError(f"{name} {port!r}: must be an integer 0..65535")
+
+
+def parse_address(text: str, default_host: str = LOCALHOST) -> tuple[str, int]:
+    """``host:port`` or ``port`` to a tuple; ConfigError on anything else."""
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        host, port = default_host, text
+    try:
+        p = int(port)
+    except ValueError:
+        raise ConfigError(f"address {text!r}: expected host:port with a numeric port") from None
+    if not 0 <= p <= 65535:
+        raise ConfigError(f"address {text!r}: port must be 0..65535")
+    return host or default_host, p
+
+
+class RateLimitedLog:
+    """The first message of a kind, then at most one per ``period`` seconds, telling how many were held back."""
+
+    def __init__(self, logger: logging.Logger, period: float = 5.0, clock=time.monotonic):
+        self.logger, self.period, self.clock = logger, period, clock
+        self._last: dict[str, float] = {}
+        self._held: dict[str, int] = {}
+
+    def warn(self, key: str, msg: str) -> bool:
+        now = self.clock()
+        last = self._last.get(key)
+        if last is not None and now - last < self.period:
+            self._held[key] = self._held.get(key, 0) + 1
+            return False
+        n = self._held.pop(key, 0)
+        self._last[key] = now
+        self.logger.warning(msg + (f" ({n} more like this since the last report)" if n else ""))
+        return True
+
+
+@dataclass
+class RunnerCounters:
+    cycles: int = 0
+    frames_sent: int = 0
+    send_errors: int = 0
+    commands: int = 0  # valid commands received
+    replies: int = 0  # valid commands whose Seq answered the frame just sent
+    stale: int = 0  # valid commands answering an older frame
+    rejected: int = 0  # malformed + foreign + version
+    malformed: int = 0
+    foreign: int = 0
+    version: int = 0
+    timeouts: int = 0
+    camera_frames: int = 0
+    camera_errors: int = 0
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class RunResult:
+    sim_time: float
+    wall_time: float
+    counters: dict
+    report: object | None  # competition ScoreReport, None without the competition
+    reason: str  # duration, stopped, timeout-exit
+    exit_code: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time / self.wall_time if self.wall_time > 0 else math.inf
+
+
+class SimRunner:
+    """Runs a :class:`~robotatfactory.sim.Simulator` against the outside world. See the module docstring."""
+
+    def __init__(self, sim, config: RunnerConfig | None = None, *, out=None):
+        self.sim = sim
+        self.config = config or RunnerConfig()
+        self.out = out if out is not None else sys.stdout
+        self.counters = RunnerCounters()
+        self._rlog = RateLimitedLog(log, self.config.log_period)
+        self._stop = threading.Event()
+        self._sock: socket.socket | None = None
+        self._zmq_ctx = None
+        self._pub = None
+        self.server = None
+        self.command = Command.stop()
+        self._opened = False
+
+    # ------------------------------------------------------------------------------------------ setup
+    def open(self) -> "SimRunner":
+        """Bind the command socket, the camera publisher and the factory-state server."""
+        if self._opened:
+            return self
+        c = self.config
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.bind((c.host, c.port))
+        except OSError as e:
+            sock.close()
+            raise ConfigError(f"cannot bind the command socket udp {c.host}:{c.port}: {e.strerror or e} "
+                              "(another simulator running? choose --port)") from None
+        sock.setblocking(False)
+        self._sock = sock
+        try:
+            if c.camera_bind:
+                import zmq
+
+                self._zmq_ctx = zmq.Context()
+                pub = self._zmq_ctx.socket(zmq.PUB)
+                pub.setsockopt(zmq.SNDHWM, 2)
+                pub.setsockopt(zmq.LINGER, 0)
+                try:
+                    pub.bind(c.camera_bind)
+                except zmq.ZMQError as e:
+                    pub.close()
+                    raise ConfigError(f"cannot bind the camera publisher {c.camera_bind}: {e} "
+                                      "(choose --camera-bind or --no-camera)") from None
+                self._pub = pub
+            if c.server_port is not None and self.sim.factory is not None:
+                from ..competition import FactoryServer
+
+                sim = self.sim
+                self.server = FactoryServer(sim.factory, host=c.server_host, port=c.server_port,
+                                            clock=lambda: sim.time).start()
+        except Exception:
+            self.close()
+            raise
+        self._opened = True
+        return self
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) the command socket is bound to (the real port when configured with 0)."""
+        return self._sock.getsockname()[:2] if self._sock is not None else (self.config.host, self.config.port)
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        if self._pub is not None:
+            self._pub.close(0)
+            self._pub = None
+        if self._zmq_ctx is not None:
+            self._zmq_ctx.term()
+            self._zmq_ctx = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+        self._opened = False
+
+    def __enter__(self):
+        return self.open()
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def request_stop(self, *_args) -> None:
+        """Ask the loop to end after the present cycle (signal-handler safe)."""
+        self._stop.set()
+
+    # ------------------------------------------------------------------------------------------ commands
+    def _accept(self, data: bytes, addr, expect_seq: int | None) -> bool:
+        """Decode one datagram; returns True when it is the reply to ``expect_seq``."""
+        c = self.counters
+        try:
+            cmd = Command.decode(data)
+        except (ProtocolError, UnicodeDecodeError, ValueError) as e:
+            msg = str(e)
+            c.rejected += 1
+            if msg.startswith("not a RobotAtFactory"):
+                c.foreign += 1
+                kind = "foreign"
+            elif "protocol version" in msg:
+                c.version += 1
+                kind = "version"
+            else:
+                c.malformed += 1
+                kind = "malformed"
+            self._rlog.warn(f"rx-{kind}", f"rejected {kind} command datagram ({len(data)} bytes) from "
+                                          f"{addr[0]}:{addr[1]}: {msg}; keeping V={self.command.v:g} "
+                                          f"W={self.command.w:g} S={int(self.command.magnet)}")
+            return False
+        c.commands += 1
+        self.command = cmd
+        if expect_seq is not None and cmd.seq >= 0 and cmd.seq < expect_seq:
+            c.stale += 1
+        if expect_seq is not None and cmd.seq == expect_seq:
+            c.replies += 1
+            return True
+        return False
+
+    def _drain(self, expect_seq: int | None = None) -> bool:
+        """Read every queued datagram; True if the reply to ``expect_seq`` was among them."""
+        got = False
+        sock = self._sock
+        while True:
+            try:
+                data, addr = sock.recvfrom(RECV_BUFFER)
+            except (BlockingIOError, InterruptedError):
+                return got
+            except OSError as e:  # e.g. ICMP port unreachable reported on some systems: not fatal
+                self._rlog.warn("rx-error", f"command socket receive error: {e}")
+                return got
+            if self._accept(data, addr, expect_seq):
+                got = True
+
+    def _wait_reply(self, seq: int) -> bool:
+        """Lockstep: wait up to the timeout for the Command answering frame ``seq``."""
+        deadline = time.monotonic() + self.config.lockstep_timeout
+        if self._drain(seq):
+            return True
+        while not self._stop.is_set():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            try:
+                r, _, _ = select.select([self._sock], [], [], min(left, 0.1))
+            except InterruptedError:
+                continue
+            if r and self._drain(seq):
+                return True
+        return False
+
+    def _on_timeout(self, seq: int) -> bool:
+        """Apply the lockstep timeout policy; returns False when the run must end."""
+        c = self.config
+        self.counters.timeouts += 1
+        if c.on_timeout == "exit":
+            log.error("lockstep: no reply to frame %d within %.3g s; --on-timeout exit: ending the run", seq,
+                      c.lockstep_timeout)
+            return False
+        if c.on_timeout == "stop":
+            self.command = Command(0.0, 0.0, self.command.magnet, -1)
+            what = "stopping the robot (V = W = 0, magnet kept)"
+        else:
+            what = f"holding the last command V={self.command.v:g} W={self.command.w:g}"
+        self._rlog.warn("timeout", f"lockstep: no reply to frame {seq} within {c.lockstep_timeout:g} s from the "
+                                   f"controller at {self.config.bridge[0]}:{self.config.bridge[1]}; {what} "
+                                   f"({self.counters.timeouts} timeouts so far)")
+        return True
+
+    # ------------------------------------------------------------------------------------------ outputs
+    def _publish(self, frames) -> None:
+        if not frames:
+            return
+        bottom_up = self.sim.robot.camera.bottom_up
+        for f in frames:
+            if self._pub is None:
+                continue
+            try:
+                import zmq
+
+                self._pub.send(f.wire(bottom_up), copy=False, flags=zmq.NOBLOCK)
+                self.counters.camera_frames += 1
+            except Exception as e:  # noqa: BLE001 - a camera hiccup must not stop the simulation
+                self.counters.camera_errors += 1
+                self._rlog.warn("camera", f"camera frame {f.index} not published: {e}")
+
+    def _send(self, frame) -> None:
+        try:
+            self._sock.sendto(frame.encode(), self.config.bridge)
+            self.counters.frames_sent += 1
+        except OSError as e:
+            self.counters.send_errors += 1
+            self._rlog.warn("tx", f"sensor frame {frame.seq} not sent to {self.config.bridge[0]}:"
+                                  f"{self.config.bridge[1]}: {e}")
+
+    def report(self):
+        sim = self.sim
+        return sim.referee.report(sim.time) if sim.referee is not None else None
+
+    def status_line(self, wall_elapsed: float) -> str:
+        sim, c = self.sim, self.counters
+        rtf = sim.time / wall_elapsed if wall_elapsed > 0 else 0.0
+        rep = self.report()
+        score = f" | {rep.short()}" if rep is not None else ""
+        held = f" holding part {sim.held}" if sim.held is not None else ""
+        return (f"t={sim.time:8.2f}s rtf {rtf:5.2f}x | sent {c.frames_sent} cmd {c.commands} "
+                f"rejected {c.rejected} timeouts {c.timeouts} | camera {c.camera_frames} | "
+                f"V={self.command.v:+.3f} W={self.command.w:+.3f} S={int(self.command.magnet)}{held}{score}")
+
+    # ------------------------------------------------------------------------------------------ the loop
+    def run(self) -> RunResult:
+        """Run until the duration, a stop request or a lockstep ``exit``. Opens and closes the endpoints."""
+        c = self.config
+        sim = self.sim
+        self.open()
+        reason, code = "stopped", 0
+        wall0 = time.monotonic()
+        sim0 = sim.time
+        pace_wall0, pace_sim0 = wall0, sim0
+        next_status = wall0 + c.status_every
+        try:
+            while not self._stop.is_set():
+                if c.duration is not None and sim.time - sim0 >= c.duration - 1e-9:
+                    reason = "duration"
+                    break
+                if not c.lockstep:
+                    self._drain()
+                frame = sim.step_cycle(self.command)
+                self.counters.cycles += 1
+                self._publish(sim.take_frames())
+                self._send(frame)
+                if c.lockstep and not self._wait_reply(frame.seq):
+                    if self._stop.is_set():
+                        break
+                    if not self._on_timeout(frame.seq):
+                        reason, code = "timeout-exit", 3
+                        break
+                now = time.monotonic()
+                if c.mode == "realtime":
+                    ahead = (sim.time - pace_sim0) - (now - pace_wall0)
+                    if ahead > 0:
+                        self._stop.wait(ahead)
+                    elif -ahead > MAX_BEHIND:  # cannot keep up (lockstep waits, slow machine): re-anchor
+                        pace_wall0, pace_sim0 = now, sim.time
+                if not c.quiet and c.status_every > 0 and now >= next_status:
+                    print(self.status_line(now - wall0), file=self.out, flush=True)
+                    next_status = now + c.status_every
+        finally:
+            wall = time.monotonic() - wall0
+            self.close()
+        return RunResult(sim_time=sim.time - sim0, wall_time=wall, counters=self.counters.as_dict(),
+                         report=self.report(), reason=reason, exit_code=code)
