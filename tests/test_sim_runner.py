@@ -212,3 +212,17 @@ def test_bad_settings_are_clear_errors(raf_cmd):
     assert p.returncode == 2 and "x,y,theta" in p.stderr and "Traceback" not in p.stderr
     p = subprocess.run(raf_cmd + ["sim", "--bridge", "localhost:http"], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and "numeric port" in p.stderr
+
+
+def test_cached_frame_encoder_gives_the_codecs_bytes(field, robot):
+    from robotatfactory.sim import Simulator
+    from robotatfactory.sim.runner import CachedFrameEncoder
+
+    sim = Simulator(field, robot, SimConfig(camera=False, lidar=True, beacons=True, seed=2))
+    enc = CachedFrameEncoder()
+    for i in range(30):
+        f = sim.step_cycle(Command(0.2, 1.0 if i < 15 else -2.0, False))
+        assert enc.encode(f) == f.encode()
+    f.ranges[[0, 5, 359]] = [-1.0, 1e-5, 123456.7]  # no return, exponent and rounding formats
+    assert enc.encode(f) == f.encode()
+    sim.close()

@@ -62,7 +62,7 @@ class Lidar:
         self._period_ns = int(round(spec.period * 1e9))
         self._plans: dict[tuple[int, int], tuple] = {}
         self._plan = None
-        self._poses: list[tuple[float, float, float]] = []
+        self.poses: list = []
         self._gid1 = np.zeros(1, dtype=np.int32)
         self._pnt = np.zeros(3)
         self._vec = np.zeros(3)
@@ -97,11 +97,13 @@ class Lidar:
             if steps_per_sweep:
                 self._plans[key] = p
         self._plan = (p, self._count(first_step))
-        self._poses = [(0.0, 0.0, 0.0)] * len(p[0])
+        self.poses = [None] * len(p[0])
         return p[0]
 
     def log_pose(self, slot: int, x: float, y: float, yaw: float) -> None:
-        self._poses[slot] = (x, y, yaw)
+        """Log the robot's (x, y, yaw) after the ``slot``-th due step (the simulator's hot loop writes
+        ``poses[slot] = qpos[free joint]`` as a 7-list instead: x, y, z, qw, qx, qy, qz)."""
+        self.poses[slot] = (x, y, yaw)
 
     def cast(self, model, data, mujoco) -> None:
         """Measure every ray due in this cycle."""
@@ -124,7 +126,13 @@ class Lidar:
         gid = [0] * m
         # one mj_ray per ray from the pose logged at its physics step (mj_multiRay has a fixed cost of
         # ~10 us that only pays off for many rays from one point)
-        for g, (x, y, yaw) in enumerate(self._poses):
+        atan2 = math.atan2
+        for g, pose in enumerate(self.poses):
+            if len(pose) == 7:  # the free joint's qpos: yaw from the quaternion
+                x, y, _, w, qx, qy, qz = pose
+                yaw = atan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+            else:
+                x, y, yaw = pose
             cy, sy = cos(yaw), sin(yaw)
             pnt[0] = x + cy * lx - sy * ly
             pnt[1] = y + sy * lx + cy * ly

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+from collections import deque
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -121,6 +122,7 @@ class Simulator:
         self._renderer: Renderer | None = None
         self.render_seconds = 0.0  # wall time spent rendering (for benchmarks)
         self.frames_rendered = 0
+        self.render_times: deque[float] = deque(maxlen=10000)  # seconds per camera frame, latest last
 
         # rest everything on the floor, then start the clock and the encoders at t = 0
         mujoco.mj_forward(m, d)
@@ -332,8 +334,7 @@ class Simulator:
         al, ar = self._act
         qa = self._qa
         step = mujoco.mj_step
-        atan2 = math.atan2
-        log_pose = self._lidar.log_pose if self._lidar is not None else None
+        poses = self._lidar.poses if self._lidar is not None else None
         ml, mr = self.motors
         pl, pr = self.controllers
         mp, cp = self.motor_params, self.controller_params
@@ -416,8 +417,7 @@ class Simulator:
             step(m, d)
             slot = lidar_slot[j]
             if slot >= 0:
-                w_, x_, y_, z_ = qpos[qa + 3], qpos[qa + 4], qpos[qa + 5], qpos[qa + 6]
-                log_pose(slot, qpos[qa], qpos[qa + 1], atan2(2.0 * (w_ * z_ + x_ * y_), 1.0 - 2.0 * (y_ * y_ + z_ * z_)))
+                poses[slot] = qpos[qa:qa + 7].tolist()
             if events and j in events:
                 self._on_events(s0 + j + 1, events[j])
         # write the state back
@@ -536,7 +536,9 @@ class Simulator:
 
         t0 = _time.perf_counter()
         rgb = self._get_renderer().render(self.data).copy()
-        self.render_seconds += _time.perf_counter() - t0
+        dt = _time.perf_counter() - t0
+        self.render_seconds += dt
+        self.render_times.append(dt)
         self.frames_rendered += 1
         dec = self.robot.camera.decimation
         self._frames.append(CameraFrame(index=index, tick=index * dec, tick_time=index * self._frame_period,
