@@ -188,3 +188,34 @@ def test_same_seed_same_run_different_seed_different_lidar_noise(field, robot):
     assert a == b
     assert [f.x for f in a] == [f.x for f in c]  # the physics does not depend on the seed
     assert any(not np.array_equal(fa.ranges, fc.ranges) for fa, fc in zip(a, c))
+
+
+def test_speed_pi_is_stable_on_a_lifted_wheel(robot):
+    """A wheel off the ground has only its own inertia (2.6e-5 kg.m^2): the 1 ms loop must not ring."""
+    p = MotorParams.from_spec(robot.motor)
+    cp = SpeedControllerParams.from_spec(robot.speed_controller)
+    pi, motor = SpeedPI(cp, p.Vmax), DCMotor(p, 0.001)
+    inertia = 0.5 * robot.wheel["mass"] * robot.wheel_radius ** 2
+    w, trace = 0.0, []
+    pi.target = 10.0
+    for _ in range(1000):
+        torque = motor.step(pi.update(w), w) - p.Bv * w - math.copysign(p.Fc, w) * (w != 0)
+        w += torque / inertia * 0.001
+        trace.append((w, pi.output))
+    trace = np.array(trace[-300:])
+    assert np.ptp(trace[:, 0]) < 0.01 and abs(trace[-1, 0] - 10.0) < 0.01
+    assert np.ptp(trace[:, 1]) < 0.05  # no voltage chatter
+
+
+def test_circle_is_driven_round_and_round(sim, robot):
+    """Ten seconds on a 0.18 m circle round the field's centre: the path stays on the circle."""
+    v, w = 0.108, 0.6
+    sim.set_pose(0.0, -0.1, 0.0)
+    centre = np.array([0.0, -0.1 + v / w])
+    radii = []
+    for k in range(250):
+        sim.step_cycle(Command(v, w, False))
+        if k > 15:
+            radii.append(np.linalg.norm(np.array(sim.pose[:2]) - centre))
+    assert np.max(np.abs(np.array(radii) - v / w)) < 0.004
+    assert sim.data.ncon == 3  # two wheels and the caster on the floor, nothing else

@@ -15,11 +15,13 @@ group what                                        camera  LIDAR     magnet
 3     parts' bodies (visual)                      yes     yes       no
 4     parts' ferromagnetic plates (visual)        yes     yes       yes
 5     collision-only shapes (floor plane, wheel   no      no        no
-      spheres, part boxes)
+      spheres, wheel guard, part boxes)
 ====  ==========================================  ======  ========  ========
 
-Collision filtering (``contype``/``conaffinity`` bits): the floor only meets wheels, caster and parts; the
-walls meet everything that moves; decoration meets nothing.
+Collision filtering (``contype``/``conaffinity`` bits): the wheel spheres and the caster meet only the floor
+(a 65 mm sphere is wider than the 20 mm tyre); walls and parts meet the robot's base, its magnet housing and
+a "wheel guard" box around both tyres; parts meet the floor, the walls, each other and the robot;
+decoration meets nothing.
 """
 from __future__ import annotations
 
@@ -40,8 +42,8 @@ LIDAR_GROUPS = (1, 0, 0, 1, 1, 0)
 MAGNET_GROUPS = (0, 0, 0, 0, 1, 0)
 CONTACT_GROUPS = (1, 0, 0, 1, 1, 0)
 
-# collision bits
-B_WALL, B_MOVING, B_FLOOR = 1, 2, 4
+# collision bits: walls, moving bodies (robot body, parts), the floor, the robot's rolling elements
+B_WALL, B_MOVING, B_FLOOR, B_WHEEL = 1, 2, 4, 8
 
 # Robot details the spec leaves open (documented in docs/simulator.md):
 BASE_COM_X = -0.02  # m: the base's centre of mass sits 2 cm behind the axle so the caster carries load
@@ -257,8 +259,8 @@ def _add_overview_cameras(world, field: Field) -> None:
     """``overview``: from the bottom edge, above, at an angle; ``top``: straight down."""
     cx = (field.floor.x[0] + field.floor.x[1]) / 2
     cy = (field.floor.y[0] + field.floor.y[1]) / 2
-    eye = np.array([cx, cy - 1.35, 1.45])
-    target = np.array([cx, cy - 0.05, 0.0])
+    eye = np.array([cx, cy - 1.22, 1.32])
+    target = np.array([cx, cy + 0.02, 0.0])
     fwd = target - eye
     fwd /= np.linalg.norm(fwd)
     right = np.cross(fwd, [0, 0, 1.0])
@@ -266,9 +268,9 @@ def _add_overview_cameras(world, field: Field) -> None:
     up = np.cross(right, fwd)
     cam = world.add_camera(name="overview", pos=eye.tolist(),
                            quat=mat_quat(np.column_stack([right, up, -fwd])))
-    cam.fovy = 52.0
-    top = world.add_camera(name="top", pos=[cx, cy, 2.1])
-    top.fovy = 45.0
+    cam.fovy = 50.0
+    top = world.add_camera(name="top", pos=[cx, cy, 2.05])
+    top.fovy = 38.0
 
 
 def _wheel_inertia(mass: float, r: float, width: float) -> list[float]:
@@ -301,10 +303,18 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -
                       pos=[mx - BUMPER_HALF[0], 0, MAGNET_Z], rgba=[0.55, 0.55, 0.6, 1])
     g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_ROBOT
     g.friction = list(WALL_FRICTION)
+    # the wheels' outline for walls and parts: a box around both tyres, clear of the floor
+    wwidth = float(robot.wheel.get("width", 0.02))
+    r = robot.wheel_radius
+    g = body.add_geom(name="robot_wheel_guard", type=mujoco.mjtGeom.mjGEOM_BOX,
+                      size=[r, robot.track / 2 + wwidth / 2, r - 0.0025], pos=[0, 0, r + 0.0025],
+                      rgba=[0, 0, 0, 0])
+    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_HIDDEN
+    g.friction = list(WALL_FRICTION)
     cr = float(robot.caster["radius"])
     g = body.add_geom(name="robot_caster", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[cr, 0, 0],
                       pos=[float(robot.caster["x"]), 0, cr], rgba=[0.6, 0.6, 0.6, 1])
-    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING | B_FLOOR, G_ROBOT
+    g.contype, g.conaffinity, g.group = B_WHEEL, B_FLOOR, G_ROBOT
     g.condim = 1  # a ball caster: no friction (priority: its condim wins over the floor's)
     g.priority = 1
     g.solref, g.solimp = list(STIFF_SOLREF), list(STIFF_SOLIMP)
@@ -339,7 +349,9 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -
         j.damping = [float(m["Bv"]) * float(m.get("gear", 1.0)) ** 2, 0.0, 0.0]
         j.frictionloss = float(m["Fc"]) * float(m.get("gear", 1.0))
         g = wb.add_geom(name=f"wheel_{side}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0, 0])
-        g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING | B_FLOOR, G_HIDDEN
+        # the sphere only rolls on the floor (it is wider than the 2 cm tyre); walls and parts meet the
+        # wheel guard box instead
+        g.contype, g.conaffinity, g.group = B_WHEEL, B_FLOOR, G_HIDDEN
         g.condim = 3
         g.friction = list(WHEEL_FRICTION)
         g.solref, g.solimp = list(STIFF_SOLREF), list(STIFF_SOLIMP)

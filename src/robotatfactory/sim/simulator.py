@@ -36,6 +36,8 @@ log = logging.getLogger(__name__)
 SETTLE_STEPS = 300  # physics steps run before t = 0 so that wheels and parts rest on the floor
 MAGNET_CHECK_STEPS = 10  # while on and empty, the magnet looks for a plate every 10 ms
 MAGNET_GAP = 0.0005  # m left between the magnet's face and a held plate
+BEAM_BACKOFF = 0.005  # m: beams start this far behind their origin (a ray starting inside a touching
+#                       surface would miss it); hits are measured from the nominal origin
 
 
 def _yaw(q) -> float:
@@ -474,20 +476,20 @@ class Simulator:
     def _contact_pressed(self) -> bool:
         c = self.robot.contact
         p, R = self._robot_frame()
-        origin = p + R @ np.asarray(c["xyz"], dtype=np.float64)
+        origin = p + R @ (np.asarray(c["xyz"], dtype=np.float64) - (BEAM_BACKOFF, 0.0, 0.0))
         direction = np.ascontiguousarray(R[:, 0])
         dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._contact_groups, 1, -1, self._ray_gid)
-        return bool(self._ray_gid[0] >= 0 and 0.0 <= dist <= float(c["beam"]))
+        return bool(self._ray_gid[0] >= 0 and 0.0 <= dist <= float(c["beam"]) + BEAM_BACKOFF)
 
     def _magnet_check(self) -> None:
         """Attach a part whose plate is within the electromagnet's beam and faces it."""
         em = self.robot.electromagnet
         p, R = self._robot_frame()
-        origin = p + R @ np.array([float(em["x"]), 0.0, sc.MAGNET_Z])
+        origin = p + R @ np.array([float(em["x"]) - BEAM_BACKOFF, 0.0, sc.MAGNET_Z])
         direction = np.ascontiguousarray(R[:, 0])
         dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._magnet_groups, 1, -1, self._ray_gid)
         gid = int(self._ray_gid[0])
-        if gid < 0 or not 0.0 <= dist <= float(em["beam"]):
+        if gid < 0 or not 0.0 <= dist <= float(em["beam"]) + BEAM_BACKOFF:
             return
         pid = self._plate_geoms.get(gid)
         if pid is None:
