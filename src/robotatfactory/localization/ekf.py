@@ -40,14 +40,14 @@ CHI2_2_999 = 13.816
 
 @dataclass
 class EkfConfig:
-    wheel_sigma_per_sqrt_m: float = 0.01  # 1-sigma travel error of one wheel after 1 m (random, not scale)
-    turn_sigma_per_sqrt_rad: float = 0.01  # extra heading sigma per sqrt(rad turned) (slip in turns)
+    wheel_sigma_per_sqrt_m: float = 0.005  # 1-sigma travel error of one wheel after 1 m (random, not scale)
+    turn_sigma_per_sqrt_rad: float = 0.005  # extra heading sigma per sqrt(rad turned) (slip in turns)
     xy_sigma_per_sqrt_s: float = 0.0005  # random walk of position while time passes (bumps, slip)
     theta_sigma_per_sqrt_s: float = 0.0005
     track_m: float = 0.135  # wheel separation (for wheel-travel noise); from the robot file in from_robot
     gate_pose_chi2: float = CHI2_3_999
     gate_beacon_chi2: float = CHI2_2_999
-    stamp_sigma_s: float = 0.005  # uncertainty of camera frame stamps
+    stamp_sigma_s: float = 0.01  # uncertainty of camera frame stamps (and motion effects while turning)
     history_s: float = 3.0
     max_pending: int = 20  # measurements waiting for odometry to reach their stamp
     reinit_after_s: float = 5.0

@@ -24,17 +24,20 @@ class PoseConfig:
 
     # corner noise model, pixels (1 sigma per coordinate):
     #   sigma = min(sigma_max_px, sigma_min_px + sigma_px_per_m * d / max(cos a, 0.1) ** sigma_cos_exp)
-    # d = camera-to-marker distance (m), a = angle between the marker's normal and the line of sight.
-    sigma_min_px: float = 0.05
-    sigma_px_per_m: float = 0.62
-    sigma_cos_exp: float = 0.85
-    sigma_max_px: float = 0.95
+    # d = camera-to-marker distance (m), a = angle between the marker's normal and the line of sight;
+    # fitted (maximum likelihood) to the corner errors of 150 stand-in simulator frames (docs/localization.md)
+    sigma_min_px: float = 0.28
+    sigma_px_per_m: float = 0.16
+    sigma_cos_exp: float = 2.0
+    sigma_max_px: float = 1.4
     # mount check: base_link implied by a camera pose must be on the floor and level
     mount_max_height_m: float = 0.04
     mount_max_tilt_deg: float = 8.0
     mount_sigma_height_m: float = 0.01  # for ranking solutions
     mount_sigma_tilt_deg: float = 2.0
     # per-marker sanity
+    marker_max_rms_px: float = 1.0  # IPPE's square fits the corners worse than max(this, marker_rms_sigmas *
+    marker_rms_sigmas: float = 5.0  # sigma): a corner is off (occlusion, a neighbour), the marker is rejected
     min_side_px: float = 4.0
     min_area_px2: float = 20.0
     max_side_ratio: float = 12.0
@@ -47,8 +50,8 @@ class PoseConfig:
     max_position_sigma_m: float = 0.10
     max_heading_sigma_deg: float = 10.0
     # model-error floor added to every planar covariance (camera model, mount, timing within a frame)
-    floor_position_sigma_m: float = 0.0015
-    floor_heading_sigma_deg: float = 0.15
+    floor_position_sigma_m: float = 0.0005
+    floor_heading_sigma_deg: float = 0.1
     # consensus: a marker agrees with a hypothesis when its RMS reprojection error is under this (pixels)
     consensus_px: float = 10.0
     # how many of the best-supported hypotheses seed the LM of the planar fit
@@ -172,6 +175,9 @@ def observe(detections: list[Detection], field: Field, K: np.ndarray, T_cam_base
         cam_pos = T_wc[0][:3, 3]
         los = cam_pos - m.position
         cos_view = abs(float(np.dot(los, m.normal))) / max(float(np.linalg.norm(los)), 1e-9)
-        out.append(MarkerObservation(m, c, sols, errs, mounts, dist, cos_view,
-                                     cfg.corner_sigma(dist, cos_view), checked))
+        sigma = cfg.corner_sigma(dist, cos_view)
+        if min(errs) > max(cfg.marker_max_rms_px, cfg.marker_rms_sigmas * sigma):
+            rejected.append((d.id, reasons.REPROJECTION))
+            continue
+        out.append(MarkerObservation(m, c, sols, errs, mounts, dist, cos_view, sigma, checked))
     return out
