@@ -1,17 +1,17 @@
 """The bridge node: SimTwo's streams (UDP SensorFrames, ZMQ camera) to ROS topics and TF, commands back.
 
-Threads (none of them ever blocks another):
+Threads of this process (none of them ever blocks another):
 
-* **UDP** (the control path): receive a datagram, check its source, decode it, classify it (stream
-  bookkeeping), answer it at once with one ``Command`` (``Seq`` echoed, watchdog applied) to its source,
-  then publish ``/clock``, ``odom`` (+ TF), ``ground_truth``, ``joint_states``, ``scan``, ``contact`` and
-  ``electromagnet/state`` stamped with the frame's ``Tms``.
-* **camera receive**: ZMQ SUB; keeps only the newest frame (older ones are counted as skipped) with its
-  arrival time in a one-slot mailbox.
-* **camera publish**: checks the size, estimates the render time (``simtwo.timing.CameraStamper``),
-  flips and converts to bgr8, publishes ``camera/image_raw`` and ``camera/camera_info``.
+* **UDP** (the control path): receive a datagram (with the kernel's arrival time), check its source, decode
+  it, classify it (stream bookkeeping), answer it at once with one ``Command`` (``Seq`` echoed, watchdog
+  applied) to its source, then publish ``odom`` (written synchronously), ``/clock``, TF, ``ground_truth``,
+  ``joint_states``, ``contact``, ``electromagnet/state`` and ``scan`` stamped with the frame's ``Tms``, and
+  pass ``Tms`` and the arrival time to the camera process.
 * **diagnostics**: every ``~diagnostics/period`` wall seconds (so it keeps reporting when the simulator, and
   with it simulation time, stops).
+
+The camera (ZMQ -> ``camera/image_raw``, ``camera/camera_info``) runs in a child process, the node
+``<name>_camera`` (:mod:`.camera_node`), so that 1.2 MB frames never hold this process's GIL.
 
 The algorithms are in ``robotatfactory.simtwo.stream``, ``robotatfactory.simtwo.timing`` and
 ``robotatfactory.localization.odometry``; this module is wiring. See docs/bridge.md.
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import socket
+from collections import deque
 import sys
 import threading
 import time
@@ -31,18 +32,18 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan
+from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import Bool
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from ..errors import ConfigError
 from ..localization.odometry import DiffDriveOdometry
-from ..simtwo import Command, ProtocolError, SensorFrame, decode_frame
+from ..simtwo import Command, ProtocolError, SensorFrame
 from ..simtwo.labels import LabelledValues
 from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
 from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
-from ..simtwo.timing import CameraStamper, SimClock, SweepAssembler
+from ..simtwo.timing import SimClock, SweepAssembler
 from . import messages as rm
 from .config import BridgeConfig, load_config
 from .udp import TimestampedUDP
@@ -75,18 +76,15 @@ class Bridge:
             field = load_field(cfg.field)
         self.field = field
         self.tracker = StreamTracker(cfg.reorder_window, cfg.restart_confirm)
-        self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, cfg.overtake_window,
-                                     use_grid=cfg.use_grid)
+        self.camera = None  # CameraLink: the camera half runs in its own process (camera_node)
         self.clock = SimClock()
         self.odo = DiffDriveOdometry(wheel_radius=cfg.wheel_radius, track=cfg.track, ticks_per_rev=cfg.ticks_per_rev,
                                      slip_var_per_m=cfg.slip_var_per_m)
         self.sweeps: SweepAssembler | None = None
         self.log = LogLimiter(cfg.log_period)
         self.datagram_rate = RateMeter()
-        self.camera_rate = RateMeter()
         self.counts = {"replies": 0, "reply_errors": 0, "cmd_vel": 0, "cmd_vel_rejected": 0, "magnet_cmds": 0,
-                       "watchdog_stops": 0, "camera_received": 0, "camera_skipped": 0, "camera_wrong_size": 0,
-                       "camera_published": 0, "scans": 0, "publish_errors": 0}
+                       "watchdog_stops": 0, "scans": 0, "publish_errors": 0}
         self._cmd_lock = threading.Lock()
         self._v = self._w = 0.0
         self._have_cmd = False
@@ -95,11 +93,12 @@ class Bridge:
         self._watchdog_active = False
         self._gt_prev = None
         self._map_odom_sent = False
-        self._mail = None
-        self._mail_cv = threading.Condition()
         self._running = False
         self._threads: list[threading.Thread] = []
         self._rejects_at_last_diag = 0
+        # wall seconds from the kernel receiving a datagram to its reply sent / its odom written
+        self.reply_delay: deque = deque(maxlen=2000)
+        self.odom_delay: deque = deque(maxlen=2000)
         self.sock: socket.socket | None = None
         self.bound_port: int | None = None
 
@@ -116,14 +115,14 @@ class Bridge:
         # delay the control path (and the arrival times the camera stamping compares) by that much
         sys.setswitchinterval(0.0005)
         self.pub_clock = rospy.Publisher(t["clock"], Clock, queue_size=10)
-        self.pub_odom = rospy.Publisher(t["odom"], Odometry, queue_size=10)
+        # odom is the control path: written to the subscribers' sockets in this thread (no hand-over to a
+        # writer thread, which would wait for the GIL while the rest of the frame is published)
+        self.pub_odom = rospy.Publisher(t["odom"], Odometry, queue_size=None)
         self.pub_gt = rospy.Publisher(t["ground_truth"], Odometry, queue_size=10)
         self.pub_joints = rospy.Publisher(t["joint_states"], JointState, queue_size=10)
         self.pub_scan = rospy.Publisher(t["scan"], LaserScan, queue_size=10)
         self.pub_contact = rospy.Publisher(t["contact"], Bool, queue_size=10)
         self.pub_magnet = rospy.Publisher(t["magnet_state"], Bool, queue_size=10)
-        self.pub_image = rospy.Publisher(t["image"], Image, queue_size=2)
-        self.pub_info = rospy.Publisher(t["camera_info"], CameraInfo, queue_size=2)
         self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=10)
         self.pub_tf = rospy.Publisher("/tf", TFMessage, queue_size=100)
         self.static_tf = tf2_ros.StaticTransformBroadcaster()
@@ -136,10 +135,12 @@ class Bridge:
             self.pub_markers = rospy.Publisher(t["field_markers"], MarkerArray, queue_size=1, latch=True)
             self.pub_markers.publish(field_marker_array(self.field, cfg.frames["map"]))
         self._running = True
-        self._spawn(self._udp_loop, "udp")
         if cfg.camera_enabled:
-            self._spawn(self._camera_rx, "camera-rx")
-            self._spawn(self._camera_pub, "camera-pub")
+            from .camera_node import CameraLink
+
+            self.camera = CameraLink(cfg.params, f"{rospy.get_name().rsplit('/', 1)[-1]}_camera",
+                                     rospy.get_namespace())
+        self._spawn(self._udp_loop, "udp")
         self._spawn(self._diag_loop, "diagnostics")
         rospy.loginfo(f"bridge: SensorFrames on udp {cfg.bind_host}:{self.bound_port} from "
                       f"{'any host' if cfg.sim_host == '*' else cfg.sim_host}, camera "
@@ -165,10 +166,10 @@ class Bridge:
 
     def stop(self) -> None:
         self._running = False
-        with self._mail_cv:
-            self._mail_cv.notify_all()
         for th in self._threads:
             th.join(timeout=2.0)
+        if self.camera is not None:
+            self.camera.close()
         if self.sock is not None:
             self.sock.close()
 
@@ -277,6 +278,7 @@ class Bridge:
         try:
             self.sock.sendto(cmd.encode(), (addr[0], cfg.reply_port or addr[1]))
             self.counts["replies"] += 1
+            self.reply_delay.append(time.monotonic() - arrival)
         except OSError as e:
             self.counts["reply_errors"] += 1
             self._warn("send", f"bridge: cannot reply to {addr[0]}:{cfg.reply_port or addr[1]}: {e}")
@@ -290,19 +292,21 @@ class Bridge:
         elif ev.verdict is Verdict.GAP:
             self._warn("gap", f"bridge: {ev.lost} frame(s) lost before Seq {frame.seq} (ticks are kept: "
                               "odometry uses the cumulative totals)")
-        self.stamper.on_sensor_frame(frame.time_ms, arrival)
         self.clock.on_sensor_frame(frame.time_ms, arrival)
         try:
-            self.publish_frame(frame)
+            self.publish_frame(frame, arrival)
         except (rospy.ROSException, ValueError) as e:
             self.counts["publish_errors"] += 1
             self._warn("publish", f"bridge: publishing frame Seq {frame.seq} failed: {e}")
+        if self.camera is not None:  # after publishing: the camera process waits for this (see camera_node)
+            self.camera.frame(frame.time_ms, arrival)
 
     def _start_stream(self, ev, frame: SensorFrame) -> None:
         if ev.verdict is Verdict.RESTART:
             rospy.logwarn(f"bridge: the simulator restarted (Seq {frame.seq}, Tms {frame.time_ms}): resetting "
                           "odometry, clock and camera stamping")
-        self.stamper.reset()
+        if self.camera is not None:
+            self.camera.reset()
         self.clock.reset()
         if self.sweeps is not None:
             self.sweeps.reset()
@@ -314,14 +318,16 @@ class Bridge:
         if self.cfg.map_to_odom == "first_ground_truth":
             self._send_static(map_odom=(frame.x, frame.y, frame.theta))
 
-    def publish_frame(self, f: SensorFrame) -> None:
+    def publish_frame(self, f: SensorFrame, arrival: float | None = None) -> None:
         cfg, fr = self.cfg, self.cfg.frames
         stamp = rm.stamp_ms(f.time_ms)
         t = f.time_ms / 1000.0
-        self.pub_clock.publish(Clock(stamp))
         s = self.odo.update(f.enc_total[0], f.enc_total[1], t)
         self.pub_odom.publish(rm.odometry(stamp, fr["odom"], fr["base_link"], s.x, s.y, s.theta, s.v, s.w,
                                           s.pose_cov, s.twist_cov))
+        if arrival is not None:
+            self.odom_delay.append(time.monotonic() - arrival)
+        self.pub_clock.publish(Clock(stamp))
         tfs = [rm.wheel_transform(fr["base_link"], fr["left_wheel"], cfg.track / 2, cfg.wheel_radius,
                                   s.left_angle, stamp),
                rm.wheel_transform(fr["base_link"], fr["right_wheel"], -cfg.track / 2, cfg.wheel_radius,
@@ -362,69 +368,6 @@ class Bridge:
                                                 cfg.lidar_range_min, cfg.lidar_range_max, cfg.lidar_period,
                                                 sw.time_increment))
             self.counts["scans"] += 1
-
-    # ---- camera --------------------------------------------------------------------------------------------
-    def _camera_rx(self) -> None:
-        import zmq
-
-        ctx = zmq.Context.instance()
-        sock = ctx.socket(zmq.SUB)
-        sock.setsockopt(zmq.RCVHWM, 2)
-        sock.setsockopt(zmq.LINGER, 0)
-        sock.setsockopt(zmq.SUBSCRIBE, b"")
-        sock.connect(self.cfg.camera_endpoint)
-        try:
-            while self._running and not rospy.is_shutdown():
-                if not sock.poll(200):
-                    continue
-                msg = sock.recv(copy=False)
-                arrival = time.monotonic()
-                self.counts["camera_received"] += 1
-                while sock.poll(0):  # keep only the newest frame
-                    msg = sock.recv(copy=False)
-                    arrival = time.monotonic()
-                    self.counts["camera_received"] += 1
-                    self.counts["camera_skipped"] += 1
-                with self._mail_cv:
-                    if self._mail is not None:
-                        self.counts["camera_skipped"] += 1
-                    self._mail = (arrival, msg)
-                    self._mail_cv.notify()
-        finally:
-            sock.close(0)
-
-    def _camera_pub(self) -> None:
-        cfg = self.cfg
-        w, h = cfg.width, cfg.height
-        expected = w * h * 4
-        info_template = rm.camera_info(rospy.Time(0), cfg.frames["camera_optical"], w, h, cfg.fx, cfg.fy, cfg.cx,
-                                       cfg.cy)
-        while self._running and not rospy.is_shutdown():
-            with self._mail_cv:
-                while self._mail is None and self._running:
-                    self._mail_cv.wait(0.2)
-                if self._mail is None:
-                    continue
-                arrival, msg = self._mail
-                self._mail = None
-            buf = msg.buffer
-            if buf.nbytes != expected:
-                self.counts["camera_wrong_size"] += 1
-                self._warn("camera_size", f"bridge: ignoring a camera frame of {buf.nbytes} bytes (expected "
-                                          f"{w}x{h}x4 = {expected}; ~camera/width, ~camera/height)")
-                continue
-            est = self.stamper.stamp(arrival)
-            if est is None:
-                self._warn("camera_clock", "bridge: camera frame before any SensorFrame: no simulation time to "
-                                           "stamp it with, dropped")
-                continue
-            img = decode_frame(buf, w, h, cfg.bottom_up)
-            stamp = rm.stamp_s(est.stamp)
-            self.pub_image.publish(rm.image_bgr8(stamp, cfg.frames["camera_optical"], img.tobytes(), w, h))
-            info_template.header.stamp = stamp
-            self.pub_info.publish(info_template)
-            self.counts["camera_published"] += 1
-            self.camera_rate.tick(arrival)
 
     # ---- diagnostics ---------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:
@@ -469,30 +412,16 @@ class Bridge:
                 "sim_time_s": -1.0 if ms is None else ms / 1000, "real_time_factor": self.clock.real_time_factor(now),
                 "last_seq": tr.last_seq if tr.last_seq is not None else -1}
         vals.update(tr.counters.as_dict())
+        for key, dq in (("reply", self.reply_delay), ("odom", self.odom_delay)):
+            if dq:
+                a = np.array(dq) * 1000
+                vals[f"{key}_delay_median_ms"] = float(np.median(a))
+                vals[f"{key}_delay_p99_ms"] = float(np.percentile(a, 99))
         vals.update({"replies_sent": c["replies"], "reply_errors": c["reply_errors"], "scans_published": c["scans"],
                      "lidar_rays_missing": self.sweeps.missing_total if self.sweeps else 0,
-                     "publish_errors": c["publish_errors"]})
+                     "publish_errors": c["publish_errors"],
+                     "camera_timing_dropped": self.camera.dropped if self.camera else 0})
         st1 = DiagnosticStatus(level=level, name=f"{name}: sensor stream", message=text, hardware_id=hw, values=kv(vals))
-        # camera
-        sc = self.stamper.counters
-        cam_age = self.camera_rate.age(now)
-        if not cfg.camera_enabled:
-            level, text = DiagnosticStatus.OK, "disabled (~camera/enabled)"
-        elif cam_age is None:
-            level, text = DiagnosticStatus.WARN, f"no camera frame yet from {cfg.camera_endpoint}"
-        elif cam_age > cfg.stale_error:
-            level, text = DiagnosticStatus.ERROR, f"stale: no camera frame for {cam_age:.1f} s"
-        elif cam_age > cfg.stale_warn * 4:  # 15 frames/s of simulation time: a slower sim is not stale yet
-            level, text = DiagnosticStatus.WARN, f"no camera frame for {cam_age:.1f} s"
-        else:
-            level, text = DiagnosticStatus.OK, "receiving"
-        vals = {"frame_rate_hz": self.camera_rate.rate(now), "staleness_s": -1.0 if cam_age is None else cam_age,
-                "received": c["camera_received"], "published": c["camera_published"], "skipped": c["camera_skipped"],
-                "rejected_wrong_size": c["camera_wrong_size"], "locked_render_phase": self.stamper.locked_phase
-                if self.stamper.locked_phase is not None else -1}
-        vals.update({f"stamps_{k}": v for k, v in sc.as_dict().items()})
-        st2 = DiagnosticStatus(level=level, name=f"{name}: camera", message=text, hardware_id=cfg.camera_endpoint,
-                               values=kv(vals))
         # commands
         with self._cmd_lock:
             age = (ms - self._cmd_ms) / 1000 if (ms is not None and self._cmd_ms is not None) else -1.0
@@ -504,7 +433,7 @@ class Bridge:
             text = (f"watchdog: cmd_vel older than {cfg.watchdog_timeout} s, sending V = W = 0"
                     if self._watchdog_active else ("following cmd_vel" if self._have_cmd else "no cmd_vel yet"))
         st3 = DiagnosticStatus(level=level, name=f"{name}: commands", message=text, hardware_id=hw, values=kv(vals))
-        arr.status = [st1, st2, st3]
+        arr.status = [st1, st3]
         return arr
 
 

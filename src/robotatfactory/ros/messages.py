@@ -69,26 +69,26 @@ def wheel_transform(parent: str, child: str, y: float, radius: float, angle: flo
 
 def _pose_cov6(cov3: np.ndarray) -> list[float]:
     """3x3 (x, y, yaw) to ROS's row-major 6x6 (x, y, z, roll, pitch, yaw)."""
-    c = np.zeros((6, 6))
-    ix = [0, 1, 5]
-    c[np.ix_(ix, ix)] = cov3
+    c = [0.0] * 36
+    ix = (0, 1, 5)
+    for a in range(3):
+        for b in range(3):
+            c[ix[a] * 6 + ix[b]] = float(cov3[a, b])
     for i in ix:
-        c[i, i] = max(c[i, i], COV_FLOOR)
+        c[i * 7] = max(c[i * 7], COV_FLOOR)
     for i in (2, 3, 4):
-        c[i, i] = PLANAR_VAR
-    return c.ravel().tolist()
+        c[i * 7] = PLANAR_VAR
+    return c
 
 
 def _twist_cov6(cov2: np.ndarray) -> list[float]:
-    """2x2 (v, w) to 6x6 (vx, vy, vz, wx, wy, wz)."""
-    c = np.zeros((6, 6))
-    ix = [0, 5]
-    c[np.ix_(ix, ix)] = cov2
-    for i in ix:
-        c[i, i] = max(c[i, i], COV_FLOOR)
+    """2x2 (v, w) to 6x6 (vx, vy, vz, wx, wy, wz); vy = 0 (non-holonomic), flat floor."""
+    c = [0.0] * 36
+    c[0], c[5], c[30], c[35] = float(cov2[0, 0]), float(cov2[0, 1]), float(cov2[1, 0]), float(cov2[1, 1])
+    c[0], c[35] = max(c[0], COV_FLOOR), max(c[35], COV_FLOOR)
     for i in (1, 2, 3, 4):
-        c[i, i] = PLANAR_VAR  # non-holonomic: no sideways speed; flat floor
-    return c.ravel().tolist()
+        c[i * 7] = PLANAR_VAR
+    return c
 
 
 def odometry(stamp, frame: str, child: str, x: float, y: float, theta: float, v: float, w: float,

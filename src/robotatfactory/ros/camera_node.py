@@ -1,0 +1,299 @@
+"""The bridge's camera half: ZMQ frames to ``camera/image_raw`` + ``camera/camera_info``, in its own process.
+
+Why a separate process: converting and serialising a 1.2 MB frame in rospy holds Python's GIL for around a
+millisecond at a time; in the bridge's process that delay lands on the control path (the Command reply and
+odom). The bridge node starts this node (``<bridge name>_camera``, same namespace) with
+``python -m robotatfactory.ros.camera_node`` and feeds it, over a local SOCK_SEQPACKET socket pair, the
+``Tms`` and kernel arrival time of every accepted SensorFrame (and a reset mark on a simulator restart): the
+camera stamping (``simtwo.timing.CameraStamper``) needs both streams' arrival times on one clock
+(``time.monotonic()`` is system-wide). The bridge's writes are non-blocking: if this process stalls, timing
+messages are dropped, never the control path. This process exits when the bridge does (the socket closes).
+
+Threads: ZMQ receive (keeps only the newest frame, counts the skipped ones), publish (size check, stamp,
+flip, bgr8), timing reader, diagnostics (its own ``<node>: camera`` status on ``/diagnostics``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import struct
+import sys
+import threading
+import time
+
+TIMING = struct.Struct("<qd")  # Tms (or -1: reset), arrival (monotonic seconds)
+RESET = -1
+
+
+class CameraBridge:
+    def __init__(self, cfg, timing_sock: socket.socket | None = None):
+        from ..simtwo.stream import LogLimiter, RateMeter
+        from ..simtwo.timing import CameraStamper
+
+        self.cfg = cfg
+        self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, cfg.overtake_window,
+                                     use_grid=cfg.use_grid)
+        self.timing_sock = timing_sock
+        self.rate = RateMeter()
+        self.log = LogLimiter(cfg.log_period)
+        self.counts = {"received": 0, "skipped": 0, "wrong_size": 0, "published": 0, "timing_messages": 0}
+        self._mail = None
+        self._cv = threading.Condition()
+        self._running = False
+        self._threads: list[threading.Thread] = []
+        self.parent_gone = threading.Event()
+
+    def start(self) -> "CameraBridge":
+        import rospy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sensor_msgs.msg import CameraInfo, Image
+
+        t = self.cfg.topics
+        self.pub_image = rospy.Publisher(t["image"], Image, queue_size=2)
+        self.pub_info = rospy.Publisher(t["camera_info"], CameraInfo, queue_size=2)
+        self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=10)
+        self._running = True
+        for fn in (self._rx, self._publish, self._diag_loop) + ((self._timing,) if self.timing_sock else ()):
+            th = threading.Thread(target=self._guard, args=(fn,), daemon=True, name=f"raf-camera-{fn.__name__}")
+            th.start()
+            self._threads.append(th)
+        return self
+
+    def stop(self) -> None:
+        self._running = False
+        with self._cv:
+            self._cv.notify_all()
+        for th in self._threads:
+            th.join(2.0)
+
+    def _guard(self, fn):
+        import rospy
+
+        while self._running and not rospy.is_shutdown():
+            try:
+                fn()
+                return
+            except Exception as e:  # noqa: BLE001 - never die on bad input
+                if self._running:
+                    rospy.logerr(f"camera: {fn.__name__} failed: {e!r}; restarting it")
+                    time.sleep(0.2)
+
+    def _warn(self, key, text):
+        import rospy
+
+        suffix = self.log(key)
+        if suffix is not None:
+            rospy.logwarn(text + suffix)
+
+    # -- the SensorFrame timing from the bridge --------------------------------------------------------------
+    def _timing(self) -> None:
+        s = self.timing_sock
+        s.settimeout(0.5)
+        while self._running:
+            try:
+                data = s.recv(64)
+            except socket.timeout:
+                continue
+            except OSError:
+                data = b""
+            if not data:  # the bridge went away
+                self.parent_gone.set()
+                return
+            tms, arrival = TIMING.unpack(data[:TIMING.size])
+            self.counts["timing_messages"] += 1
+            if tms == RESET:
+                self.stamper.reset()
+            else:
+                self.stamper.on_sensor_frame(tms, arrival)
+
+    # -- frames ------------------------------------------------------------------------------------------------
+    def _rx(self) -> None:
+        import zmq
+
+        ctx = zmq.Context.instance()
+        sock = ctx.socket(zmq.SUB)
+        sock.setsockopt(zmq.RCVHWM, 2)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.SUBSCRIBE, b"")
+        sock.connect(self.cfg.camera_endpoint)
+        try:
+            while self._running:
+                if not sock.poll(200):
+                    continue
+                msg = sock.recv(copy=False)
+                arrival = time.monotonic()
+                self.counts["received"] += 1
+                while sock.poll(0):  # keep only the newest frame
+                    msg = sock.recv(copy=False)
+                    arrival = time.monotonic()
+                    self.counts["received"] += 1
+                    self.counts["skipped"] += 1
+                with self._cv:
+                    if self._mail is not None:
+                        self.counts["skipped"] += 1
+                    self._mail = (arrival, msg)
+                    self._cv.notify()
+        finally:
+            sock.close(0)
+
+    def _publish(self) -> None:
+        import numpy as np
+        import rospy
+
+        from . import messages as rm
+
+        cfg = self.cfg
+        w, h = cfg.width, cfg.height
+        expected = w * h * 4
+        frame_id = cfg.frames["camera_optical"]
+        info = rm.camera_info(rospy.Time(0), frame_id, w, h, cfg.fx, cfg.fy, cfg.cx, cfg.cy)
+        while self._running:
+            with self._cv:
+                while self._mail is None and self._running:
+                    self._cv.wait(0.2)
+                if self._mail is None:
+                    continue
+                arrival, msg = self._mail
+                self._mail = None
+            buf = msg.buffer
+            if buf.nbytes != expected:
+                self.counts["wrong_size"] += 1
+                self._warn("size", f"camera: ignoring a frame of {buf.nbytes} bytes (expected {w}x{h}x4 = "
+                                   f"{expected}; ~camera/width, ~camera/height)")
+                continue
+            est = self.stamper.stamp(arrival)
+            if est is None:
+                self._warn("clock", "camera: frame before any SensorFrame: no simulation time to stamp it with, "
+                                    "dropped")
+                continue
+            # B G R A (bottom row first) to top-row-first bgr8 bytes in ONE strided copy
+            bgra = np.frombuffer(buf, dtype=np.uint8).reshape(h, w, 4)
+            data = (bgra[::-1, :, :3] if cfg.bottom_up else bgra[:, :, :3]).tobytes()
+            stamp = rm.stamp_s(est.stamp)
+            self.pub_image.publish(rm.image_bgr8(stamp, frame_id, data, w, h))
+            info.header.stamp = stamp
+            self.pub_info.publish(info)
+            self.counts["published"] += 1
+            self.rate.tick(arrival)
+
+    # -- diagnostics -------------------------------------------------------------------------------------------
+    def _diag_loop(self) -> None:
+        import rospy
+
+        period = self.cfg.diag_period
+        nxt = time.monotonic()
+        while self._running:
+            nxt += period
+            try:
+                self.pub_diag.publish(self.diagnostics())
+            except rospy.ROSException:
+                pass
+            time.sleep(max(0.0, nxt - time.monotonic()))
+
+    def diagnostics(self, now: float | None = None):
+        import rospy
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+        now = time.monotonic() if now is None else now
+        cfg, c = self.cfg, self.counts
+        age = self.rate.age(now)
+        if age is None:
+            level, text = DiagnosticStatus.WARN, f"no camera frame yet from {cfg.camera_endpoint}"
+        elif age > cfg.stale_error:
+            level, text = DiagnosticStatus.ERROR, f"stale: no camera frame for {age:.1f} s"
+        elif age > 4 * cfg.stale_warn:
+            level, text = DiagnosticStatus.WARN, f"no camera frame for {age:.1f} s"
+        else:
+            level, text = DiagnosticStatus.OK, "receiving"
+        phase = self.stamper.locked_phase
+        vals = {"frame_rate_hz": self.rate.rate(now), "staleness_s": -1.0 if age is None else age,
+                "received": c["received"], "published": c["published"], "skipped": c["skipped"],
+                "rejected_wrong_size": c["wrong_size"], "locked_render_phase": -1 if phase is None else phase,
+                "timing_messages": c["timing_messages"]}
+        vals.update({f"stamps_{k}": v for k, v in self.stamper.counters.as_dict().items()})
+        arr = DiagnosticArray()
+        arr.header.stamp = rospy.Time(0)
+        arr.status = [DiagnosticStatus(level=level, name=f"{rospy.get_name()}: camera", message=text,
+                                       hardware_id=cfg.camera_endpoint,
+                                       values=[KeyValue(k, f"{v:.3f}" if isinstance(v, float) else str(v))
+                                               for k, v in vals.items()])]
+        return arr
+
+
+class CameraLink:
+    """The bridge's side: starts the camera process and sends it the SensorFrame timing (non-blocking)."""
+
+    def __init__(self, params: dict, name: str, namespace: str):
+        import subprocess
+
+        self.parent_sock, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self.parent_sock.setblocking(False)
+        self.dropped = 0
+        args = [sys.executable, "-m", "robotatfactory.ros.camera_node", "--fd", str(child.fileno()),
+                "--params", json.dumps(params), f"__name:={name}", f"__ns:={namespace or '/'}"]
+        self.proc = subprocess.Popen(args, pass_fds=[child.fileno()])
+        child.close()
+
+    def frame(self, time_ms: int, arrival: float) -> None:
+        self._send(TIMING.pack(int(time_ms), float(arrival)))
+
+    def reset(self) -> None:
+        self._send(TIMING.pack(RESET, 0.0))
+
+    def _send(self, data: bytes) -> None:
+        try:
+            self.parent_sock.send(data)
+        except (BlockingIOError, OSError):
+            self.dropped += 1
+
+    def close(self, timeout: float = 5.0) -> None:
+        import subprocess
+
+        self.parent_sock.close()  # the camera process sees EOF and exits
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.terminate()
+            try:
+                self.proc.wait(2)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+
+
+def main(argv: list[str] | None = None) -> int:
+    import rospy
+
+    from ..errors import ConfigError
+    from .config import load_config
+
+    argv = list(sys.argv if argv is None else argv)
+    ap = argparse.ArgumentParser(prog="camera_node", description=__doc__.splitlines()[0])
+    ap.add_argument("--fd", type=int, help="SOCK_SEQPACKET socket with the bridge's SensorFrame timing")
+    ap.add_argument("--params", default="{}", help="the bridge's parameters as JSON")
+    args = ap.parse_args(rospy.myargv(argv)[1:])
+    rospy.init_node("raf_bridge_camera", argv=argv, disable_signals=True)
+    sys.setswitchinterval(0.0005)
+    try:
+        cfg = load_config(json.loads(args.params))
+    except ConfigError as e:
+        rospy.logfatal(f"camera: {e}")
+        return 2
+    sock = socket.socket(fileno=args.fd) if args.fd is not None else None
+    cam = CameraBridge(cfg, sock).start()
+    ppid = os.getppid()
+    try:
+        while not rospy.is_shutdown() and not cam.parent_gone.is_set():
+            if sock is not None and os.getppid() != ppid:
+                break
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    cam.stop()
+    rospy.signal_shutdown("bridge gone")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
