@@ -117,16 +117,14 @@ class Lidar:
         idx = ((rel + base) % self.n).tolist()
         angles = self._angles_list
         lx, ly, lz = self.spec.xyz
-        pnt, vec, g1 = self._pnt, self._vec, self._gid1
+        pnt, vec = self._pnt, self._vec
         pnt[2] = lz
         gg = self.geomgroup
         ray = mujoco.mj_ray
-        cos, sin = math.cos, math.sin
+        cos, sin, atan2 = math.cos, math.sin, math.atan2
         dist = [0.0] * m
-        gid = [0] * m
         # one mj_ray per ray from the pose logged at its physics step (mj_multiRay has a fixed cost of
-        # ~10 us that only pays off for many rays from one point)
-        atan2 = math.atan2
+        # ~10 us that only pays off for many rays from one point); no geom id asked: -1 means no hit
         for g, pose in enumerate(self.poses):
             if len(pose) == 7:  # the free joint's qpos: yaw from the quaternion
                 x, y, _, w, qx, qy, qz = pose
@@ -140,12 +138,10 @@ class Lidar:
                 a = yaw + angles[idx[r]]
                 vec[0] = cos(a)
                 vec[1] = sin(a)
-                dist[r] = ray(model, data, pnt, vec, gg, 1, -1, g1)
-                gid[r] = g1[0]
+                dist[r] = ray(model, data, pnt, vec, gg, 1, -1, None)
         dist = np.asarray(dist)
-        gid = np.asarray(gid)
         rmax = float(self.spec.range_max)
-        valid = (gid >= 0) & (dist >= 0) & (dist <= rmax)
+        valid = (dist >= 0) & (dist <= rmax)
         if self.noise:
             z = self.rng.standard_normal(m)
             dist = np.maximum(dist + z * self.spec.noise_sigma(np.where(valid, dist, 0.0)), 0.0)
