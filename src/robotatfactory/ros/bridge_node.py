@@ -24,6 +24,7 @@ from collections import deque
 import sys
 import threading
 import time
+import warnings
 
 import numpy as np
 import rospy
@@ -117,7 +118,9 @@ class Bridge:
         self.pub_clock = rospy.Publisher(t["clock"], Clock, queue_size=10)
         # odom is the control path: written to the subscribers' sockets in this thread (no hand-over to a
         # writer thread, which would wait for the GIL while the rest of the frame is published)
-        self.pub_odom = rospy.Publisher(t["odom"], Odometry, queue_size=None)
+        with warnings.catch_warnings():  # rospy warns about queue_size=None: here it is deliberate
+            warnings.simplefilter("ignore", SyntaxWarning)
+            self.pub_odom = rospy.Publisher(t["odom"], Odometry, queue_size=None)
         self.pub_gt = rospy.Publisher(t["ground_truth"], Odometry, queue_size=10)
         self.pub_joints = rospy.Publisher(t["joint_states"], JointState, queue_size=10)
         self.pub_scan = rospy.Publisher(t["scan"], LaserScan, queue_size=10)

@@ -1,0 +1,182 @@
+"""``raf experiment speed``: the paper's first validation (its figure 5), through ROS.
+
+A private roscore (free port), the stand-in simulator (``raf sim --lockstep``, real time, no camera), the
+bridge (``raf bridge``) and a small rospy node in this process that sends, on ``cmd_vel``, a linear speed
+reference: a cubic Hermite spline from 0 to 0.3 m/s in 1 s (zero slope at both ends), then held. The speed
+measured from the encoders (``odom`` twist, the mean over each 40 ms cycle) is recorded against the
+reference.
+
+Timing. The node answers each ``odom`` (stamp T, the end of a cycle) with the reference for the cycle
+after next's start, r(T + P): the bridge puts it in its reply to the next SensorFrame (sent at T + P), and
+the simulator applies it during (T + P, T + 2P], a zero-order hold sampled at the start of the interval
+(what a real 25 Hz controller does). The measured speed at stamp T is the mean over (T - P, T], so it is
+compared with the reference at the middle of that interval, r(T - P/2).
+
+Figures: RMS and maximum error over the run, and the lag (the time shift of the reference that best
+matches the measurement, found on a 1 ms grid). Target: RMS error <= 0.01 m/s.
+"""
+from __future__ import annotations
+
+import math
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+NAME = "speed"
+HELP = "the paper's figure 5: a 0 -> 0.3 m/s cubic Hermite speed reference through ROS cmd_vel, encoder speed vs reference"
+TARGETS = {"speed_rmse_mps": "<= 0.01 m/s (issue 4)"}
+
+P = 0.04  # s, control period
+
+
+def hermite_reference(t: np.ndarray | float, v_max: float = 0.3, rise: float = 1.0):
+    """Cubic Hermite spline 0 -> v_max over ``rise`` seconds with zero end slopes; v_max afterwards; 0 before."""
+    s = np.clip(np.asarray(t, dtype=float) / rise, 0.0, 1.0)
+    return v_max * (3 * s ** 2 - 2 * s ** 3)
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--v-max", type=float, default=0.3, help="held speed, m/s (default 0.3)")
+    parser.add_argument("--rise", type=float, default=1.0, help="spline duration, s (default 1.0)")
+    parser.add_argument("--hold", type=float, default=3.0, help="time at v-max after the rise, s (default 3.0)")
+    parser.add_argument("--settle", type=float, default=0.5,
+                        help="simulation seconds at rest before the reference starts (default 0.5)")
+    parser.add_argument("--seed", type=int, default=0, help="simulator seed")
+
+
+def analyse(t: np.ndarray, v: np.ndarray, v_max: float, rise: float) -> dict:
+    """Errors of the measured speed ``v`` at stamps ``t`` (s since the reference started) vs the reference."""
+    ref = hermite_reference(t - P / 2, v_max, rise)
+    err = v - ref
+    lags = np.arange(-0.1, 0.2001, 0.001)
+    rms = [math.sqrt(np.mean((v - hermite_reference(t - P / 2 - L, v_max, rise)) ** 2)) for L in lags]
+    i = int(np.argmin(rms))
+    steady = (t >= rise + 0.5)
+    return {
+        "speed_rmse_mps": float(math.sqrt(np.mean(err ** 2))),
+        "speed_max_error_mps": float(np.max(np.abs(err))),
+        "speed_lag_ms": float(lags[i] * 1000),
+        "speed_rmse_lag_compensated_mps": float(rms[i]),
+        "speed_rmse_rise_mps": float(math.sqrt(np.mean(err[t <= rise + 0.2] ** 2))),
+        "speed_steady_mean_mps": float(np.mean(v[steady])) if steady.any() else float("nan"),
+        "speed_steady_std_mps": float(np.std(v[steady])) if steady.any() else float("nan"),
+    }
+
+
+def run(args, out_dir: Path | None) -> dict:
+    from ..ros.master import PrivateMaster, free_port, stop_process
+
+    v_max, rise, hold = args.v_max, args.rise, args.hold
+    duration = args.settle + rise + hold
+    tmp = Path(tempfile.mkdtemp(prefix="raf-exp-speed-"))
+    master = PrivateMaster().start()
+    master.use_in_this_process()
+    env = master.env()
+    port, sim_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    procs = []
+    try:
+        bridge = subprocess.Popen([sys.executable, "-m", "robotatfactory", "--field", args.field, "bridge", "--port",
+                                   str(port), "--no-camera", "--set", "lidar/enabled=false"], env=env,
+                                  stdout=open(tmp / "bridge.log", "wb"), stderr=subprocess.STDOUT, start_new_session=True)
+        procs.append(bridge)
+        import rospy
+        from geometry_msgs.msg import Twist
+        from nav_msgs.msg import Odometry
+
+        rospy.init_node("raf_speed_experiment", anonymous=True, disable_signals=True)
+        pub = rospy.Publisher("cmd_vel", Twist, queue_size=1, tcp_nodelay=True)
+        lock = threading.Lock()
+        rec: list[tuple[float, float, float]] = []  # (stamp, odom v, ground-truth v)
+        gt_v: dict[int, float] = {}
+        t_start = args.settle
+
+        def on_odom(m):
+            T = m.header.stamp.to_sec()
+            tw = Twist()
+            tw.linear.x = float(hermite_reference(T + P - t_start, v_max, rise)) if T + P >= t_start else 0.0
+            pub.publish(tw)
+            with lock:
+                rec.append((T, m.twist.twist.linear.x, gt_v.get(m.header.stamp.to_nsec(), math.nan)))
+
+        def on_gt(m):
+            with lock:
+                gt_v[m.header.stamp.to_nsec()] = m.twist.twist.linear.x
+
+        rospy.Subscriber("ground_truth", Odometry, on_gt, queue_size=10, tcp_nodelay=True)
+        rospy.Subscriber("odom", Odometry, on_odom, queue_size=10, tcp_nodelay=True)
+        _wait(lambda: pub.get_num_connections() > 0, 30, "the bridge subscribing to cmd_vel")
+        sim = subprocess.Popen([sys.executable, "-m", "robotatfactory", "--field", args.field, "sim", "--port",
+                                str(sim_port), "--bridge", f"127.0.0.1:{port}", "--no-camera", "--no-server",
+                                "--lockstep", "--realtime", "--lockstep-timeout", "2.0", "--start-pose=-0.7,0.35,0",
+                                "--seed", str(args.seed), "--duration", f"{duration + 0.2:.2f}",
+                                "--status-every", "1"], env=env, stdout=open(tmp / "sim.log", "wb"),
+                               stderr=subprocess.STDOUT, start_new_session=True)
+        procs.append(sim)
+        code = sim.wait(timeout=120 + 4 * duration)
+        if code != 0:
+            raise RuntimeError(f"raf sim exited with {code}: {(tmp / 'sim.log').read_text()[-1500:]}")
+        time.sleep(0.3)
+        with lock:
+            data = [(T, v, gt_v.get(int(round(T * 1e9)), g)) for T, v, g in rec]
+    finally:
+        for p in procs:
+            stop_process(p)
+        master.cleanup()
+    if len(data) < 10:
+        raise RuntimeError(f"only {len(data)} odom messages recorded; see {tmp}/sim.log and {tmp}/bridge.log")
+    arr = np.array(sorted(data))
+    t = arr[:, 0] - t_start
+    keep = (t >= 0) & (t <= rise + hold)
+    t, v, g = t[keep], arr[keep, 1], arr[keep, 2]
+    res = analyse(t, v, v_max, rise)
+    res.update({"speed_samples": int(len(t)), "speed_reference_max_mps": v_max, "speed_rise_s": rise,
+                "speed_rmse_target_met": res["speed_rmse_mps"] <= 0.01})
+    ok = np.isfinite(g)
+    if ok.any():
+        res["speed_rmse_ground_truth_mps"] = float(math.sqrt(np.mean(
+            (g[ok] - hermite_reference(t[ok] - P / 2, v_max, rise)) ** 2)))
+    if out_dir is not None:
+        _figure(out_dir / "speed.png", t, v, g, v_max, rise, res)
+        np.savetxt(out_dir / "speed.csv", np.column_stack([t, v, g, hermite_reference(t - P / 2, v_max, rise)]),
+                   delimiter=",", header="t_s,odom_v_mps,ground_truth_v_mps,reference_mid_interval_mps", comments="")
+    return res
+
+
+def _wait(pred, timeout, what):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return
+        time.sleep(0.05)
+    raise RuntimeError(f"timed out waiting for {what}")
+
+
+def _figure(path: Path, t, v, g, v_max, rise, res) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tt = np.linspace(-0.2, t.max(), 800)
+    fig, ax = plt.subplots(figsize=(7, 3.6), dpi=120)
+    ax.plot(tt, hermite_reference(tt, v_max, rise), "k-", lw=1.6, label="reference (cubic Hermite spline)")
+    ax.step(t - P / 2, v, where="mid", color="tab:blue", lw=1.2,
+            label="measured from the encoders (odom, 40 ms means)")
+    ok = np.isfinite(g)
+    if ok.any():
+        ax.plot(t[ok] - P / 2, g[ok], ".", color="tab:orange", ms=3, label="ground truth (simulator, 40 ms means)")
+    ax.set_xlabel("time since the reference started (s)")
+    ax.set_ylabel("linear speed (m/s)")
+    ax.set_title(f"Speed test through ROS: RMS error {res['speed_rmse_mps'] * 1000:.1f} mm/s, "
+                 f"max {res['speed_max_error_mps'] * 1000:.1f} mm/s, lag {res['speed_lag_ms']:.0f} ms", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
