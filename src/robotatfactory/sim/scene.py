@@ -48,7 +48,7 @@ B_WALL, B_MOVING, B_FLOOR, B_WHEEL = 1, 2, 4, 8
 # Robot details the spec leaves open (documented in docs/simulator.md):
 BASE_COM_X = -0.02  # m: the base's centre of mass sits 2 cm behind the axle so the caster carries load
 MAGNET_Z = 0.035  # m: height of the electromagnet beam = the centre of a part's plate
-BUMPER_HALF = (0.005, 0.02, 0.01)  # m: the magnet's housing, x in [0.07, 0.08], as tall as a part's plate
+BUMPER_HALF = (0.005, 0.01, 0.01)  # m: the magnet, x in [0.07, 0.08], 2 cm wide, as tall as a part's plate
 WHEEL_FRICTION = (1.0, 0.005, 0.0001)
 PART_FRICTION = (0.4, 0.005, 0.0001)
 WALL_FRICTION = (0.3, 0.005, 0.0001)
