@@ -387,12 +387,12 @@ Visualization Manager:
   Views:
     Current:
       Class: rviz/Orbit
-      Distance: 1.1
+      Distance: 1.0
       Focal Point:
         X: 0.0
         Y: -0.15
         Z: 0.0
-      Pitch: 0.95
+      Pitch: 0.6
       Yaw: 4.71
       Target Frame: map
 Window Geometry:
@@ -429,8 +429,18 @@ def _free_display() -> int:
     raise RuntimeError("no free X display number")
 
 
-def rviz_screenshot(env: dict, cfg: Path, png: Path, log_dir: Path, wait: float = 20.0) -> str:
-    """RViz under Xvfb, then xwd of the root window converted to PNG. Returns '' or what went wrong."""
+def rviz_screenshot(env: dict, cfg: Path, png: Path, log_dir: Path, wait: float = 20.0, attempts: int = 3) -> str:
+    """RViz under Xvfb, then xwd of the root window converted to PNG; RViz with software OpenGL sometimes
+    aborts at start-up, so it gets a few attempts. Returns '' or what went wrong."""
+    why = ""
+    for i in range(attempts):
+        why = _rviz_once(env, cfg, png, log_dir, wait)
+        if not why:
+            return ""
+    return f"{why} (after {attempts} attempts)"
+
+
+def _rviz_once(env: dict, cfg: Path, png: Path, log_dir: Path, wait: float) -> str:
     from ..ros.master import stop_process
 
     for tool in ("Xvfb", "rviz", "xwd"):
@@ -593,8 +603,12 @@ def run(args, out_dir: Path | None) -> dict:
             save_debug_image(out_dir / "localization_debug_image.png", notes)
             cfg = out_dir / "localization.rviz"
             d = rec.arrays()
-            fx, fy = (d["gt"][-1, 1], d["gt"][-1, 2]) if len(d["gt"]) else (0.0, 0.0)
-            cfg.write_text(RVIZ.replace("X: 0.0\n        Y: -0.15", f"X: {fx:.3f}\n        Y: {fy:.3f}"))
+            # look over the robot's shoulder at what its camera sees (the paper's figure 7)
+            x, y, th = d["gt"][-1, 1:4] if len(d["gt"]) else (0.0, 0.0, 0.0)
+            fx, fy = x + 0.25 * math.cos(th), y + 0.25 * math.sin(th)
+            view = RVIZ.replace("X: 0.0\n        Y: -0.15", f"X: {fx:.3f}\n        Y: {fy:.3f}")
+            view = view.replace("Yaw: 4.71", f"Yaw: {(th + math.pi) % (2 * math.pi):.3f}")
+            cfg.write_text(view)
             if not args.no_tf_tree:
                 why = tf_tree(env, out_dir, log_dir)
                 if why:
