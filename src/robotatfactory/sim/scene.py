@@ -389,24 +389,26 @@ def _add_part(spec, world, field: Field, pid: int, letter: str, x: float, y: flo
     g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING | B_FLOOR, G_HIDDEN
     g.friction = list(PART_FRICTION)
     g.rgba = [0, 0, 0, 0]
-    # what it looks like: body on four feet, plate in front, tag on top
-    g = body.add_geom(name=f"part_{pid}_body", type=mujoco.mjtGeom.mjGEOM_BOX,
+    # what it looks like: body on four feet, plate in front, tag on top -- in a jointless child body that
+    # never collides, so the broad phase skips all of them at once (measured: 2-3 us per physics step)
+    look = body.add_body(name=f"part_{pid}_look")
+    g = look.add_geom(name=f"part_{pid}_body", type=mujoco.mjtGeom.mjGEOM_BOX,
                       size=[p.depth / 2, p.width / 2, p.body_height / 2],
                       pos=[0, 0, p.feet_height + p.body_height / 2], rgba=list(part_rgba(letter)))
     _visual(g, G_PART)
     fs = 0.006
     for i, (sx, sy) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
-        g = body.add_geom(name=f"part_{pid}_foot{i}", type=mujoco.mjtGeom.mjGEOM_BOX,
+        g = look.add_geom(name=f"part_{pid}_foot{i}", type=mujoco.mjtGeom.mjGEOM_BOX,
                           size=[fs, fs, p.feet_height / 2],
                           pos=[sx * (p.depth / 2 - fs), sy * (p.width / 2 - fs), p.feet_height / 2],
                           rgba=[0.2, 0.2, 0.2, 1])
         _visual(g)
     pw, ph = p.plate
-    g = body.add_geom(name=f"part_{pid}_plate", type=mujoco.mjtGeom.mjGEOM_BOX,
+    g = look.add_geom(name=f"part_{pid}_plate", type=mujoco.mjtGeom.mjGEOM_BOX,
                       size=[PLATE_THICKNESS / 2, pw / 2, ph / 2],
                       pos=[p.depth / 2 + PLATE_THICKNESS / 2, 0, MAGNET_Z], rgba=[0.6, 0.6, 0.62, 1])
     _visual(g, G_PLATE)
     # the tag's top edge points the way the plate faces: local +x, i.e. the quad's +y turned by -90 deg
-    g = body.add_geom(name=f"part_{pid}_tag", type=mujoco.mjtGeom.mjGEOM_MESH, meshname="quad_tag",
+    g = look.add_geom(name=f"part_{pid}_tag", type=mujoco.mjtGeom.mjGEOM_MESH, meshname="quad_tag",
                       material=f"mat_tag_{pid}", pos=[0, 0, h + 0.0002], quat=yaw_quat(-math.pi / 2))
     _visual(g)
