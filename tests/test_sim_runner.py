@@ -122,6 +122,7 @@ def test_lockstep_timeout_policy(field, robot, bridge, policy):
         assert v == pytest.approx(0.3, abs=0.01)
 
 
+@pytest.mark.render
 def test_camera_frames_are_published_raw(field, robot, bridge):
     import zmq
 
