@@ -85,6 +85,16 @@ class Recorder:
                      rospy.Subscriber("camera_pose", PoseWithCovarianceStamped, self._on_camera, queue_size=50)]
         self.subs += [rospy.Subscriber(f"aruco/fixes/{m}", PoseWithCovarianceStamped, self._rec(m), queue_size=50)
                       for m in METHODS]
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self.diag: dict[str, str] = {}
+        self.subs.append(rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diag, queue_size=20))
+
+    def _on_diag(self, msg):
+        for st in msg.status:
+            if "raf_localization" in st.name:
+                with self.lock:
+                    self.diag.update({kv.key: kv.value for kv in st.values})
 
     @staticmethod
     def _planar(msg) -> tuple[float, float, float, float]:
@@ -619,6 +629,8 @@ def run(args, out_dir: Path | None) -> dict:
                     notes.append(f"RViz screenshot: {why}")
         data = rec.arrays()
         done_t = rec.done_t
+        with rec.lock:
+            diag = dict(rec.diag)
         ok = len(data["gt"]) >= 10
     finally:
         if rec is not None:
@@ -643,5 +655,12 @@ def run(args, out_dir: Path | None) -> dict:
         figures(data, errs, field, pts, out_dir, done_t)
         (out_dir / "localization_table.md").write_text(table(out) + "\n")
         np.savez_compressed(out_dir / "localization_data.npz", **{k: v for k, v in data.items()})
+    for k in sorted(diag):  # the node's counters at the end: frames, fixes, rejections by reason, filter
+        if k.startswith(("rejected_", "filter_")) or k in ("frames", "fixes", "beacons_seen", "beacons_used",
+                                                           "frame_ms_median", "scans"):
+            try:
+                out[f"node_{k.replace(':', '_')}"] = float(diag[k]) if "." in diag[k] else int(diag[k])
+            except ValueError:
+                pass
     out["notes"] = "; ".join(notes)
     return out

@@ -1,0 +1,62 @@
+"""The experiment's analysis on fabricated recordings with known errors (the full run is
+`raf experiment localization`; it needs the simulator, the bridge and minutes)."""
+import math
+
+import numpy as np
+import pytest
+
+from robotatfactory.experiments.localization import analyse, read_xwd, table
+
+
+def _recording():
+    t = np.arange(0.04, 20.0, 0.04)
+    gt = np.column_stack([t, 0.1 * t - 1.0, 0.05 * np.sin(t), np.full_like(t, 0.2)])
+    rng = np.random.default_rng(0)
+    # odometry: the truth drifting 1 mm per second in y, seen from an arbitrary odom frame
+    drift = gt[:, 1:4] + np.column_stack([np.zeros_like(t), 0.001 * (t - t[0]), np.zeros_like(t)])
+    a, ox, oy = 0.7, 0.3, -0.1
+    c, s = math.cos(a), math.sin(a)
+    odo = np.column_stack([t, c * drift[:, 0] - s * drift[:, 1] + ox, s * drift[:, 0] + c * drift[:, 1] + oy,
+                           drift[:, 2] + a])
+    ekf = np.column_stack([gt[:, :3] + np.c_[np.zeros(len(t)), rng.normal(0, 0.0005, (len(t), 2))],
+                           gt[:, 3], np.full((len(t), 3), 0.0005 ** 2)])
+    tc = t[::3] + 0.013
+    ref = np.column_stack([tc, np.interp(tc, t, gt[:, 1]), np.interp(tc, t, gt[:, 2]), np.full_like(tc, 0.2)])
+    closest = ref.copy()
+    closest[:, 1] += 0.004  # 4 mm off in x
+    closest[5, 1] += 0.5  # one ambiguity flip
+    pad = np.zeros((len(tc), 3))
+    return {"gt": gt, "odom": odo, "ekf": ekf, "camera_pose": np.zeros((0, 5)),
+            "closest": np.hstack([closest, pad]), "closest_checked": np.hstack([ref, pad]),
+            "all_pnp": np.hstack([ref, pad]), "planar": np.hstack([ref, pad])}
+
+
+def test_analysis_on_known_errors():
+    d = _recording()
+    errs, out = analyse(d, done_t=19.0)
+    assert out["route_completed"] and out["route_duration_sim_s"] == pytest.approx(19.0 - 0.04, abs=0.05)
+    assert out["planar_position_rmse_m"] < 1e-6 and out["planar_heading_rmse_deg"] < 1e-6
+    n = out["closest_samples"]
+    expect = math.sqrt(((n - 1) * 0.004 ** 2 + 0.504 ** 2) / n)
+    assert out["closest_position_rmse_m"] == pytest.approx(expect, rel=1e-3)
+    assert out["closest_position_max_m"] == pytest.approx(0.504, abs=1e-6)
+    assert 0.0005 < out["ekf_position_rmse_m"] < 0.0009
+    assert out["odometry_end_position_error_m"] == pytest.approx(0.019, abs=0.002)  # 1 mm/s for ~19 s
+    assert out["odometry_over_ekf_end_position_error"] > 10
+    assert out["ekf_position_rmse_target_met"] and out["ekf_3x_closest_target_met"]
+    assert out["ekf_10x_odometry_end_target_met"]
+    assert 1.0 < out["ekf_nees_diag_mean"] < 3.0  # x exact, y with the claimed variance: about 1
+    assert "| EKF" in table(out) and "closest marker (paper)" in table(out)
+
+
+def test_xwd_reader(tmp_path):
+    # a 3x2 ZPixmap, 32 bits per pixel, LSBFirst, no colormap: what xwd writes from a 24-bit Xvfb
+    w, h = 3, 2
+    header = np.zeros(25, dtype=">u4")
+    header[0] = 100 + len(b"root\0")  # header size includes the window name
+    header[1], header[2], header[3], header[4], header[5] = 7, 2, 24, w, h
+    header[7], header[11], header[12], header[19] = 0, 32, w * 4, 0
+    px = np.arange(w * h * 4, dtype=np.uint8).reshape(h, w, 4)
+    (tmp_path / "x.xwd").write_bytes(header.tobytes() + b"root\0" + px.tobytes())
+    img = read_xwd(tmp_path / "x.xwd")
+    assert img.shape == (2, 3, 3) and np.array_equal(img, px[:, :, :3])
