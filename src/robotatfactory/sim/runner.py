@@ -33,6 +33,8 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..simtwo import Command, ProtocolError
+from ..simtwo.labels import format_real
+from ..simtwo.messages import LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, encode_ranges
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
 
 log = logging.getLogger(__name__)
@@ -118,18 +120,21 @@ class CachedFrameEncoder:
     largest cost. The bytes are identical to ``frame.encode()`` (a test checks it).
     """
 
+    # SensorFrame.encode's labels in its order; every value is a plain number or the LIDAR list
+    _TEMPLATE = "\r\n\r\n".join(f"{label}\r\n%s" for label in (
+        VERSION_LABEL, "Seq", "Tms", "Enc1", "Enc2", "Odo1", "Odo2", "X", "Y", "Theta", "Contact", "Magnet",
+        "LidarN", "Lidar")) + "\r\n\r\n"
+
     def __init__(self):
         self._last = None
         self._strings: list[str] = []
 
     def _ranges(self, ranges: np.ndarray) -> str:
-        from ..simtwo.messages import LIDAR_SEPARATOR, encode_ranges
-
         last = self._last
         if last is None or last.shape != ranges.shape:
             self._strings = encode_ranges(ranges).split(LIDAR_SEPARATOR) if len(ranges) else []
         else:
-            changed = np.flatnonzero((ranges != last) & ~(np.isnan(ranges) & np.isnan(last)))
+            changed = np.flatnonzero(ranges != last)  # (ranges are never NaN: -1 marks no return)
             if len(changed):
                 fresh = encode_ranges(ranges[changed]).split(LIDAR_SEPARATOR)
                 strings = self._strings
@@ -139,25 +144,12 @@ class CachedFrameEncoder:
         return LIDAR_SEPARATOR.join(self._strings)
 
     def encode(self, frame) -> bytes:
-        from ..simtwo.labels import encode_labels, format_int, format_real
-        from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
-
-        return encode_labels([
-            (VERSION_LABEL, format_int(PROTOCOL_VERSION)),
-            ("Seq", format_int(frame.seq)),
-            ("Tms", format_int(frame.time_ms)),
-            ("Enc1", format_int(frame.enc_delta[0])),
-            ("Enc2", format_int(frame.enc_delta[1])),
-            ("Odo1", format_int(frame.enc_total[0])),
-            ("Odo2", format_int(frame.enc_total[1])),
-            ("X", format_real(frame.x)),
-            ("Y", format_real(frame.y)),
-            ("Theta", format_real(frame.theta)),
-            ("Contact", format_int(int(frame.contact))),
-            ("Magnet", format_int(int(frame.magnet))),
-            ("LidarN", format_int(len(frame.ranges))),
-            ("Lidar", self._ranges(np.asarray(frame.ranges, dtype=np.float64))),
-        ])
+        ranges = np.asarray(frame.ranges, dtype=np.float64)
+        return (self._TEMPLATE % (
+            PROTOCOL_VERSION, int(frame.seq), int(frame.time_ms), int(frame.enc_delta[0]), int(frame.enc_delta[1]),
+            int(frame.enc_total[0]), int(frame.enc_total[1]), format_real(frame.x), format_real(frame.y),
+            format_real(frame.theta), int(frame.contact), int(frame.magnet), len(ranges), self._ranges(ranges),
+        )).encode("ascii")
 
 
 @dataclass
