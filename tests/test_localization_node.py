@@ -152,3 +152,28 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, ro
     assert int(v.get("bad_odom", "0")) == 1
     assert proc.poll() is None
     assert len(got) >= 20
+
+
+def test_launch_file_starts_the_node_with_its_settings(ros_master, tmp_path):
+    """roslaunch robotatfactory localization.launch: the YAML is loaded as private parameters, the node
+    accepts them and reports on /diagnostics."""
+    import subprocess
+
+    import rospy
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from rosutil import ROOT
+
+    test_node()
+    log = open(tmp_path / "roslaunch.log", "wb")
+    proc = subprocess.Popen(["roslaunch", "--wait", str(ROOT / "launch" / "localization.launch"), "ns:=/launched",
+                             "use_sim_time:=false", "initial_pose:=start"],
+                            env=ros_master.env(), stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        diag = Collector("/diagnostics", DiagnosticArray)
+        diag.wait(1, timeout=40, pred=lambda a: any("/launched/raf_localization" in s.name for s in a.status))
+        assert rospy.get_param("/launched/raf_localization/node/initial_pose") == "start"
+        assert rospy.get_param("/launched/raf_localization/pose/lone_marker_max_distance_m") == 0.45
+        assert proc.poll() is None
+    finally:
+        stop_process(proc)
