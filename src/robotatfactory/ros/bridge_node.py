@@ -296,13 +296,13 @@ class Bridge:
             self._warn("gap", f"bridge: {ev.lost} frame(s) lost before Seq {frame.seq} (ticks are kept: "
                               "odometry uses the cumulative totals)")
         self.clock.on_sensor_frame(frame.time_ms, arrival)
+        if self.camera is not None:  # its stamping may be waiting for this SensorFrame (non-blocking send)
+            self.camera.frame(frame.time_ms, arrival)
         try:
             self.publish_frame(frame, arrival)
         except (rospy.ROSException, ValueError) as e:
             self.counts["publish_errors"] += 1
             self._warn("publish", f"bridge: publishing frame Seq {frame.seq} failed: {e}")
-        if self.camera is not None:  # after publishing: the camera process waits for this (see camera_node)
-            self.camera.frame(frame.time_ms, arrival)
 
     def _start_stream(self, ev, frame: SensorFrame) -> None:
         if ev.verdict is Verdict.RESTART:

@@ -9,8 +9,9 @@ camera stamping (``simtwo.timing.CameraStamper``) needs both streams' arrival ti
 (``time.monotonic()`` is system-wide). The bridge's writes are non-blocking: if this process stalls, timing
 messages are dropped, never the control path. This process exits when the bridge does (the socket closes).
 
-Threads: ZMQ receive (keeps only the newest frame, counts the skipped ones), publish (size check, stamp,
-flip, bgr8), timing reader, diagnostics (its own ``<node>: camera`` status on ``/diagnostics``).
+Threads: ZMQ receive (keeps only the newest frame, counts the skipped ones), publish (size check, stamp --
+which may wait up to ``~camera/max_wait`` for the SensorFrame that follows the frame --, flip, bgr8), timing
+reader, diagnostics (its own ``<node>: camera`` status on ``/diagnostics``).
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ class CameraBridge:
         from ..simtwo.timing import CameraStamper
 
         self.cfg = cfg
-        self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, cfg.overtake_window,
+        self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
                                      use_grid=cfg.use_grid)
         self.timing_sock = timing_sock
         self.rate = RateMeter()
@@ -41,6 +42,7 @@ class CameraBridge:
         self.counts = {"received": 0, "skipped": 0, "wrong_size": 0, "published": 0, "timing_messages": 0}
         self._mail = None
         self._cv = threading.Condition()
+        self._timing_cv = threading.Condition()  # notified on every SensorFrame timing message
         self._running = False
         self._threads: list[threading.Thread] = []
         self.parent_gone = threading.Event()
@@ -107,6 +109,8 @@ class CameraBridge:
                 self.stamper.reset()
             else:
                 self.stamper.on_sensor_frame(tms, arrival)
+            with self._timing_cv:
+                self._timing_cv.notify_all()
 
     # -- frames ------------------------------------------------------------------------------------------------
     def _rx(self) -> None:
@@ -163,7 +167,7 @@ class CameraBridge:
                 self._warn("size", f"camera: ignoring a frame of {buf.nbytes} bytes (expected {w}x{h}x4 = "
                                    f"{expected}; ~camera/width, ~camera/height)")
                 continue
-            est = self.stamper.stamp(arrival)
+            est = self._stamp(arrival)
             if est is None:
                 self._warn("clock", "camera: frame before any SensorFrame: no simulation time to stamp it with, "
                                     "dropped")
@@ -177,6 +181,17 @@ class CameraBridge:
             self.pub_info.publish(info)
             self.counts["published"] += 1
             self.rate.tick(arrival)
+
+    def _stamp(self, arrival: float):
+        """The frame's stamp; waits (briefly) for the SensorFrame after it when the stamper needs it."""
+        from ..simtwo.timing import Pending
+
+        while True:
+            with self._timing_cv:
+                est = self.stamper.stamp(arrival)
+                if not isinstance(est, Pending):
+                    return est
+                self._timing_cv.wait(max(0.0, est.deadline - time.monotonic()) + 1e-4)
 
     # -- diagnostics -------------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:

@@ -76,7 +76,7 @@ def default_params(robot: RobotSpec | None = None) -> dict:
             "xyz": list(cam.xyz), "pitch_down_deg": cam.pitch_down_deg,
             "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
             "bottom_up": cam.bottom_up, "render_fps": cam.render_fps, "decimation": cam.decimation,
-            "use_grid": True, "overtake_window": 0.005,
+            "use_grid": True, "max_wait": 0.02,
         },
         "tf": {"publish_odom": True, "publish_field": True, "map_to_odom": "none"},
         "diagnostics": {"period": 1.0, "stale_warn": 0.5, "stale_error": 2.0},
@@ -236,7 +236,7 @@ class BridgeConfig:
     render_fps: float
     decimation: int
     use_grid: bool
-    overtake_window: float
+    max_wait: float
     publish_odom_tf: bool
     publish_field: bool
     map_to_odom: str
@@ -333,7 +333,7 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
         render_fps=_real(p, ("camera", "render_fps"), 0.0, lo_open=True),
         decimation=_int(p, ("camera", "decimation"), 1, 10 ** 6),
         use_grid=_bool(p, ("camera", "use_grid")),
-        overtake_window=_real(p, ("camera", "overtake_window"), 0.0, 1.0),
+        max_wait=_real(p, ("camera", "max_wait"), 0.0, 1.0),
         publish_odom_tf=_bool(p, ("tf", "publish_odom")),
         publish_field=_bool(p, ("tf", "publish_field")),
         map_to_odom=_str(p, ("tf", "map_to_odom"), allowed=("none", "identity", "first_ground_truth")),

@@ -1,45 +1,51 @@
 """Simulation time from the SensorFrame stream, and honest simulation-time stamps for camera frames.
 
 Plain Python, no ROS, no I/O. Times: simulation time in integer milliseconds (``Tms``) or seconds; arrival
-times in seconds of one monotonic wall clock shared by the UDP and the camera receivers.
+times in seconds of one monotonic wall clock shared by the UDP and the camera receivers (the bridge takes a
+datagram's arrival from the kernel's receive timestamp, not from when a thread read it).
 
 The camera problem. SimTwo's camera frames (ZMQ, 640x480 BGRA) carry no timestamp. The bridge stamps each
 one with an estimate of the simulation time at which it was rendered, using only what any SimTwo user has:
 
 1. the SensorFrame stream: ``Tms`` (end of each control cycle, period ``P`` = 40 ms) and its arrival times;
-2. the camera frame's arrival time (order relative to the SensorFrames);
+2. the camera frame's arrival time;
 3. the camera's render-clock settings: render ticks every ``1/render_fps`` s of simulation time, one frame
    published every ``decimation`` ticks (60 FPS / 4 = 15 frames/s);
 4. the ordering rule: a frame rendered at ``t_r`` is published after the SensorFrame of the cycle before
-   (the simulator renders during a cycle, after it has sent the previous cycle's frame) and before the
-   SensorFrame of the cycle whose end is the first cycle end ``>= t_r``.
+   and before the SensorFrame of the cycle whose end is the first cycle end ``>= t_r``; a simulator that
+   renders during the cycle and publishes just before sending the cycle's SensorFrame (the stand-in does;
+   so does a SimTwo script that sends right after the render) puts the two close together on the wall clock.
 
 Method (``CameraStamper``), for a camera frame arriving at wall time ``a``:
 
-* **Bracket** (arrival order). Let ``T_b`` be the ``Tms`` of the last SensorFrame that arrived before ``a``
-  (at ``a_b``). Normally the frame arrives before the SensorFrame that follows it, so it belongs to the cycle
-  ending ``T_b + P``: ``t_r`` in ``(T_b, T_b + P]``. But a 1.2 MB frame takes longer to deliver than a 3 KB
-  datagram sent just after it, so when ``a - a_b <= overtake_window`` (default 5 ms) the SensorFrame is taken
-  to have overtaken the frame, which then belongs to the cycle ending ``T_b``: ``t_r`` in ``(T_b - P, T_b]``
-  (the window is capped at half the median wall time between SensorFrames, for fast simulators). The
-  bridge takes a datagram's arrival from the kernel's receive timestamp, not from when a thread read it.
-  The bracket is right when the camera's delivery latency is below ``overtake_window`` and the simulator
-  needs longer than ``overtake_window`` (wall) between sending a SensorFrame and publishing the next
-  cycle's camera frame (reply, physics, rendering): both hold on one machine, in real time or in lockstep.
-* **Render grid**. Published frames sit on the ticks ``k / render_fps`` with ``k = phase (mod decimation)``.
+* **Bracket: the nearest SensorFrame.** The frame is published just before its own cycle's SensorFrame, so
+  it arrives close to it: shortly before it (UDP and ZMQ equally fast), or shortly after it (a 1.2 MB frame
+  takes longer to deliver than a 3 KB datagram sent just after it: the SensorFrame *overtook* it). The
+  frame is assigned to whichever of the SensorFrames just before (``T_prev``, arrived ``a_prev``) and just
+  after (``T_next``) arrived nearer to it: ``t_r`` in ``(T_prev - P, T_prev]`` if ``a - a_prev`` is the
+  smaller gap, else ``(T_next - P, T_next]``. This needs no latency threshold and holds in real time and in
+  a fast lockstep run alike, as long as the frame's delivery takes less than half the wall time between
+  two SensorFrames. The decision may have to wait for the next SensorFrame, but never longer than
+  ``a - a_prev`` (after that the previous one is known to be nearer) nor than ``max_wait``.
+* **Render grid.** Published frames sit on the ticks ``k / render_fps`` with ``k = phase (mod decimation)``.
   A 40 ms bracket holds two or three render ticks but (since ``P < decimation / render_fps`` = 66.7 ms) at
-  most one tick of each phase. Each frame therefore allows a set of phases; the phases allowed by every one
-  of the last ``window`` frames are kept. Once exactly one phase remains (after at least ``min_frames``
-  frames) the frame's render tick is identified: the stamp is exact (``method = "grid"``, error 0).
-  With several phases left, the stamp is the middle of the remaining candidate ticks (``"grid-partial"``,
-  error at most half their spread, <= 20 ms). Before ``min_frames`` frames, or when no phase is consistent
-  with all recent frames (a render clock that is not locked to simulation time, as in SimTwo's wall-paced
-  GUI), or with ``use_grid=False``, the stamp is the middle of the bracket (``"interval"``, error at most
-  P/2 = 20 ms). The grid's bounds assume render ticks on simulation time; a free-running render clock can
-  pass the consistency test by chance for a while, so set ``use_grid=False`` for such a simulator. One inconsistent frame (a wrong bracket) does not
-  unlock a learned phase; that frame itself is stamped ``"interval"`` and counted in ``bracket_misses``.
+  most one tick of each phase. Each frame therefore allows a set of phases; over the last ``window`` frames
+  (at least ``min_frames``) a phase allowed by all of them but one in eight, and by two frames more than any
+  other phase, is locked: the frame's render tick is identified and the stamp is exact (``method =
+  "grid"``, error 0). With the phase locked, the tick is taken from the two cycles around the
+  bracket's SensorFrame (80 ms: at most two ticks of the phase, 66.7 ms apart), the one not used by an
+  earlier frame; only when both are free (the earlier frame was lost) does the bracket choose. A bracket the
+  grid corrects is counted (``rebracketed``).
+* **Fallbacks.** With several phases left, the stamp is the middle of the remaining candidate ticks
+  (``"grid-partial"``, error at most half their spread, <= 20 ms). Before ``min_frames`` frames, or when no
+  phase is consistent with the recent frames (a render clock not locked to simulation time, as in SimTwo's
+  wall-paced GUI), or with ``use_grid=False``, the stamp is the middle of the bracket (``"interval"``,
+  error at most P/2 = 20 ms, when the bracket is right). The grid's bound assumes render ticks on
+  simulation time; a free-running render clock can pass the consistency test by chance for a while, so
+  set ``use_grid=False`` for such a simulator.
 
-Stamps are kept strictly increasing; a frame that cannot be (a wrong bracket) is counted as ``conflicts``.
+Stamps are kept strictly increasing; a frame that would break that is nudged 1 ms after the previous one
+and counted (``conflicts``).
 """
 from __future__ import annotations
 
@@ -68,14 +74,23 @@ class StampEstimate:
     phase: int | None = None  # the render-clock phase used (grid), else None
 
 
+@dataclass(frozen=True)
+class Pending:
+    """The stamp needs the next SensorFrame: ask again when one arrives, or at ``deadline`` (monotonic s)."""
+
+    deadline: float
+
+
 @dataclass
 class StampCounters:
     grid: int = 0
     grid_partial: int = 0
     interval: int = 0
-    overtaken: int = 0  # frames whose bracket was moved back one cycle (SensorFrame arrived just before)
+    overtaken: int = 0  # frames assigned to the SensorFrame that arrived before them
+    waited: int = 0  # frames whose decision had to wait for the next SensorFrame (or the deadline)
     conflicts: int = 0  # stamp not after the previous one: nudged forward
-    bracket_misses: int = 0  # the learned phase has no render tick in the bracket (stamped "interval")
+    bracket_misses: int = 0  # the learned phase has no free render tick near the frame (stamped "interval")
+    rebracketed: int = 0  # the grid put the frame in the other cycle than the bracket said
     no_clock: int = 0  # frames before any SensorFrame: not stamped
 
     def as_dict(self) -> dict:
@@ -85,20 +100,22 @@ class StampCounters:
 class CameraStamper:
     """Stamps camera frames with the simulation time they were rendered at (see the module docstring).
 
-    Thread-safe: the UDP receiver calls :meth:`on_sensor_frame`, the camera receiver :meth:`stamp`.
+    Thread-safe: the UDP side calls :meth:`on_sensor_frame`, the camera side :meth:`stamp`, which returns a
+    :class:`StampEstimate`, None (no SensorFrame yet) or :class:`Pending` (call again when the next
+    SensorFrame is known, or at the deadline).
     """
 
     def __init__(self, period_ms: int = 40, render_fps: float = 60.0, decimation: int = 4,
-                 overtake_window: float = 0.005, window: int = 16, min_frames: int = 8, history: int = 512,
+                 max_wait: float = 0.02, window: int = 16, min_frames: int = 8, history: int = 512,
                  use_grid: bool = True):
         if period_ms <= 0 or render_fps <= 0 or decimation < 1:
             raise ValueError(f"period_ms {period_ms}, render_fps {render_fps} must be > 0, decimation >= 1")
-        if overtake_window < 0:
-            raise ValueError("overtake_window must be >= 0")
+        if max_wait < 0:
+            raise ValueError("max_wait must be >= 0")
         self.period_ms = int(period_ms)
         self.fps = _fraction(render_fps)
         self.decimation = int(decimation)
-        self.overtake_window = float(overtake_window)
+        self.max_wait = float(max_wait)
         self.window = int(window)
         self.min_frames = int(min_frames)
         self.use_grid = bool(use_grid)
@@ -138,8 +155,9 @@ class CameraStamper:
     def _locked(self) -> tuple[int | None, set]:
         """(the phase the recent frames agree on, or None; the phases allowed by all of them).
 
-        A phase is locked when it is the only one allowed by every frame in the window, or (one wrong
-        bracket tolerated) the only one allowed by all but one, and the window holds ``min_frames`` frames.
+        With ``n`` frames in the window (at least ``min_frames``), a phase is locked when it is allowed by
+        all of them but at most ``max(1, n // 8)`` (wrong brackets happen) and by at least two more frames
+        than any other phase.
         """
         n = len(self._phases)
         if n == 0:
@@ -150,12 +168,11 @@ class CameraStamper:
                 score[p] += 1
         strict = {p for p in range(self.decimation) if score[p] == n}
         if n >= self.min_frames:
-            if len(strict) == 1:
-                return next(iter(strict)), strict
-            if not strict:
-                loose = [p for p in range(self.decimation) if score[p] == n - 1]
-                if len(loose) == 1:
-                    return loose[0], strict
+            order = sorted(range(self.decimation), key=lambda p: -score[p])
+            best = order[0]
+            second = score[order[1]] if self.decimation > 1 else -10
+            if score[best] >= n - max(1, n // 8) and score[best] - second >= 2:
+                return best, strict
         return None, strict
 
     def _ticks(self, lo_ms: int, hi_ms: int) -> list[int]:
@@ -164,38 +181,43 @@ class CameraStamper:
         k_max = math.floor(Fraction(hi_ms, 1000) * self.fps)
         return list(range(k_min, k_max + 1))
 
-    def effective_overtake_window(self) -> float:
-        """``overtake_window``, but at most half the recent median wall time between SensorFrames (a fast
-        simulator's next camera frame may follow a SensorFrame sooner than ``overtake_window``)."""
-        a = self._arrivals
-        if len(a) < 3:
-            return self.overtake_window
-        recent = list(a)[-17:]
-        gaps = sorted(b - x for x, b in zip(recent, recent[1:]))
-        return min(self.overtake_window, 0.5 * gaps[len(gaps) // 2])
-
-    def bracket(self, arrival: float) -> tuple[int, int, bool] | None:
-        """(lo_ms, hi_ms, overtaken) for a frame arriving at ``arrival``; None before any SensorFrame."""
-        i = bisect.bisect_right(self._arrivals, arrival) - 1
+    def bracket(self, arrival: float, now: float) -> tuple[int, int, bool] | Pending | None:
+        """(lo_ms, hi_ms, overtaken) for a frame that arrived at ``arrival``, known at wall time ``now``."""
+        a, T = self._arrivals, self._tms
+        i = bisect.bisect_right(a, arrival) - 1
+        P = self.period_ms
         if i < 0:
-            return None
-        t_b, a_b = self._tms[i], self._arrivals[i]
-        overtaken = arrival - a_b <= self.effective_overtake_window()
-        hi = t_b if overtaken else t_b + self.period_ms
-        return hi - self.period_ms, hi, overtaken
+            if a:  # a frame before the first SensorFrame we kept: it belongs to that one's cycle
+                return T[0] - P, T[0], False
+            return Pending(arrival + self.max_wait) if now < arrival + self.max_wait else None
+        d_prev = arrival - a[i]
+        if i + 1 < len(a):
+            overtaken = d_prev <= a[i + 1] - arrival
+            hi = T[i] if overtaken else T[i + 1]
+        else:
+            wait = min(d_prev, self.max_wait)
+            if now < arrival + wait:
+                return Pending(arrival + wait)
+            overtaken = d_prev <= self.max_wait  # the next did not come within d_prev: the previous is nearer
+            hi = T[i] if overtaken else T[i] + P
+        return hi - P, hi, overtaken
 
-    def stamp(self, arrival: float | None = None) -> StampEstimate | None:
+    def stamp(self, arrival: float | None = None, now: float | None = None) -> StampEstimate | Pending | None:
         """Estimate the render time of a camera frame that arrived at ``arrival`` (monotonic seconds)."""
-        if arrival is None:
-            arrival = time.monotonic()
+        now = time.monotonic() if now is None else now
+        arrival = now if arrival is None else arrival
         with self._lock:
-            br = self.bracket(arrival)
+            br = self.bracket(arrival, now)
             c = self.counters
             if br is None:
                 c.no_clock += 1
                 return None
+            if isinstance(br, Pending):
+                return br
             lo, hi, overtaken = br
             c.overtaken += overtaken
+            if now > arrival:
+                c.waited += 1
             ticks = self._ticks(lo, hi)
             d = self.decimation
             self._phases.append(frozenset(k % d for k in ticks))
@@ -204,11 +226,25 @@ class CameraStamper:
                 strict = set()  # too few frames to trust the render grid yet
             lo_s, hi_s = lo / 1000, hi / 1000
             est = None
-            cand = []
-            if phase is not None:
-                cand = [k for k in ticks if k % d == phase]
+            cand: list[int] = []
+            if phase is not None and self.grid_spacing * 1000 <= self.period_ms:
+                cand = [k for k in ticks if k % d == phase]  # several published ticks per cycle
                 if not cand:
-                    c.bracket_misses += 1  # the learned phase has no tick in this bracket: a wrong bracket
+                    c.bracket_misses += 1
+            elif phase is not None:
+                t_prev = hi if overtaken else lo  # the SensorFrame before the frame; its cycle and the next
+                prev = self._prev if self._prev is not None else float("-inf")
+                wide = [k for k in self._ticks(t_prev - self.period_ms, t_prev + self.period_ms)
+                        if k % d == phase and float(k / self.fps) > prev + 1e-9]
+                cand = wide if len(wide) <= 1 else [k for k in wide if lo < float(k / self.fps) * 1000 <= hi + 1e-9]
+                if not cand:
+                    c.bracket_misses += 1  # the learned phase has no free tick near this frame
+                elif len(cand) == 1:
+                    k_ms = float(cand[0] / self.fps) * 1000
+                    if not (lo < k_ms <= hi + 1e-9):
+                        c.rebracketed += 1
+                        lo_s, hi_s = ((hi, hi + self.period_ms) if k_ms > hi else (lo - self.period_ms, lo))
+                        lo_s, hi_s = lo_s / 1000, hi_s / 1000
             elif strict:
                 cand = [k for k in ticks if k % d in strict]
             if len(cand) == 1 and phase is not None:
@@ -217,7 +253,7 @@ class CameraStamper:
                 t0, t1 = float(cand[0] / self.fps), float(cand[-1] / self.fps)
                 est = StampEstimate((t0 + t1) / 2, lo_s, hi_s, (t1 - t0) / 2, "grid-partial", phase)
             if est is None:
-                est = StampEstimate((lo + hi) / 2000, lo_s, hi_s, self.period_ms / 2000, "interval")
+                est = StampEstimate((lo + hi) / 2000, lo / 1000, hi / 1000, self.period_ms / 2000, "interval")
             if est.method == "grid":
                 c.grid += 1
             elif est.method == "grid-partial":

@@ -1,0 +1,142 @@
+"""The bridge with the stand-in simulator: real roscore (free port), ``raf sim`` and the bridge as processes
+(``raf bridge`` and ``roslaunch robotatfactory bridge.launch``), an in-process rospy test node."""
+from __future__ import annotations
+
+import json
+import math
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from rosutil import ROOT, Collector, free_port, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.render]
+
+
+def _ports():
+    return free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM), f"tcp://127.0.0.1:{free_port()}"
+
+
+def _sim(env, port, sim_port, cam, log, *extra):
+    camera = [] if "--no-camera" in extra else ["--camera-bind", cam]
+    return raf_process(["sim", "--port", str(sim_port), "--bridge", f"127.0.0.1:{port}", *camera, "--no-server",
+                        "--lockstep", "--realtime", "--lockstep-timeout", "3", "--status-every", "5", *extra], env, log)
+
+
+def test_raf_sim_through_the_bridge(ros_master, tmp_path):
+    import rospy
+    import tf2_ros
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import Image, LaserScan
+
+    test_node()
+    port, sim_port, cam = _ports()
+    env = ros_master.env()
+    bridge = raf_process(["bridge", "--port", str(port), "--camera", cam], env, tmp_path / "bridge.log")
+    sim = None
+    try:
+        odom, gt = Collector("/odom", Odometry), Collector("/ground_truth", Odometry)
+        img, scan = Collector("/camera/image_raw", Image), Collector("/scan", LaserScan)
+        pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
+        wait_until(lambda: pub.get_num_connections() > 0, 30, what="the bridge subscribing to cmd_vel")
+        sim = _sim(env, port, sim_port, cam, tmp_path / "sim.log", "--start-pose=-0.7,0.35,0")
+        img.wait(45, timeout=60)
+        scan.wait(3, timeout=10)
+        # camera stamps: the render ticks of the simulator's camera clock (k/15 s), once the phase is learned
+        stamps = np.array([m.header.stamp.to_sec() for m in img.msgs])
+        assert np.all(np.diff(stamps) > 0)
+        k = stamps[-12:] * 15
+        assert np.allclose(k, np.round(k), atol=1e-6), k
+        # a real frame: the field seen by the robot camera is not a constant image
+        from robotatfactory.ros.messages import image_to_bgr
+
+        frame = image_to_bgr(img.msgs[-1])
+        assert frame.shape == (480, 640, 3) and frame.std() > 10
+        sc = scan.msgs[-1]
+        r = np.array(sc.ranges)
+        assert np.isfinite(r).sum() > 100 and np.nanmin(r) > 0.02  # walls and ribs within 6 m
+        # TF: the field and the robot chain
+        buf = tf2_ros.Buffer()
+        listener = tf2_ros.TransformListener(buf)
+        assert buf.can_transform("map", "aruco_13", rospy.Time(0), rospy.Duration(10))
+        assert buf.can_transform("odom", "camera_optical", rospy.Time(0), rospy.Duration(10))
+        listener.unregister()
+        # a cmd_vel moves the simulated robot
+        g0, o0 = gt.msgs[-1].pose.pose.position, odom.msgs[-1].pose.pose.position
+        tw = Twist()
+        tw.linear.x = 0.2
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end:
+            pub.publish(tw)
+            time.sleep(0.05)
+        # the watchdog stops it: after the timeout the ground-truth speed falls to zero
+        time.sleep(1.5)
+        g1, o1 = gt.msgs[-1].pose.pose.position, odom.msgs[-1].pose.pose.position
+        moved = math.hypot(g1.x - g0.x, g1.y - g0.y)
+        assert 0.3 < moved < 0.6, moved  # 0.2 m/s for 2 s plus the watchdog's 0.5 s
+        assert math.hypot(o1.x - o0.x, o1.y - o0.y) == pytest.approx(moved, rel=0.05)
+        assert abs(gt.msgs[-1].twist.twist.linear.x) < 0.005
+        time.sleep(0.5)
+        assert math.hypot(gt.msgs[-1].pose.pose.position.x - g1.x, gt.msgs[-1].pose.pose.position.y - g1.y) < 0.002
+        for c in (odom, gt, img, scan):
+            c.close()
+    finally:
+        if sim is not None:
+            stop_process(sim)
+        assert stop_process(bridge) == 0, (tmp_path / "bridge.log").read_text()[-3000:]
+
+
+def test_bridge_launch_in_a_namespace_with_a_frame_prefix(ros_master, tmp_path):
+    import rospy
+    import tf2_ros
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import Image
+
+    test_node()
+    port, sim_port, cam = _ports()
+    env = ros_master.env()
+    launch = subprocess.Popen(["roslaunch", "robotatfactory", "bridge.launch", "ns:=robot1", "frame_prefix:=robot1",
+                               f"port:={port}", f"camera:={cam}"], env=env, stdout=open(tmp_path / "launch.log", "wb"),
+                              stderr=subprocess.STDOUT, start_new_session=True)
+    sim = None
+    try:
+        odom = Collector("/robot1/odom", Odometry)
+        img = Collector("/robot1/camera/image_raw", Image)
+        wait_until(lambda: any(n == "/robot1/raf_bridge" for n in __import__("rosnode").get_node_names()), 30,
+                   what="/robot1/raf_bridge")
+        sim = _sim(env, port, sim_port, cam, tmp_path / "sim.log", "--no-camera")
+        m = odom.wait(5, timeout=60)[-1]
+        assert (m.header.frame_id, m.child_frame_id) == ("robot1/odom", "robot1/base_link")
+        assert rospy.get_param("/robot1/raf_bridge/frame_prefix") == "robot1"
+        assert rospy.get_param("/use_sim_time") is True
+        buf = tf2_ros.Buffer()
+        listener = tf2_ros.TransformListener(buf)
+        assert buf.can_transform("robot1/odom", "robot1/camera_optical", rospy.Time(0), rospy.Duration(10))
+        assert buf.can_transform("map", "aruco_13", rospy.Time(0), rospy.Duration(10))
+        listener.unregister()
+        assert not img.msgs  # --no-camera: the simulator publishes none, the bridge invents none
+        odom.close()
+        img.close()
+    finally:
+        if sim is not None:
+            stop_process(sim)
+        stop_process(launch)
+
+
+def test_speed_experiment_meets_the_papers_target(ros_master, tmp_path):
+    """raf experiment speed end to end (its own roscore): RMS error of the encoder speed <= 0.01 m/s."""
+    out = tmp_path / "speed"
+    r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "speed", "--hold", "1.5", "--out",
+                        str(out)], capture_output=True, text=True, timeout=240, cwd=str(ROOT))
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    res = json.loads((out / "results.json").read_text())
+    assert res["speed_samples"] >= 55
+    assert res["speed_rmse_mps"] <= 0.01
+    assert res["speed_steady_mean_mps"] == pytest.approx(0.3, abs=0.005)
+    assert 0 <= res["speed_lag_ms"] <= 80
+    assert (out / "speed.png").stat().st_size > 10_000
