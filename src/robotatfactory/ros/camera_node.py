@@ -139,6 +139,8 @@ class CameraBridge:
                         self.counts["skipped"] += 1
                     self._mail = (arrival, msg)
                     self._cv.notify()
+                with self._timing_cv:  # a stamp waiting for its SensorFrame can decide now
+                    self._timing_cv.notify_all()
         finally:
             sock.close(0)
 
@@ -191,6 +193,10 @@ class CameraBridge:
                 est = self.stamper.stamp(arrival)
                 if not isinstance(est, Pending):
                     return est
+                if self._mail is not None:
+                    # a newer frame has arrived: it was published after this frame's SensorFrame was sent,
+                    # so waiting longer cannot tell more; decide now (this also keeps up with floods)
+                    return self.stamper.stamp(arrival, now=est.deadline)
                 self._timing_cv.wait(max(0.0, est.deadline - time.monotonic()) + 1e-4)
 
     # -- diagnostics -------------------------------------------------------------------------------------------
