@@ -208,6 +208,24 @@ def test_tick_enumeration_is_exact_at_bracket_edges():
     assert st._ticks(80, 120) == [5, 6, 7]  # 120 ms is tick 7.2 -> 7 = 116.67; 100 ms = tick 6 included
 
 
+def test_following_rule_for_a_simulator_rendering_between_cycles():
+    """rule="following": frames rendered after a SensorFrame at arbitrary moments (not locked to the cycle)
+    are bracketed by the cycle after it, immediately (no waiting), within half a period of the truth."""
+    rng = random.Random(2)
+    st = CameraStamper(P, 60, 4, use_grid=False, rule="following")
+    errs = []
+    for j in range(200):
+        st.on_sensor_frame(P * (j + 1), 100.0 + 0.04 * j)
+        if j % 2:
+            frac = rng.uniform(0.05, 0.95)  # rendered part-way through the next cycle, published at once
+            truth = (P * (j + 1) + frac * P) / 1000
+            est = st.stamp(100.0 + 0.04 * j + frac * 0.04 + 0.002, now=100.0 + 0.04 * j + frac * 0.04 + 0.002)
+            assert not isinstance(est, Pending)
+            errs.append(abs(est.stamp - truth))
+            assert est.error_bound == pytest.approx(0.020)
+    assert max(errs) <= 0.020 + 1e-9
+
+
 def test_bad_settings_are_rejected():
     with pytest.raises(ValueError):
         CameraStamper(0, 60, 4)
@@ -215,6 +233,8 @@ def test_bad_settings_are_rejected():
         CameraStamper(40, 60, 0)
     with pytest.raises(ValueError):
         CameraStamper(40, 60, 4, max_wait=-1)
+    with pytest.raises(ValueError):
+        CameraStamper(40, 60, 4, rule="closest")
 
 
 def test_sim_clock_real_time_factor():

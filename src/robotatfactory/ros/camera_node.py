@@ -35,7 +35,7 @@ class CameraBridge:
 
         self.cfg = cfg
         self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
-                                     use_grid=cfg.use_grid)
+                                     use_grid=cfg.use_grid, rule=cfg.camera_bracket)
         self.timing_sock = timing_sock
         self.rate = RateMeter()
         self.log = LogLimiter(cfg.log_period)

@@ -27,6 +27,10 @@ Method (``CameraStamper``), for a camera frame arriving at wall time ``a``:
   a fast lockstep run alike, as long as the frame's delivery takes less than half the wall time between
   two SensorFrames. The decision may have to wait for the next SensorFrame, but never longer than
   ``a - a_prev`` (after that the previous one is known to be nearer) nor than ``max_wait``.
+  With ``rule="following"`` the frame is instead taken to belong to the cycle after the last SensorFrame
+  received before it, ``(T_prev, T_prev + P]``, without waiting: right for a simulator that renders and
+  publishes between control cycles at arbitrary moments (SimTwo's GUI loop renders the scene as it is, at a
+  simulation time after the last script cycle), as long as delivery does not reorder the two streams.
 * **Render grid.** Published frames sit on the ticks ``k / render_fps`` with ``k = phase (mod decimation)``.
   A 40 ms bracket holds two or three render ticks but (since ``P < decimation / render_fps`` = 66.7 ms) at
   most one tick of each phase. Each frame therefore allows a set of phases; over the last ``window`` frames
@@ -107,11 +111,14 @@ class CameraStamper:
 
     def __init__(self, period_ms: int = 40, render_fps: float = 60.0, decimation: int = 4,
                  max_wait: float = 0.02, window: int = 16, min_frames: int = 8, history: int = 512,
-                 use_grid: bool = True):
+                 use_grid: bool = True, rule: str = "nearest"):
         if period_ms <= 0 or render_fps <= 0 or decimation < 1:
             raise ValueError(f"period_ms {period_ms}, render_fps {render_fps} must be > 0, decimation >= 1")
         if max_wait < 0:
             raise ValueError("max_wait must be >= 0")
+        if rule not in ("nearest", "following"):
+            raise ValueError(f"rule {rule!r}: 'nearest' or 'following'")
+        self.rule = rule
         self.period_ms = int(period_ms)
         self.fps = _fraction(render_fps)
         self.decimation = int(decimation)
@@ -191,6 +198,8 @@ class CameraStamper:
                 return T[0] - P, T[0], False
             return Pending(arrival + self.max_wait) if now < arrival + self.max_wait else None
         d_prev = arrival - a[i]
+        if self.rule == "following":  # rendered after the last SensorFrame received: the cycle after it
+            return T[i], T[i] + P, False
         if i + 1 < len(a):
             overtaken = d_prev <= a[i + 1] - arrival
             hi = T[i] if overtaken else T[i + 1]
