@@ -16,7 +16,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _stages():
     """(title, function(args, out_dir)) in order; later issues add the simulator, bridge and localization."""
-    return [("field map", _field_map), ("protocol codec benchmark", _protocol)]
+    return [("field map", _field_map), ("protocol codec benchmark", _protocol),
+            ("stand-in simulator snapshot", _snapshot),
+            ("simulator + bridge + localization on the reference route (raf experiment localization)",
+             _localization)]
 
 
 def _field_map(args, out: Path) -> None:
@@ -34,6 +37,30 @@ def _protocol(args, out: Path) -> None:
     res = protocol.run(ns)
     print_table("  protocol", res, protocol.TARGETS)
     write_json(out / "protocol.json", res)
+
+
+def _snapshot(args, out: Path) -> None:
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "robotatfactory", "--field", args.field, "sim", "--snapshot", str(out / "scene.png")]
+    subprocess.run(cmd, check=True)
+
+
+def _localization(args, out: Path) -> None:
+    from ..commands.experiment import run as run_experiment
+    from ..experiments import registry
+
+    mod = registry()["localization"]
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--out")
+    mod.add_arguments(parser)
+    argv = ["--out", str(out / "localization"), "--laps", "1"]
+    if args.quick:
+        argv += ["--no-rviz", "--no-tf-tree"]
+    ns = parser.parse_args(argv)
+    ns._experiment, ns.field = mod, args.field
+    run_experiment(ns)
 
 
 def run(args) -> int:
