@@ -12,7 +12,6 @@ Child processes (``raf bridge``, ``roslaunch``, ``rosbag``) get ``master.env()``
 """
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import threading

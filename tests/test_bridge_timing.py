@@ -1,7 +1,6 @@
 """Camera stamping and the simulation clock (robotatfactory.simtwo.timing): pure, simulated streams."""
 from __future__ import annotations
 
-import math
 import random
 from fractions import Fraction
 

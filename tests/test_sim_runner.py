@@ -5,7 +5,6 @@ import subprocess
 import threading
 import time
 
-import numpy as np
 import pytest
 
 from robotatfactory.sim import SimConfig

@@ -1,5 +1,4 @@
 """SimTwo's labelled strings, the RobotAtFactory datagrams and camera frames."""
-import math
 
 import numpy as np
 import pytest

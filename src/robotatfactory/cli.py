@@ -6,8 +6,6 @@ imports heavy libraries (MuJoCo, rospy, OpenCV) inside ``run`` so that ``raf --h
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
 import sys
 
 from . import __version__
@@ -15,14 +13,9 @@ from . import __version__
 
 def _command_modules():
     from . import commands
+    from .registry import discover
 
-    mods = []
-    for info in pkgutil.iter_modules(commands.__path__):
-        if info.name.startswith("_"):
-            continue
-        mod = importlib.import_module(f"{commands.__name__}.{info.name}")
-        mods.append(mod)
-    return sorted(mods, key=lambda m: (getattr(m, "ORDER", 50), m.NAME))
+    return list(discover(commands).values())
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,14 +5,11 @@ A benchmark module defines ``NAME``, ``HELP``, ``TARGETS`` (``{result_key: "desc
 """
 from __future__ import annotations
 
-import importlib
-import pkgutil
-
 
 def registry() -> dict:
-    mods = {}
-    for info in pkgutil.iter_modules(__path__):
-        if not info.name.startswith("_"):
-            mod = importlib.import_module(f"{__name__}.{info.name}")
-            mods[mod.NAME] = mod
-    return dict(sorted(mods.items()))
+    """``{NAME: module}`` of every module in this package."""
+    import sys
+
+    from ..registry import discover
+
+    return discover(sys.modules[__name__])

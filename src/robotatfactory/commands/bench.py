@@ -10,14 +10,10 @@ ORDER = 80
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..bench import registry
+    from ..registry import add_entry_parsers
 
-    sub = parser.add_subparsers(dest="bench", metavar="NAME", title="benchmarks")
-    for name, mod in registry().items():
-        p = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
-        p.add_argument("--json", metavar="FILE", help="write the results as a flat JSON object")
-        mod.add_arguments(p)
-        p.set_defaults(_bench=mod)
-    parser.set_defaults(_parser=parser)
+    add_entry_parsers(parser, registry(), "bench", "benchmarks",
+                      ("--json", "FILE", "write the results as a flat JSON object"))
 
 
 def run(args) -> int:

@@ -76,30 +76,21 @@ def build_params(args) -> dict:
 
 
 def run(args) -> int:
-    import os
     import sys
 
     import yaml
 
-    from ..errors import ConfigError
     from ..ros.config import load_config
 
     cfg = load_config(build_params(args))
     if args.print_params:
         print(yaml.safe_dump(cfg.params, sort_keys=False), end="")
         return 0
-    master = None
-    if args.roscore:
-        from ..ros.master import PrivateMaster
+    from ..ros.master import ensure_master
 
-        master = PrivateMaster().start()
-        os.environ["ROS_MASTER_URI"] = master.uri
-        print(f"raf bridge: started roscore at {master.uri} (export ROS_MASTER_URI={master.uri})", flush=True)
+    master = ensure_master(args.roscore, "bridge")
     import rosgraph
     import rospy
-
-    if not rosgraph.is_master_online():
-        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore (or pass --roscore)")
     from ..ros.bridge_node import Bridge
 
     ns = args.ns.strip("/")

@@ -11,14 +11,10 @@ ORDER = 81
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..experiments import registry
+    from ..registry import add_entry_parsers
 
-    sub = parser.add_subparsers(dest="experiment", metavar="NAME", title="experiments")
-    for name, mod in registry().items():
-        p = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
-        p.add_argument("--out", metavar="DIR", help="write figures and DIR/results.json here")
-        mod.add_arguments(p)
-        p.set_defaults(_experiment=mod)
-    parser.set_defaults(_parser=parser)
+    add_entry_parsers(parser, registry(), "experiment", "experiments",
+                      ("--out", "DIR", "write figures and DIR/results.json here"))
 
 
 def run(args) -> int:

@@ -53,12 +53,10 @@ def _plain(obj):
 
 
 def run(args) -> int:
-    import os
     import sys
 
     import yaml
 
-    from ..errors import ConfigError
     from ..localization.config import from_dict
 
     settings = build_settings(args)
@@ -66,18 +64,11 @@ def run(args) -> int:
     if args.print_params:
         print(yaml.safe_dump({k: _plain(getattr(cfg, k)) for k in cfg.__dataclass_fields__}, sort_keys=False), end="")
         return 0
-    master = None
-    if args.roscore:
-        from ..ros.master import PrivateMaster
+    from ..ros.master import ensure_master
 
-        master = PrivateMaster().start()
-        os.environ["ROS_MASTER_URI"] = master.uri
-        print(f"raf localize: started roscore at {master.uri} (export ROS_MASTER_URI={master.uri})", flush=True)
+    master = ensure_master(args.roscore, "localize")
     import rosgraph
     import rospy
-
-    if not rosgraph.is_master_online():
-        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore (or pass --roscore)")
     from ..ros.localization_node import LocalizationNode
 
     ns = args.ns.strip("/")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from dataclasses import dataclass, field as dc_field
+from dataclasses import dataclass
 
 from ..errors import ConfigError
 from ..field.model import Field, Slot

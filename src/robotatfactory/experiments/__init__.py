@@ -6,14 +6,11 @@ and the command writes ``out_dir/results.json`` from the returned flat dict.
 """
 from __future__ import annotations
 
-import importlib
-import pkgutil
-
 
 def registry() -> dict:
-    mods = {}
-    for info in pkgutil.iter_modules(__path__):
-        if not info.name.startswith("_"):
-            mod = importlib.import_module(f"{__name__}.{info.name}")
-            mods[mod.NAME] = mod
-    return dict(sorted(mods.items()))
+    """``{NAME: module}`` of every module in this package."""
+    import sys
+
+    from ..registry import discover
+
+    return discover(sys.modules[__name__])

@@ -53,8 +53,8 @@ def draw_field(field: Field, ax=None, show_slots: bool = True, show_team_areas: 
             ax.plot(*zip(plate - np.array([-sn, c]) * p.plate[0] / 2, plate + np.array([-sn, c]) * p.plate[0] / 2),
                     color=col, lw=2.5, solid_capstyle="butt")
             label = {"store": "", "input": " in", "output": " out"}[s.role]
-            ax.text(s.xy[0] - c * 0.012, s.xy[1] - sn * 0.012, f"{s.number}{label}", ha="center", va="center",
-                    fontsize=7, color=col, fontweight="bold")
+            ax.text(s.xy[0] - c * 0.006, s.xy[1] - sn * 0.006, f"{s.number}{label}", ha="center", va="center",
+                    fontsize=6.5, color=col, fontweight="bold", rotation=90 if abs(c) > 0.5 else 0)
     for m in field.floor_markers():
         cs = m.corners[:, :2]
         ax.add_patch(Polygon(cs, closed=True, fc="black", ec="black"))
@@ -63,8 +63,11 @@ def draw_field(field: Field, ax=None, show_slots: bool = True, show_team_areas: 
         pos, n = m.position[:2], m.normal[:2]
         across = np.array([-n[1], n[0]]) * m.size / 2
         ax.plot(*zip(pos - across, pos + across), color="black", lw=4, solid_capstyle="butt")
-        ax.annotate("", xy=pos + n * 0.05, xytext=pos, arrowprops=dict(arrowstyle="-|>", color="#d62728", lw=1))
-        ax.text(*(pos + n * 0.075), str(m.id), color="#d62728", ha="center", va="center", fontsize=7)
+        # ID and facing arrow drawn beside the marker (along the wall) so that slot labels stay readable
+        side = np.array([-n[1], n[0]]) * (m.size / 2 + 0.022)
+        ax.annotate("", xy=pos + side + n * 0.035, xytext=pos + side, arrowprops=dict(arrowstyle="-|>", color="#d62728", lw=0.9))
+        ax.text(*(pos + side + n * 0.05), str(m.id), color="#d62728", ha="center", va="center", fontsize=7,
+                fontweight="bold")
     for zone, (x, y) in {"incoming warehouse": (-0.47, 0.47), "outgoing warehouse": (0.47, -0.47),
                          "machine A": (-0.3475, 0.135), "machine B": (0.3475, -0.135)}.items():
         ax.text(x, y, zone, ha="center", va="center", fontsize=8, style="italic", color="#404040")

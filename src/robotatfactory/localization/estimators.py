@@ -19,7 +19,7 @@ frame (x, y, z, then rotations about the world x, y, z axes; ROS's PoseWithCovar
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np

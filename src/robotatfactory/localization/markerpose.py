@@ -7,7 +7,7 @@ Frames: ``T_cam_marker`` maps marker-frame points into ``camera_optical`` (x rig
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np

@@ -110,3 +110,22 @@ class PrivateMaster:
 
     def __exit__(self, *exc):
         self.cleanup()
+
+
+def ensure_master(start_private: bool, who: str) -> "PrivateMaster | None":
+    """For ``raf bridge``/``raf localize``: start a private roscore when asked, then insist a master answers.
+
+    Returns the started master (the caller stops it) or None; raises ConfigError when no master is online.
+    """
+    from ..errors import ConfigError
+
+    master = None
+    if start_private:
+        master = PrivateMaster().start()
+        os.environ["ROS_MASTER_URI"] = master.uri
+        print(f"raf {who}: started roscore at {master.uri} (export ROS_MASTER_URI={master.uri})", flush=True)
+    import rosgraph
+
+    if not rosgraph.is_master_online():
+        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore (or pass --roscore)")
+    return master

@@ -60,6 +60,10 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # annotations only: this module needs no numpy at run time
+    import numpy as np
 
 
 def _fraction(x: float | int) -> Fraction:
