@@ -29,7 +29,7 @@ import warnings
 import numpy as np
 import rospy
 import tf2_ros
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
@@ -393,9 +393,6 @@ class Bridge:
         ms = self.clock.time_ms
         arr.header.stamp = rm.stamp_ms(ms) if ms is not None else rospy.Time(0)
 
-        def kv(d):
-            return [KeyValue(str(k), f"{v:.3f}" if isinstance(v, float) else str(v)) for k, v in d.items()]
-
         # the SensorFrame stream
         stale = tr.staleness(now)
         rejects = tr.counters.rejected_total
@@ -424,7 +421,7 @@ class Bridge:
                      "lidar_rays_missing": self.sweeps.missing_total if self.sweeps else 0,
                      "publish_errors": c["publish_errors"],
                      "camera_timing_dropped": self.camera.dropped if self.camera else 0})
-        st1 = DiagnosticStatus(level=level, name=f"{name}: sensor stream", message=text, hardware_id=hw, values=kv(vals))
+        st1 = rm.diagnostic_status(f"{name}: sensor stream", level, text, hw, vals)
         # commands
         with self._cmd_lock:
             age = (ms - self._cmd_ms) / 1000 if (ms is not None and self._cmd_ms is not None) else -1.0
@@ -435,7 +432,7 @@ class Bridge:
             level = DiagnosticStatus.WARN if self._watchdog_active else DiagnosticStatus.OK
             text = (f"watchdog: cmd_vel older than {cfg.watchdog_timeout} s, sending V = W = 0"
                     if self._watchdog_active else ("following cmd_vel" if self._have_cmd else "no cmd_vel yet"))
-        st3 = DiagnosticStatus(level=level, name=f"{name}: commands", message=text, hardware_id=hw, values=kv(vals))
+        st3 = rm.diagnostic_status(f"{name}: commands", level, text, hw, vals)
         arr.status = [st1, st3]
         return arr
 

@@ -20,8 +20,8 @@ from collections import Counter
 
 import numpy as np
 import rospy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped, TransformStamped
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, TransformStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
 from tf2_msgs.msg import TFMessage
@@ -32,57 +32,11 @@ from ..field import load_field
 from ..localization import reasons
 from ..localization.config import LocalizationConfig, from_dict
 from ..localization.ekf import Ekf
-from ..localization.geometry import inv, quaternion_xyzw, se2_matrix
+from ..localization.geometry import inv, se2_matrix
 from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from ..robot import load_robot
-
-PLANAR_VAR = 1e-6  # z, roll, pitch of base_link on a flat floor
-
-
-def stamp_of(t: float) -> rospy.Time:
-    ns = int(round(t * 1e9))
-    return rospy.Time(ns // 1_000_000_000, ns % 1_000_000_000)
-
-
-def pose_msg(T: np.ndarray) -> Pose:
-    p = Pose()
-    p.position.x, p.position.y, p.position.z = (float(v) for v in T[:3, 3])
-    q = quaternion_xyzw(T[:3, :3])
-    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (float(v) for v in q)
-    return p
-
-
-def planar_cov6(cov3: np.ndarray) -> list[float]:
-    """3x3 (x, y, yaw) covariance to ROS's row-major 6x6 (x, y, z, rot x, rot y, rot z)."""
-    c = np.zeros((6, 6))
-    ix = [0, 1, 5]
-    c[np.ix_(ix, ix)] = cov3
-    for i in (2, 3, 4):
-        c[i, i] = PLANAR_VAR
-    return c.ravel().tolist()
-
-
-def image_array(msg: Image) -> np.ndarray:
-    """sensor_msgs/Image (bgr8, rgb8, mono8, bgra8, rgba8) to an HxWx3 BGR or HxW grey uint8 array."""
-    import cv2
-
-    enc = msg.encoding.lower()
-    ch = {"bgr8": 3, "rgb8": 3, "mono8": 1, "8uc1": 1, "bgra8": 4, "rgba8": 4, "8uc3": 3}.get(enc)
-    if ch is None:
-        raise ValueError(f"unsupported image encoding {msg.encoding!r}")
-    if msg.height <= 0 or msg.width <= 0 or msg.step < msg.width * ch or len(msg.data) < msg.step * msg.height:
-        raise ValueError(f"image of {len(msg.data)} bytes does not hold {msg.height}x{msg.width}x{ch} "
-                         f"(step {msg.step})")
-    a = np.frombuffer(msg.data, dtype=np.uint8, count=msg.step * msg.height).reshape(msg.height, msg.step)
-    a = a[:, :msg.width * ch].reshape(msg.height, msg.width, ch) if ch > 1 else a[:, :msg.width]
-    if enc == "rgb8":
-        return cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
-    if enc == "bgra8":
-        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
-    if enc == "rgba8":
-        return cv2.cvtColor(a, cv2.COLOR_RGBA2BGR)
-    return a
+from . import messages as rm
 
 
 class LocalizationNode:
@@ -209,17 +163,17 @@ class LocalizationNode:
         x, P = self.ekf.pose(), self.ekf.covariance()
         if x is None:
             return
-        stamp = stamp_of(t)
+        stamp = rm.stamp_s(t)
         m = PoseWithCovarianceStamped()
         m.header.stamp = stamp
         m.header.frame_id = self.frames["map"]
-        m.pose.pose = pose_msg(se2_matrix(*x))
-        m.pose.covariance = planar_cov6(P)
+        m.pose.pose = rm.pose_from_matrix(se2_matrix(*x))
+        m.pose.covariance = rm.pose_cov6(P)
         self.pub_pose.publish(m)
         if self.cfg.node.publish_tf:
             T = se2_matrix(*x) @ inv(se2_matrix(*odom_pose))  # map <- odom
             tf = TransformStamped()
-            tf.header.stamp = stamp_of(t + self.cfg.node.tf_future_s)
+            tf.header.stamp = rm.stamp_s(t + self.cfg.node.tf_future_s)
             tf.header.frame_id = self.frames["map"]
             tf.child_frame_id = self.frames["odom"]
             tf.transform.translation.x, tf.transform.translation.y = float(T[0, 3]), float(T[1, 3])
@@ -230,7 +184,7 @@ class LocalizationNode:
     def on_image(self, msg: Image) -> None:
         t = msg.header.stamp.to_sec()
         try:
-            img = image_array(msg)
+            img = rm.image_to_bgr(msg)
         except ValueError as e:
             self.counts["bad_image"] += 1
             self._warn("image", f"localization: ignoring an image: {e}")
@@ -253,7 +207,7 @@ class LocalizationNode:
             m = PoseWithCovarianceStamped()
             m.header.stamp = msg.header.stamp
             m.header.frame_id = self.frames["map"]
-            m.pose.pose = pose_msg(cp.T_world_cam)
+            m.pose.pose = rm.pose_from_matrix(cp.T_world_cam)
             m.pose.covariance = np.asarray(cp.cov6, dtype=float).ravel().tolist()
             self.pub_camera_pose.publish(m)
         fix = res.estimates.get(nc.filter_method)
@@ -284,8 +238,8 @@ class LocalizationNode:
         m = PoseWithCovarianceStamped()
         m.header.stamp = stamp
         m.header.frame_id = self.frames["map"]
-        m.pose.pose = pose_msg(se2_matrix(*e.base))
-        m.pose.covariance = planar_cov6(e.cov)
+        m.pose.pose = rm.pose_from_matrix(se2_matrix(*e.base))
+        m.pose.covariance = rm.pose_cov6(e.cov)
         return m
 
     def _publish_markers(self, res, stamp, frame: str) -> None:
@@ -301,7 +255,7 @@ class LocalizationNode:
             used = set(fix.marker_ids)
         for o in res.observations:
             T = o.solutions[o.checked if o.checked is not None else 0]
-            p = pose_msg(T)
+            p = rm.pose_from_matrix(T)
             pa.poses.append(p)
             for kind in ("cube", "text"):
                 m = Marker()
@@ -364,9 +318,6 @@ class LocalizationNode:
         arr = DiagnosticArray()
         arr.header.stamp = rospy.Time.now()
 
-        def kv(d):
-            return [KeyValue(str(k), f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in sorted(d.items())]
-
         with self.lock:
             c = dict(self.counts)
             lc = dict(self.loc.counts)
@@ -385,8 +336,7 @@ class LocalizationNode:
                 "camera_matrix_from_camera_info": self._K_from_info,
                 "last_fix_age_wall_s": -1.0 if age is None else age, "bad_images": c.get("bad_image", 0)}
         vals.update({f"rejected_{k}": v for k, v in lc.items()})
-        st1 = DiagnosticStatus(level=level, name=f"{name}: camera", message=text, hardware_id="aruco",
-                               values=kv(vals))
+        st1 = rm.diagnostic_status(f"{name}: camera", level, text, "aruco", dict(sorted(vals.items())), ".4g")
         if x is None:
             level, text = DiagnosticStatus.WARN, "not initialised: waiting for a confident camera fix"
             vals = {}
@@ -401,7 +351,7 @@ class LocalizationNode:
                      "beacons_seen": c.get("beacons_seen", 0), "beacons_used": c.get("beacons_used", 0),
                      "restarts": c.get("restarts", 0)})
         vals.update({k: v for k, v in c.items() if k.startswith("callback_error") or k.startswith("bad_")})
-        st2 = DiagnosticStatus(level=level, name=f"{name}: filter", message=text, hardware_id="ekf", values=kv(vals))
+        st2 = rm.diagnostic_status(f"{name}: filter", level, text, "ekf", dict(sorted(vals.items())), ".4g")
         arr.status = [st1, st2]
         return arr
 

@@ -5,7 +5,8 @@ import math
 
 import numpy as np
 import rospy
-from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Pose, Quaternion, Transform, TransformStamped, Vector3
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan
 
@@ -67,15 +68,15 @@ def wheel_transform(parent: str, child: str, y: float, radius: float, angle: flo
     return m
 
 
-def _pose_cov6(cov3: np.ndarray) -> list[float]:
-    """3x3 (x, y, yaw) to ROS's row-major 6x6 (x, y, z, roll, pitch, yaw)."""
+def pose_cov6(cov3: np.ndarray, floor: float = COV_FLOOR) -> list[float]:
+    """3x3 (x, y, yaw) to ROS's row-major 6x6 (x, y, z, roll, pitch, yaw); z, roll, pitch known (flat floor)."""
     c = [0.0] * 36
     ix = (0, 1, 5)
     for a in range(3):
         for b in range(3):
             c[ix[a] * 6 + ix[b]] = float(cov3[a, b])
     for i in ix:
-        c[i * 7] = max(c[i * 7], COV_FLOOR)
+        c[i * 7] = max(c[i * 7], floor)
     for i in (2, 3, 4):
         c[i * 7] = PLANAR_VAR
     return c
@@ -100,7 +101,7 @@ def odometry(stamp, frame: str, child: str, x: float, y: float, theta: float, v:
     p = m.pose.pose
     p.position.x, p.position.y = x, y
     p.orientation = yaw_quaternion(theta)
-    m.pose.covariance = _pose_cov6(pose_cov)
+    m.pose.covariance = pose_cov6(pose_cov)
     m.twist.twist.linear.x = v
     m.twist.twist.angular.z = w
     m.twist.covariance = _twist_cov6(twist_cov)
@@ -162,7 +163,39 @@ def image_bgr8(stamp, frame: str, data: bytes, width: int, height: int) -> Image
 
 
 def image_to_bgr(msg: Image) -> np.ndarray:
-    """A bgr8 sensor_msgs/Image back to an HxWx3 uint8 array (tests, tools)."""
-    if msg.encoding != "bgr8":
-        raise ValueError(f"expected bgr8, got {msg.encoding}")
-    return np.frombuffer(msg.data, dtype=np.uint8).reshape(msg.height, msg.width, 3)
+    """sensor_msgs/Image (bgr8, rgb8, mono8, bgra8, rgba8) to an HxWx3 BGR or HxW grey uint8 array.
+
+    Raises ValueError (naming the encoding or the sizes) for anything else or a truncated image."""
+    import cv2
+
+    enc = msg.encoding.lower()
+    ch = {"bgr8": 3, "rgb8": 3, "mono8": 1, "8uc1": 1, "bgra8": 4, "rgba8": 4, "8uc3": 3}.get(enc)
+    if ch is None:
+        raise ValueError(f"unsupported image encoding {msg.encoding!r}")
+    if msg.height <= 0 or msg.width <= 0 or msg.step < msg.width * ch or len(msg.data) < msg.step * msg.height:
+        raise ValueError(f"image of {len(msg.data)} bytes does not hold {msg.height}x{msg.width}x{ch} "
+                         f"(step {msg.step})")
+    a = np.frombuffer(msg.data, dtype=np.uint8, count=msg.step * msg.height).reshape(msg.height, msg.step)
+    a = a[:, :msg.width * ch].reshape(msg.height, msg.width, ch) if ch > 1 else a[:, :msg.width]
+    if enc == "rgb8":
+        return cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
+    if enc == "bgra8":
+        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
+    if enc == "rgba8":
+        return cv2.cvtColor(a, cv2.COLOR_RGBA2BGR)
+    return a
+
+
+def pose_from_matrix(T: np.ndarray) -> Pose:
+    """A 4x4 homogeneous transform to geometry_msgs/Pose."""
+    p = Pose()
+    p.position.x, p.position.y, p.position.z = (float(v) for v in T[:3, 3])
+    p.orientation = matrix_quaternion(T[:3, :3])
+    return p
+
+
+def diagnostic_status(name: str, level: int, message: str, hardware_id: str, values: dict,
+                      real_format: str = ".3f") -> DiagnosticStatus:
+    """A DiagnosticStatus whose values are ``{key: number or text}``, reals written with ``real_format``."""
+    kv = [KeyValue(str(k), format(v, real_format) if isinstance(v, float) else str(v)) for k, v in values.items()]
+    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id, values=kv)
