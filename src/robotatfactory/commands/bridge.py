@@ -76,7 +76,6 @@ def build_params(args) -> dict:
 
 
 def run(args) -> int:
-    import sys
 
     import yaml
 
@@ -86,27 +85,12 @@ def run(args) -> int:
     if args.print_params:
         print(yaml.safe_dump(cfg.params, sort_keys=False), end="")
         return 0
-    from ..ros.master import ensure_master
+    from ..ros.cli import run_node
 
-    master = ensure_master(args.roscore, "bridge")
-    import rosgraph
-    import rospy
-    from ..ros.bridge_node import Bridge
+    def make_node():  # imported only once the master is known (--roscore sets ROS_MASTER_URI)
+        from ..ros.bridge_node import Bridge
 
-    ns = args.ns.strip("/")
-    node = f"/{ns}/{args.name}" if ns else f"/{args.name}"
-    if not args.no_sim_time:
-        rosgraph.Master("/raf_bridge_cli").setParam("/use_sim_time", True)
-    for k, v in cfg.flat_params().items():  # visible with rosparam, as if loaded from a launch file
-        rosgraph.Master("/raf_bridge_cli").setParam(f"{node}/{k}", list(v) if isinstance(v, tuple) else v)
-    argv = [sys.argv[0]] + ([f"__ns:=/{ns}"] if ns else [])
-    rospy.init_node(args.name, argv=argv)
-    bridge = Bridge(cfg).start()
-    print(f"raf bridge: {rospy.get_name()} listening on udp {cfg.bind_host}:{bridge.bound_port}", flush=True)
-    try:
-        rospy.spin()
-    finally:
-        bridge.stop()
-        if master is not None:
-            master.stop()
-    return 0
+        return Bridge(cfg).start()
+
+    return run_node(args, "bridge", cfg.flat_params(), make_node,
+                    lambda b: f"{args.name} listening on udp {cfg.bind_host}:{b.bound_port}")

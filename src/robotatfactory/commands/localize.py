@@ -53,8 +53,6 @@ def _plain(obj):
 
 
 def run(args) -> int:
-    import sys
-
     import yaml
 
     from ..localization.config import from_dict
@@ -64,27 +62,12 @@ def run(args) -> int:
     if args.print_params:
         print(yaml.safe_dump({k: _plain(getattr(cfg, k)) for k in cfg.__dataclass_fields__}, sort_keys=False), end="")
         return 0
-    from ..ros.master import ensure_master
+    from ..ros.cli import run_node
 
-    master = ensure_master(args.roscore, "localize")
-    import rosgraph
-    import rospy
-    from ..ros.localization_node import LocalizationNode
+    def make_node():  # imported only once the master is known (--roscore sets ROS_MASTER_URI)
+        from ..ros.localization_node import LocalizationNode
 
-    ns = args.ns.strip("/")
-    node = f"/{ns}/{args.name}" if ns else f"/{args.name}"
-    m = rosgraph.Master("/raf_localize_cli")
-    if not args.no_sim_time:
-        m.setParam("/use_sim_time", True)
-    m.setParam(node, settings)  # visible with rosparam, as if loaded from a launch file
-    argv = [sys.argv[0]] + ([f"__ns:=/{ns}"] if ns else [])
-    rospy.init_node(args.name, argv=argv)
-    loc = LocalizationNode(cfg).start()
-    print(f"raf localize: {rospy.get_name()} running (field {loc.field.name})", flush=True)
-    try:
-        rospy.spin()
-    finally:
-        loc.stop()
-        if master is not None:
-            master.stop()
-    return 0
+        return LocalizationNode(cfg).start()
+
+    return run_node(args, "localize", {"": settings}, make_node,
+                    lambda n: f"{args.name} running (field {n.field.name})")

@@ -46,6 +46,7 @@ from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
 from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
 from ..simtwo.timing import SimClock, SweepAssembler
 from . import messages as rm
+from .cli import read_private_params
 from .config import BridgeConfig, load_config
 from .udp import TimestampedUDP
 
@@ -435,12 +436,6 @@ class Bridge:
         st3 = rm.diagnostic_status(f"{name}: commands", level, text, hw, vals)
         arr.status = [st1, st3]
         return arr
-
-
-def read_private_params() -> dict:
-    """The node's private parameters as a nested dict (``~udp/port`` -> ``{"udp": {"port": ...}}``)."""
-    p = rospy.get_param("~", {})
-    return p if isinstance(p, dict) else {}
 
 
 def main(argv: list[str] | None = None) -> int:

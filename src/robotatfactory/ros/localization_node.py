@@ -37,6 +37,7 @@ from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from ..robot import load_robot
 from . import messages as rm
+from .cli import read_private_params
 
 
 class LocalizationNode:
@@ -354,11 +355,6 @@ class LocalizationNode:
         st2 = rm.diagnostic_status(f"{name}: filter", level, text, "ekf", dict(sorted(vals.items())), ".4g")
         arr.status = [st1, st2]
         return arr
-
-
-def read_private_params() -> dict:
-    p = rospy.get_param("~", {})
-    return p if isinstance(p, dict) else {}
 
 
 def main(argv: list[str] | None = None) -> int:
