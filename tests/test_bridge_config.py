@@ -7,7 +7,8 @@ import pytest
 import yaml
 
 from robotatfactory.errors import ConfigError
-from robotatfactory.ros.config import load_config, parse_set
+from robotatfactory.ros.config import load_config
+from robotatfactory.settings import parse_set
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -162,7 +162,7 @@ def test_render_clock_off_the_grid_is_mostly_detected_by_the_consistency_test():
 def test_one_wrong_bracket_does_not_unlock_the_phase():
     st = CameraStamper(P, 60, 4)
     ev = simulate(n_cycles=200)
-    res = run(st, ev[:200])
+    run(st, ev[:200])
     assert st.locked_phase == 0
     # a frame arriving 30 ms after a SensorFrame although it was rendered in that SensorFrame's cycle
     last_udp = max((e for e in ev[:200] if e[0] == "udp"), key=lambda e: e[1])

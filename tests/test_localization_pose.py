@@ -145,7 +145,7 @@ def test_planar_covariance_is_consistent(field, robot):
 
 def test_covariance_grows_with_distance_and_shrinks_with_markers(field, robot):
     loc = FrameLocalizer(field, robot)
-    K, Tcb = loc.K, loc.T_cam_base
+    K = loc.K
     # the robot looking at marker 13 (origin) from 0.2 m and 0.45 m, straight on
     sig = []
     for dist in (0.2, 0.3, 0.45):

@@ -39,24 +39,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def build_params(args) -> dict:
     """The override tree from --config, the global --field, the options and --set (in that order)."""
-    import yaml
-
-    from ..errors import ConfigError
     from ..field import DEFAULT_FIELD
-    from ..ros.config import deep_update, parse_set
+    from ..settings import deep_update, parse_set, read_yaml
 
-    params: dict = {}
-    if args.config:
-        try:
-            with open(args.config) as fh:
-                loaded = yaml.safe_load(fh) or {}
-        except OSError as e:
-            raise ConfigError(f"--config {args.config}: {e}") from None
-        except yaml.YAMLError as e:
-            raise ConfigError(f"--config {args.config}: not valid YAML: {e}") from None
-        if not isinstance(loaded, dict):
-            raise ConfigError(f"--config {args.config}: expected a mapping of parameters, got {type(loaded).__name__}")
-        params = loaded
+    params: dict = read_yaml(args.config, "--config") if args.config else {}
     if getattr(args, "field", DEFAULT_FIELD) != DEFAULT_FIELD:
         params["field"] = args.field
     opts = {}

@@ -34,8 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def build_settings(args) -> dict:
     from ..field import DEFAULT_FIELD
-    from ..localization.config import DEFAULT_FILE, deep_update, read_yaml
-    from ..ros.config import parse_set
+    from ..localization.config import DEFAULT_FILE, read_yaml
+    from ..settings import deep_update, parse_set
 
     d = read_yaml(args.config) if args.config else (read_yaml(DEFAULT_FILE) if DEFAULT_FILE.is_file() else {})
     if getattr(args, "field", DEFAULT_FIELD) != DEFAULT_FIELD:

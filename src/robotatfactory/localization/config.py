@@ -11,6 +11,8 @@ from dataclasses import field as dc_field
 from pathlib import Path
 
 from ..errors import ConfigError
+from ..settings import deep_update
+from ..settings import read_yaml as _read_yaml
 from .detect import DetectorConfig
 from .ekf import EkfConfig
 from .lidar import BeaconConfig
@@ -157,28 +159,8 @@ def from_dict(d: dict | None) -> LocalizationConfig:
     return cfg
 
 
-def deep_update(base: dict, over: dict) -> dict:
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(base.get(k), dict):
-            deep_update(base[k], v)
-        else:
-            base[k] = v
-    return base
-
-
 def read_yaml(path: str | Path) -> dict:
-    import yaml
-
-    try:
-        with open(path) as fh:
-            loaded = yaml.safe_load(fh) or {}
-    except OSError as e:
-        raise ConfigError(f"localization config {path}: {e}") from None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"localization config {path}: not valid YAML: {e}") from None
-    if not isinstance(loaded, dict):
-        raise ConfigError(f"localization config {path}: expected a mapping, got {type(loaded).__name__}")
-    return loaded
+    return _read_yaml(path, "localization config")
 
 
 def load_config(path: str | Path | None = None, overrides: dict | None = None) -> LocalizationConfig:

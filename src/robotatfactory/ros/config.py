@@ -367,32 +367,3 @@ def _check_field(name: str) -> None:
         load_field(name)
     except (FieldError, FileNotFoundError) as e:
         raise ConfigError(f"parameter ~field: {e}") from None
-
-
-def parse_set(items: list[str]) -> dict:
-    """``["udp/port=9999", "camera/enabled=false"]`` to a nested dict; values parsed as YAML scalars."""
-    import yaml
-
-    out: dict = {}
-    for it in items or []:
-        if "=" not in it:
-            raise ConfigError(f"--set {it!r}: expected NAME=VALUE, e.g. camera/fx=283.5")
-        k, v = it.split("=", 1)
-        keys = [s for s in k.strip().lstrip("~").split("/") if s]
-        if not keys:
-            raise ConfigError(f"--set {it!r}: empty parameter name")
-        d = out
-        for s in keys[:-1]:
-            d = d.setdefault(s, {})
-        d[keys[-1]] = yaml.safe_load(v) if v.strip() else ""
-    return out
-
-
-def deep_update(a: dict, b: dict) -> dict:
-    """``b`` onto ``a`` recursively (both nested dicts); returns ``a``."""
-    for k, v in b.items():
-        if isinstance(v, dict) and isinstance(a.get(k), dict):
-            deep_update(a[k], v)
-        else:
-            a[k] = v
-    return a
