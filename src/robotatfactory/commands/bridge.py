@@ -20,21 +20,15 @@ examples:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", metavar="FILE", help="YAML parameter file (same shape as config/bridge.yaml)")
-    parser.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
-                        help="set one parameter, e.g. udp/port=9811 (repeatable)")
+    from ..ros.cli import add_node_arguments, add_settings_arguments
+
+    add_settings_arguments(parser, "config/bridge.yaml", "udp/port=9811")
     parser.add_argument("--sim-host", metavar="HOST", help="accept SensorFrames from this host only ('*': any)")
     parser.add_argument("--port", type=int, metavar="PORT", help="UDP port to listen on (default 9810)")
     cam = parser.add_mutually_exclusive_group()
     cam.add_argument("--camera", metavar="ENDPOINT", help="ZMQ endpoint of the camera (default tcp://127.0.0.1:9899)")
     cam.add_argument("--no-camera", action="store_true", help="do not subscribe to the camera")
-    parser.add_argument("--ns", metavar="NS", default="", help="ROS namespace of the node and its topics")
-    parser.add_argument("--frame-prefix", metavar="PREFIX", help="prefix of the robot's TF frames (robot1/base_link)")
-    parser.add_argument("--name", default="raf_bridge", help="node name (default raf_bridge)")
-    parser.add_argument("--no-sim-time", action="store_true",
-                        help="do not set /use_sim_time (the bridge publishes /clock in any case)")
-    parser.add_argument("--roscore", action="store_true", help="start a private roscore on a free port")
-    parser.add_argument("--print-params", action="store_true", help="print the resolved parameters as YAML and exit")
+    add_node_arguments(parser, "raf_bridge")
 
 
 def build_params(args) -> dict:

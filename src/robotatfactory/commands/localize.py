@@ -21,15 +21,10 @@ examples:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", metavar="FILE", help="YAML settings (same shape as config/localization.yaml)")
-    parser.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
-                        help="set one setting, e.g. node/use_lidar=false (repeatable)")
-    parser.add_argument("--ns", metavar="NS", default="", help="ROS namespace of the node and its topics")
-    parser.add_argument("--frame-prefix", metavar="PREFIX", help="prefix of the robot's TF frames (robot1/base_link)")
-    parser.add_argument("--name", default="raf_localization", help="node name (default raf_localization)")
-    parser.add_argument("--no-sim-time", action="store_true", help="do not set /use_sim_time")
-    parser.add_argument("--roscore", action="store_true", help="start a private roscore on a free port")
-    parser.add_argument("--print-params", action="store_true", help="print the resolved settings as YAML and exit")
+    from ..ros.cli import add_node_arguments, add_settings_arguments
+
+    add_settings_arguments(parser, "config/localization.yaml", "node/use_lidar=false")
+    add_node_arguments(parser, "raf_localization")
 
 
 def build_settings(args) -> dict:

@@ -46,7 +46,7 @@ from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
 from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
 from ..simtwo.timing import SimClock, SweepAssembler
 from . import messages as rm
-from .cli import read_private_params
+from .cli import read_private_params, spin_node
 from .config import BridgeConfig, load_config
 from .udp import TimestampedUDP
 
@@ -439,16 +439,7 @@ class Bridge:
 
 
 def main(argv: list[str] | None = None) -> int:
-    rospy.init_node("raf_bridge", argv=argv if argv is not None else sys.argv, disable_signals=False)
-    try:
-        cfg = load_config(read_private_params())
-        bridge = Bridge(cfg).start()
-    except ConfigError as e:
-        rospy.logfatal(f"bridge: {e}")
-        return 2
-    rospy.spin()
-    bridge.stop()
-    return 0
+    return spin_node("raf_bridge", lambda: Bridge(load_config(read_private_params())).start(), argv)
 
 
 if __name__ == "__main__":

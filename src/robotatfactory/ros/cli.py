@@ -1,8 +1,26 @@
 """What ``raf bridge`` and ``raf localize`` share: a master, the node's parameters, init, spin, clean-up."""
 from __future__ import annotations
 
+import argparse
 import sys
 from typing import Callable
+
+
+def add_node_arguments(parser: argparse.ArgumentParser, default_name: str) -> None:
+    """The options every node command takes, added after the command's own."""
+    parser.add_argument("--ns", metavar="NS", default="", help="ROS namespace of the node and its topics")
+    parser.add_argument("--frame-prefix", metavar="PREFIX", help="prefix of the robot's TF frames (robot1/base_link)")
+    parser.add_argument("--name", default=default_name, help=f"node name (default {default_name})")
+    parser.add_argument("--no-sim-time", action="store_true",
+                        help="do not set /use_sim_time (the bridge publishes /clock in any case)")
+    parser.add_argument("--roscore", action="store_true", help="start a private roscore on a free port")
+    parser.add_argument("--print-params", action="store_true", help="print the resolved settings as YAML and exit")
+
+
+def add_settings_arguments(parser: argparse.ArgumentParser, config_file: str, example: str) -> None:
+    parser.add_argument("--config", metavar="FILE", help=f"YAML settings (same shape as {config_file})")
+    parser.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
+                        help=f"set one setting, e.g. {example} (repeatable)")
 
 
 def read_private_params() -> dict:
@@ -43,4 +61,24 @@ def run_node(args, who: str, params: dict, make_node: Callable[[], object], star
         node.stop()
         if master is not None:
             master.stop()
+    return 0
+
+
+def spin_node(name: str, make_node: Callable[[], object], argv: list[str] | None = None) -> int:
+    """A node's ``main`` under roslaunch: init, build from the private parameters, spin, stop.
+
+    A bad parameter (ConfigError from ``make_node``) is logged as fatal and ends the node with exit code 2.
+    """
+    import rospy
+
+    from ..errors import ConfigError
+
+    rospy.init_node(name, argv=argv if argv is not None else sys.argv)
+    try:
+        node = make_node()
+    except ConfigError as e:
+        rospy.logfatal(f"{name}: {e}")
+        return 2
+    rospy.spin()
+    node.stop()
     return 0

@@ -37,7 +37,7 @@ from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from ..robot import load_robot
 from . import messages as rm
-from .cli import read_private_params
+from .cli import read_private_params, spin_node
 
 
 class LocalizationNode:
@@ -358,15 +358,7 @@ class LocalizationNode:
 
 
 def main(argv: list[str] | None = None) -> int:
-    rospy.init_node("raf_localization", argv=argv if argv is not None else sys.argv)
-    try:
-        node = LocalizationNode(from_dict(read_private_params())).start()
-    except ConfigError as e:
-        rospy.logfatal(f"localization: {e}")
-        return 2
-    rospy.spin()
-    node.stop()
-    return 0
+    return spin_node("raf_localization", lambda: LocalizationNode(from_dict(read_private_params())).start(), argv)
 
 
 if __name__ == "__main__":
