@@ -32,17 +32,25 @@ class CameraSpec:
     def K(self) -> np.ndarray:
         return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
 
-    def base_to_optical(self) -> np.ndarray:
-        """4x4 transform base_link <- camera_optical (optical: x right, y down, z forward)."""
+    def base_to_link(self) -> np.ndarray:
+        """4x4 transform base_link <- camera_link (x forward, pitched down by ``pitch_down_deg``)."""
         p = math.radians(self.pitch_down_deg)
-        # camera_link: x forward, pitched down by p about base y
         c, s = math.cos(p), math.sin(p)
-        R_link = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-        R_opt = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]])  # camera_link <- optical
         T = np.eye(4)
-        T[:3, :3] = R_link @ R_opt
+        T[:3, :3] = [[c, 0, s], [0, 1, 0], [-s, 0, c]]
         T[:3, 3] = self.xyz
         return T
+
+    @staticmethod
+    def link_to_optical() -> np.ndarray:
+        """4x4 rotation camera_link <- camera_optical (optical: x right, y down, z forward; REP 103)."""
+        T = np.eye(4)
+        T[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]
+        return T
+
+    def base_to_optical(self) -> np.ndarray:
+        """4x4 transform base_link <- camera_optical."""
+        return self.base_to_link() @ self.link_to_optical()
 
 
 @dataclass(frozen=True)

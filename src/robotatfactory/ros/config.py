@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import ConfigError
-from ..robot import RobotSpec, load_robot
+from ..robot import CameraSpec, RobotSpec, load_robot
 
 #: Topic names (relative: a namespace puts each robot's bridge in its own space). ``/clock`` and
 #: ``/diagnostics`` are global by ROS convention.
@@ -247,6 +247,12 @@ class BridgeConfig:
     log_period: float
     topics: dict
     frames: dict  # final frame ids, prefix applied
+
+    @property
+    def camera(self) -> CameraSpec:
+        """The camera's mount and intrinsics as set by the parameters."""
+        return CameraSpec(self.camera_xyz, self.camera_pitch_down_deg, self.width, self.height, self.fx, self.fy,
+                          self.cx, self.cy, self.bottom_up, self.render_fps, self.decimation)
 
     @property
     def control_period_ms(self) -> int:

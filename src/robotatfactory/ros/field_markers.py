@@ -5,7 +5,6 @@ every ArUco marker as a black square with a white inner square (a target-like "t
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
@@ -92,14 +91,7 @@ def robot_static_transforms(cfg) -> list:
     """base_link -> laser, base_link -> camera_link (pitched down), camera_link -> camera_optical."""
     T_laser = np.eye(4)
     T_laser[:3, 3] = cfg.lidar_xyz
-    p = math.radians(cfg.camera_pitch_down_deg)
-    c, s = math.cos(p), math.sin(p)
-    T_link = np.eye(4)
-    T_link[:3, :3] = [[c, 0, s], [0, 1, 0], [-s, 0, c]]
-    T_link[:3, 3] = cfg.camera_xyz
-    T_opt = np.eye(4)
-    T_opt[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]
     f = cfg.frames
     return [transform(f["base_link"], f["laser"], T_laser),
-            transform(f["base_link"], f["camera_link"], T_link),
-            transform(f["camera_link"], f["camera_optical"], T_opt)]
+            transform(f["base_link"], f["camera_link"], cfg.camera.base_to_link()),
+            transform(f["camera_link"], f["camera_optical"], cfg.camera.link_to_optical())]
