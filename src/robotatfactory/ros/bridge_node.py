@@ -13,7 +13,8 @@ Threads of this process (none of them ever blocks another):
 The camera (ZMQ -> ``camera/image_raw``, ``camera/camera_info``) runs in a child process, the node
 ``<name>_camera`` (:mod:`.camera_node`), so that 1.2 MB frames never hold this process's GIL.
 
-The algorithms are in ``robotatfactory.simtwo.stream``, ``robotatfactory.simtwo.timing`` and
+The algorithms are in ``robotatfactory.simtwo.stream``, ``robotatfactory.simtwo.timing``,
+``robotatfactory.simtwo.watchdog`` and
 ``robotatfactory.localization.odometry``; this module is wiring. See docs/bridge.md.
 """
 from __future__ import annotations
@@ -45,6 +46,7 @@ from ..simtwo.labels import LabelledValues
 from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
 from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
 from ..simtwo.timing import SimClock, SweepAssembler
+from ..simtwo.watchdog import CommandWatchdog
 from . import messages as rm
 from .cli import read_private_params, spin_node
 from .config import BridgeConfig, load_config
@@ -88,11 +90,7 @@ class Bridge:
         self.counts = {"replies": 0, "reply_errors": 0, "cmd_vel": 0, "cmd_vel_rejected": 0, "magnet_cmds": 0,
                        "watchdog_stops": 0, "scans": 0, "publish_errors": 0}
         self._cmd_lock = threading.Lock()
-        self._v = self._w = 0.0
-        self._have_cmd = False
-        self._cmd_ms: int | None = None  # simulation time (Tms) when the last cmd_vel arrived
-        self._magnet = False
-        self._watchdog_active = False
+        self.watchdog = CommandWatchdog(cfg.watchdog_timeout)  # under self._cmd_lock
         self._gt_prev = None
         self._map_odom_sent = False
         self._running = False
@@ -198,42 +196,27 @@ class Bridge:
             self._warn("cmd_vel", f"bridge: ignoring cmd_vel with a non-finite value (v={v}, w={w})")
             return
         with self._cmd_lock:
-            self._v, self._w = v, w
-            self._have_cmd = True
-            self._cmd_ms = self.tracker.last_time_ms  # None before the first frame: fresh at the next one
+            self.watchdog.set_velocity(v, w, self.tracker.last_time_ms)
             self.counts["cmd_vel"] += 1
 
     def _on_magnet(self, msg: Bool) -> None:
         with self._cmd_lock:
-            self._magnet = bool(msg.data)
+            self.watchdog.magnet = bool(msg.data)
             self.counts["magnet_cmds"] += 1
 
     def command_for(self, seq: int, time_ms: int) -> Command:
         """The reply to a frame: the latest cmd_vel unless older than the watchdog timeout (simulation time)."""
         with self._cmd_lock:
-            fresh = False
-            if self._have_cmd:
-                if self._cmd_ms is None:
-                    self._cmd_ms = time_ms
-                age = time_ms - self._cmd_ms
-                fresh = 0 <= age <= self.cfg.watchdog_timeout * 1000
-                if not fresh and not self._watchdog_active:
-                    self._watchdog_active = True
-                    self.counts["watchdog_stops"] += 1
-                    self._warn("watchdog", f"bridge: cmd_vel is {age / 1000:.2f} s old (simulation time) > "
-                                           f"{self.cfg.watchdog_timeout} s: sending V = W = 0")
-                elif fresh:
-                    self._watchdog_active = False
-            v, w = (self._v, self._w) if fresh else (0.0, 0.0)
-            return Command(v, w, self._magnet, seq)
+            cmd, tripped = self.watchdog.reply(seq, time_ms)
+            if tripped:
+                self.counts["watchdog_stops"] += 1
+                self._warn("watchdog", f"bridge: cmd_vel is {self.watchdog.age_ms(time_ms) / 1000:.2f} s old "
+                                       f"(simulation time) > {self.cfg.watchdog_timeout} s: sending V = W = 0")
+            return cmd
 
     def _reset_commands(self) -> None:
         with self._cmd_lock:
-            self._v = self._w = 0.0
-            self._have_cmd = False
-            self._cmd_ms = None
-            self._magnet = False
-            self._watchdog_active = False
+            self.watchdog.reset()
 
     def _warn(self, key: str, text: str) -> None:
         suffix = self.log(key)
@@ -425,14 +408,15 @@ class Bridge:
         st1 = rm.diagnostic_status(f"{name}: sensor stream", level, text, hw, vals)
         # commands
         with self._cmd_lock:
-            age = (ms - self._cmd_ms) / 1000 if (ms is not None and self._cmd_ms is not None) else -1.0
-            vals = {"cmd_vel_age_sim_s": age, "watchdog_active": self._watchdog_active,
+            wd = self.watchdog
+            age_ms = wd.age_ms(ms)
+            vals = {"cmd_vel_age_sim_s": -1.0 if age_ms is None else age_ms / 1000, "watchdog_active": wd.stopping,
                     "watchdog_stops": c["watchdog_stops"], "cmd_vel_received": c["cmd_vel"],
-                    "cmd_vel_rejected": c["cmd_vel_rejected"], "magnet_on": self._magnet,
-                    "v": self._v, "w": self._w}
-            level = DiagnosticStatus.WARN if self._watchdog_active else DiagnosticStatus.OK
+                    "cmd_vel_rejected": c["cmd_vel_rejected"], "magnet_on": wd.magnet,
+                    "v": wd.v, "w": wd.w}
+            level = DiagnosticStatus.WARN if wd.stopping else DiagnosticStatus.OK
             text = (f"watchdog: cmd_vel older than {cfg.watchdog_timeout} s, sending V = W = 0"
-                    if self._watchdog_active else ("following cmd_vel" if self._have_cmd else "no cmd_vel yet"))
+                    if wd.stopping else ("following cmd_vel" if wd.have_velocity else "no cmd_vel yet"))
         st3 = rm.diagnostic_status(f"{name}: commands", level, text, hw, vals)
         arr.status = [st1, st3]
         return arr
