@@ -99,9 +99,9 @@ class Recorder:
     @staticmethod
     def _planar(msg) -> tuple[float, float, float, float]:
         p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
-        q = p.orientation
-        th = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
-        return (msg.header.stamp.to_sec(), p.position.x, p.position.y, th)
+        from ..ros.messages import quaternion_yaw
+
+        return (msg.header.stamp.to_sec(), p.position.x, p.position.y, quaternion_yaw(p.orientation))
 
     def _rec(self, key):
         def cb(msg):
@@ -232,12 +232,13 @@ def analyse(d: dict, done_t: float | None) -> tuple[dict, dict]:
         # consistency of the EKF's covariance: mean normalised error squared over the drive (3 expected)
         a = d["ekf"]
         a = a[a[:, 0] <= t_end + 1e-9]
+        from ..localization.geometry import wrap_angle
         from ..localization.metrics import interpolate
 
         ref = interpolate(a[:, 0], t_gt, P_gt)
         ok = np.all(np.isfinite(ref), axis=1)
         dd = a[ok, 1:4] - ref[ok]
-        dd[:, 2] = (dd[:, 2] + math.pi) % (2 * math.pi) - math.pi
+        dd[:, 2] = wrap_angle(dd[:, 2])
         var = a[ok, 4:7]
         out["ekf_nees_diag_mean"] = float(np.mean(np.sum(dd ** 2 / np.maximum(var, 1e-18), axis=1)))
     ekf_rmse = out.get("ekf_position_rmse_m", math.nan)

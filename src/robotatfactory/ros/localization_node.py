@@ -21,7 +21,7 @@ from collections import Counter
 import numpy as np
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, TransformStamped
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
 from tf2_msgs.msg import TFMessage
@@ -32,7 +32,7 @@ from ..field import load_field
 from ..localization import reasons
 from ..localization.config import LocalizationConfig, from_dict
 from ..localization.ekf import Ekf
-from ..localization.geometry import inv, se2_matrix
+from ..localization.geometry import inv, matrix_se2, se2_matrix
 from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from ..robot import load_robot
@@ -136,9 +136,7 @@ class LocalizationNode:
     def on_odom(self, msg: Odometry) -> None:
         t = msg.header.stamp.to_sec()
         p = msg.pose.pose
-        q = p.orientation
-        theta = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
-        pose = (p.position.x, p.position.y, theta)
+        pose = (p.position.x, p.position.y, rm.quaternion_yaw(p.orientation))
         if not all(math.isfinite(v) for v in (t,) + pose):
             self.counts["bad_odom"] += 1
             return
@@ -172,15 +170,9 @@ class LocalizationNode:
         m.pose.covariance = rm.pose_cov6(P)
         self.pub_pose.publish(m)
         if self.cfg.node.publish_tf:
-            T = se2_matrix(*x) @ inv(se2_matrix(*odom_pose))  # map <- odom
-            tf = TransformStamped()
-            tf.header.stamp = rm.stamp_s(t + self.cfg.node.tf_future_s)
-            tf.header.frame_id = self.frames["map"]
-            tf.child_frame_id = self.frames["odom"]
-            tf.transform.translation.x, tf.transform.translation.y = float(T[0, 3]), float(T[1, 3])
-            yaw = math.atan2(T[1, 0], T[0, 0])
-            tf.transform.rotation.z, tf.transform.rotation.w = math.sin(yaw / 2), math.cos(yaw / 2)
-            self.pub_tf.publish(TFMessage([tf]))
+            map_odom = matrix_se2(se2_matrix(*x) @ inv(se2_matrix(*odom_pose)))  # map <- odom (REP 105)
+            self.pub_tf.publish(TFMessage([rm.planar_transform(self.frames["map"], self.frames["odom"], *map_odom,
+                                                               rm.stamp_s(t + self.cfg.node.tf_future_s))]))
 
     def on_image(self, msg: Image) -> None:
         t = msg.header.stamp.to_sec()
@@ -227,13 +219,8 @@ class LocalizationNode:
             with self.lock:
                 fp = self.ekf.pose()
             out = draw_debug(img if img.ndim == 3 else img, res, self.loc.K, nc.debug_axis_m, fp, nc.filter_method)
-            d = Image()
-            d.header = msg.header
-            d.height, d.width = out.shape[:2]
-            d.encoding = "bgr8"
-            d.step = d.width * 3
-            d.data = out.tobytes()
-            self.pub_debug.publish(d)
+            self.pub_debug.publish(rm.image_bgr8(msg.header.stamp, msg.header.frame_id, out.tobytes(),
+                                                 out.shape[1], out.shape[0]))
 
     def _fix_msg(self, e, stamp) -> PoseWithCovarianceStamped:
         m = PoseWithCovarianceStamped()

@@ -29,6 +29,11 @@ def yaw_quaternion(theta: float) -> Quaternion:
     return Quaternion(0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2))
 
 
+def quaternion_yaw(q: Quaternion) -> float:
+    """Heading (rad) of a geometry_msgs/Quaternion: the yaw of the rotated x axis."""
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
 def matrix_quaternion(R: np.ndarray) -> Quaternion:
     from scipy.spatial.transform import Rotation
 

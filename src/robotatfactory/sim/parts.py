@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+from .scene import quat_yaw
+
 # display colours by type letter; the competition package's PartType.rgba wins when it is installed
 _FALLBACK_RGBA = {"R": (0.85, 0.1, 0.1, 1.0), "G": (0.1, 0.7, 0.15, 1.0), "B": (0.1, 0.25, 0.85, 1.0)}
 
@@ -58,9 +60,7 @@ class PartBodies:
     def pose(self, data, pid: int) -> tuple[float, float, float]:
         """(x, y, facing) of a part from its free joint."""
         a = self.qadr[pid]
-        w, qx, qy, qz = data.qpos[a + 3:a + 7]
-        return float(data.qpos[a]), float(data.qpos[a + 1]), math.atan2(2 * (w * qz + qx * qy),
-                                                                           1 - 2 * (qy * qy + qz * qz))
+        return float(data.qpos[a]), float(data.qpos[a + 1]), quat_yaw(data.qpos[a + 3:a + 7])
 
     def all_xy(self, data) -> dict[int, tuple[float, float]]:
         return {pid: self.xy(data, pid) for pid in self.ids}

@@ -83,7 +83,14 @@ class SceneInfo:
 
 
 def yaw_quat(theta: float) -> list[float]:
+    """MuJoCo quaternion (w, x, y, z) of a rotation by ``theta`` about z."""
     return [math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2)]
+
+
+def quat_yaw(q) -> float:
+    """Heading (rad) of a MuJoCo quaternion (w, x, y, z): the yaw of the rotated x axis."""
+    w, x, y, z = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def mat_quat(R: np.ndarray) -> list[float]:

@@ -40,11 +40,6 @@ BEAM_BACKOFF = 0.005  # m: beams start this far behind their origin (a ray start
 #                       surface would miss it); hits are measured from the nominal origin
 
 
-def _yaw(q) -> float:
-    w, x, y, z = q
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 class Simulator:
     """One robot on the RobotAtFactory 4.0 field. See the module docstring.
 
@@ -177,7 +172,7 @@ class Simulator:
         """Ground truth (x, y, theta) of base_link in the field frame (m, m, rad in (-pi, pi])."""
         q = self.data.qpos
         a = self._qa
-        return float(q[a]), float(q[a + 1]), _yaw(q[a + 3:a + 7])
+        return float(q[a]), float(q[a + 1]), sc.quat_yaw(q[a + 3:a + 7])
 
     @property
     def wheel_speeds(self) -> tuple[float, float]:
@@ -303,7 +298,7 @@ class Simulator:
     def _log_lidar_pose(self, slot: int) -> None:
         q = self.data.qpos
         a = self._qa
-        self._lidar.log_pose(slot, q[a], q[a + 1], _yaw(q[a + 3:a + 7]))
+        self._lidar.log_pose(slot, q[a], q[a + 1], sc.quat_yaw(q[a + 3:a + 7]))
 
     def _run_reference(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
         """The physics steps of one cycle, written plainly with :class:`DCMotor` and :class:`SpeedPI`."""
