@@ -345,6 +345,26 @@ begin
   end;
 end;
 
+// The integer after label lbl; false and RepError when the label is missing or the value is not one
+function LabelInt(lbl: string; var v: integer): boolean;
+var s: string;
+begin
+  result := false;
+  if not FindLabel(lbl, s) then RepError := 'label ' + lbl + ' is missing'
+  else if not ParseIntStr(s, v) then RepError := lbl + ' is not an integer'
+  else result := true;
+end;
+
+// The real number after label lbl; false and RepError as LabelInt
+function LabelReal(lbl: string; var v: double): boolean;
+var s: string;
+begin
+  result := false;
+  if not FindLabel(lbl, s) then RepError := 'label ' + lbl + ' is missing'
+  else if not ParseRealStr(s, v) then RepError := lbl + ' is not a real number'
+  else result := true;
+end;
+
 // Decodes a Command (RAF, Seq, V, W, S) into RepSeq, RepV, RepW, RepMagnet; false and RepError
 // when anything is missing or malformed (the whole reply is then ignored)
 function DecodeReply(txt: string): boolean;
@@ -371,42 +391,14 @@ begin
     RepError := 'protocol version ' + IntToStr(raf) + '; this script speaks version ' + IntToStr(PROTOCOL_VERSION);
     exit;
   end;
-  if not FindLabel('V', s) then begin
-    RepError := 'label V is missing';
-    exit;
-  end;
-  if not ParseRealStr(s, RepV) then begin
-    RepError := 'V is not a real number';
-    exit;
-  end;
-  if not FindLabel('W', s) then begin
-    RepError := 'label W is missing';
-    exit;
-  end;
-  if not ParseRealStr(s, RepW) then begin
-    RepError := 'W is not a real number';
-    exit;
-  end;
-  if not FindLabel('S', s) then begin
-    RepError := 'label S is missing';
-    exit;
-  end;
-  if not ParseIntStr(s, RepMagnet) then begin
-    RepError := 'S is not an integer';
-    exit;
-  end;
+  if not LabelReal('V', RepV) then exit;
+  if not LabelReal('W', RepW) then exit;
+  if not LabelInt('S', RepMagnet) then exit;
   if (RepMagnet <> 0) and (RepMagnet <> 1) then begin
     RepError := 'S is not 0 or 1';
     exit;
   end;
-  if not FindLabel('Seq', s) then begin
-    RepError := 'label Seq is missing';
-    exit;
-  end;
-  if not ParseIntStr(s, RepSeq) then begin
-    RepError := 'Seq is not an integer';
-    exit;
-  end;
+  if not LabelInt('Seq', RepSeq) then exit;
   result := true;
 end;
 
