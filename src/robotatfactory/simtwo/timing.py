@@ -40,6 +40,20 @@ Method (``CameraStamper``), for a camera frame arriving at wall time ``a``:
   bracket's SensorFrame (80 ms: at most two ticks of the phase, 66.7 ms apart), the one not used by an
   earlier frame; only when both are free (the earlier frame was lost) does the bracket choose. A bracket the
   grid corrects is counted (``rebracketed``).
+* **Sequence.** Once a frame has its tick, the next frame's tick is that one plus ``decimation`` times
+  (1 + the frames the receiver skipped in between, which the caller passes as ``skipped``): every
+  published tick reaches the receiver, in order, so counting frames is exact while the receive queue does
+  not overflow. Counting is what keeps stamps exact when the camera's delivery is delayed by load (a frame
+  a whole cycle late on the wall clock has a wrong bracket, but its place in the sequence is right). The
+  sequence is checked against the arrival times and dropped (``resyncs``: the tick is looked for again
+  from the brackets) when its
+  tick is later than the frame can have been rendered (after the cycle that follows the last SensorFrame
+  received before it) or more than a cycle after its bracket, when the frame arrived more than
+  ``max_delay`` wall seconds after the SensorFrame that followed the counted tick, when the brackets lock
+  onto another phase, or when ``max_disagree`` frames in a row fall outside their brackets. A delay by load
+  disturbs the brackets of a few frames in a row; a frame lost where the receiver cannot count it (or a
+  render the simulator skipped) shifts every stamp that follows one grid step early until one of these
+  checks fires (a few frames: ``tests/test_bridge_timing.py`` measures it).
 * **Fallbacks.** With several phases left, the stamp is the middle of the remaining candidate ticks
   (``"grid-partial"``, error at most half their spread, <= 20 ms). Before ``min_frames`` frames, or when no
   phase is consistent with the recent frames (a render clock not locked to simulation time, as in SimTwo's
@@ -99,6 +113,8 @@ class StampCounters:
     conflicts: int = 0  # stamp not after the previous one: nudged forward
     bracket_misses: int = 0  # the learned phase has no free render tick near the frame (stamped "interval")
     rebracketed: int = 0  # the grid put the frame in the other cycle than the bracket said
+    sequenced: int = 0  # exact stamps that came from counting frames after the previous tick
+    resyncs: int = 0  # the frame count contradicted the arrival times: the tick was looked for again
     no_clock: int = 0  # frames before any SensorFrame: not stamped
 
     def as_dict(self) -> dict:
@@ -115,14 +131,19 @@ class CameraStamper:
 
     def __init__(self, period_ms: int = 40, render_fps: float = 60.0, decimation: int = 4,
                  max_wait: float = 0.02, window: int = 16, min_frames: int = 8, history: int = 512,
-                 use_grid: bool = True, rule: str = "nearest"):
+                 use_grid: bool = True, rule: str = "nearest", max_disagree: int = 5,
+                 max_delay: float = 0.15):
         if period_ms <= 0 or render_fps <= 0 or decimation < 1:
             raise ValueError(f"period_ms {period_ms}, render_fps {render_fps} must be > 0, decimation >= 1")
         if max_wait < 0:
             raise ValueError("max_wait must be >= 0")
         if rule not in ("nearest", "following"):
             raise ValueError(f"rule {rule!r}: 'nearest' or 'following'")
+        if max_disagree < 1 or max_delay <= 0:
+            raise ValueError(f"max_disagree {max_disagree} must be >= 1, max_delay {max_delay} > 0")
         self.rule = rule
+        self.max_disagree = int(max_disagree)
+        self.max_delay = float(max_delay)
         self.period_ms = int(period_ms)
         self.fps = _fraction(render_fps)
         self.decimation = int(decimation)
@@ -136,6 +157,8 @@ class CameraStamper:
         self._tms: deque[int] = deque(maxlen=history)
         self._phases: deque[frozenset] = deque(maxlen=self.window)
         self._prev: float | None = None
+        self._tick: int | None = None  # render tick of the last frame stamped on the grid
+        self._disagree = 0  # consecutive frames whose counted tick was outside their bracket
 
     @property
     def grid_spacing(self) -> float:
@@ -149,6 +172,8 @@ class CameraStamper:
             self._tms.clear()
             self._phases.clear()
             self._prev = None
+            self._tick = None
+            self._disagree = 0
 
     def on_sensor_frame(self, time_ms: int, arrival: float) -> None:
         """Record an accepted SensorFrame (``Tms``) and its arrival (monotonic seconds)."""
@@ -215,8 +240,13 @@ class CameraStamper:
             hi = T[i] if overtaken else T[i] + P
         return hi - P, hi, overtaken
 
-    def stamp(self, arrival: float | None = None, now: float | None = None) -> StampEstimate | Pending | None:
-        """Estimate the render time of a camera frame that arrived at ``arrival`` (monotonic seconds)."""
+    def stamp(self, arrival: float | None = None, now: float | None = None,
+              skipped: int = 0) -> StampEstimate | Pending | None:
+        """Estimate the render time of a camera frame that arrived at ``arrival`` (monotonic seconds).
+
+        ``skipped``: frames the receiver got after the previous stamped frame and dropped unstamped (it keeps
+        only the newest); they still used render ticks.
+        """
         now = time.monotonic() if now is None else now
         arrival = now if arrival is None else arrival
         with self._lock:
@@ -232,41 +262,9 @@ class CameraStamper:
             if now > arrival:
                 c.waited += 1
             ticks = self._ticks(lo, hi)
-            d = self.decimation
-            self._phases.append(frozenset(k % d for k in ticks))
-            phase, strict = self._locked() if self.use_grid else (None, set())
-            if len(self._phases) < self.min_frames:
-                strict = set()  # too few frames to trust the render grid yet
-            lo_s, hi_s = lo / 1000, hi / 1000
-            est = None
-            cand: list[int] = []
-            if phase is not None and self.grid_spacing * 1000 <= self.period_ms:
-                cand = [k for k in ticks if k % d == phase]  # several published ticks per cycle
-                if not cand:
-                    c.bracket_misses += 1
-            elif phase is not None:
-                t_prev = hi if overtaken else lo  # the SensorFrame before the frame; its cycle and the next
-                prev = self._prev if self._prev is not None else float("-inf")
-                wide = [k for k in self._ticks(t_prev - self.period_ms, t_prev + self.period_ms)
-                        if k % d == phase and float(k / self.fps) > prev + 1e-9]
-                cand = wide if len(wide) <= 1 else [k for k in wide if lo < float(k / self.fps) * 1000 <= hi + 1e-9]
-                if not cand:
-                    c.bracket_misses += 1  # the learned phase has no free tick near this frame
-                elif len(cand) == 1:
-                    k_ms = float(cand[0] / self.fps) * 1000
-                    if not (lo < k_ms <= hi + 1e-9):
-                        c.rebracketed += 1
-                        lo_s, hi_s = ((hi, hi + self.period_ms) if k_ms > hi else (lo - self.period_ms, lo))
-                        lo_s, hi_s = lo_s / 1000, hi_s / 1000
-            elif strict:
-                cand = [k for k in ticks if k % d in strict]
-            if len(cand) == 1 and phase is not None:
-                est = StampEstimate(float(cand[0] / self.fps), lo_s, hi_s, 0.0, "grid", phase)
-            elif cand:  # several candidate ticks (phase not settled, or several published ticks per cycle)
-                t0, t1 = float(cand[0] / self.fps), float(cand[-1] / self.fps)
-                est = StampEstimate((t0 + t1) / 2, lo_s, hi_s, (t1 - t0) / 2, "grid-partial", phase)
-            if est is None:
-                est = StampEstimate((lo + hi) / 2000, lo / 1000, hi / 1000, self.period_ms / 2000, "interval")
+            self._phases.append(frozenset(k % self.decimation for k in ticks))
+            est = self._from_sequence(arrival, lo, hi, skipped) or self._from_brackets(lo, hi, overtaken, ticks)
+            self._tick = round(est.stamp * self.fps) if est.method == "grid" else None
             if est.method == "grid":
                 c.grid += 1
             elif est.method == "grid-partial":
@@ -278,8 +276,67 @@ class CameraStamper:
                 nudged = self._prev + 1e-3
                 est = StampEstimate(nudged, est.lo, est.hi, est.error_bound + (nudged - est.stamp), est.method,
                                     est.phase)
+                self._tick = None  # a nudged stamp is no tick to count from
             self._prev = est.stamp
             return est
+
+    def _from_sequence(self, arrival: float, lo: int, hi: int, skipped: int) -> StampEstimate | None:
+        """The tick after the previous frame's (plus the skipped frames), if the arrival times allow it."""
+        if self._tick is None or not self.use_grid or self.grid_spacing * 1000 <= self.period_ms:
+            return None
+        d = self.decimation
+        k = self._tick + d * (1 + max(0, int(skipped)))
+        t_ms = Fraction(k) / self.fps * 1000
+        i = bisect.bisect_right(self._arrivals, arrival) - 1
+        upper = self._tms[i] + self.period_ms if i >= 0 else self._tms[0]  # rendered before this at the latest
+        j = bisect.bisect_left(self._tms, math.ceil(t_ms))  # the SensorFrame sent just after tick k
+        late = j < len(self._tms) and arrival - self._arrivals[j] > self.max_delay
+        phase, _ = self._locked()
+        self._disagree = 0 if lo < t_ms <= hi else self._disagree + 1
+        if t_ms > min(upper, hi + self.period_ms) or late or (phase is not None and phase != k % d) \
+                or self._disagree >= self.max_disagree:
+            self.counters.resyncs += 1
+            self._disagree = 0
+            return None
+        self.counters.sequenced += 1
+        if not lo < t_ms <= hi:
+            self.counters.rebracketed += 1
+        return StampEstimate(float(k / self.fps), lo / 1000, hi / 1000, 0.0, "grid", k % d)
+
+    def _from_brackets(self, lo: int, hi: int, overtaken: bool, ticks: list[int]) -> StampEstimate:
+        """The stamp from the bracket and the render phase the recent brackets agree on (if any)."""
+        c, d = self.counters, self.decimation
+        phase, strict = self._locked() if self.use_grid else (None, set())
+        if len(self._phases) < self.min_frames:
+            strict = set()  # too few frames to trust the render grid yet
+        lo_s, hi_s = lo / 1000, hi / 1000
+        cand: list[int] = []
+        if phase is not None and self.grid_spacing * 1000 <= self.period_ms:
+            cand = [k for k in ticks if k % d == phase]  # several published ticks per cycle
+            if not cand:
+                c.bracket_misses += 1
+        elif phase is not None:
+            t_prev = hi if overtaken else lo  # the SensorFrame before the frame; its cycle and the next
+            prev = self._prev if self._prev is not None else float("-inf")
+            wide = [k for k in self._ticks(t_prev - self.period_ms, t_prev + self.period_ms)
+                    if k % d == phase and float(k / self.fps) > prev + 1e-9]
+            cand = wide if len(wide) <= 1 else [k for k in wide if lo < float(k / self.fps) * 1000 <= hi + 1e-9]
+            if not cand:
+                c.bracket_misses += 1  # the learned phase has no free tick near this frame
+            elif len(cand) == 1:
+                k_ms = float(cand[0] / self.fps) * 1000
+                if not (lo < k_ms <= hi + 1e-9):
+                    c.rebracketed += 1
+                    lo_s, hi_s = ((hi, hi + self.period_ms) if k_ms > hi else (lo - self.period_ms, lo))
+                    lo_s, hi_s = lo_s / 1000, hi_s / 1000
+        elif strict:
+            cand = [k for k in ticks if k % d in strict]
+        if len(cand) == 1 and phase is not None:
+            return StampEstimate(float(cand[0] / self.fps), lo_s, hi_s, 0.0, "grid", phase)
+        if cand:  # several candidate ticks (phase not settled, or several published ticks per cycle)
+            t0, t1 = float(cand[0] / self.fps), float(cand[-1] / self.fps)
+            return StampEstimate((t0 + t1) / 2, lo_s, hi_s, (t1 - t0) / 2, "grid-partial", phase)
+        return StampEstimate((lo + hi) / 2000, lo / 1000, hi / 1000, self.period_ms / 2000, "interval")
 
 
 @dataclass
