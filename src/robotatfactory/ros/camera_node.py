@@ -9,9 +9,10 @@ camera stamping (``simtwo.timing.CameraStamper``) needs both streams' arrival ti
 (``time.monotonic()`` is system-wide). The bridge's writes are non-blocking: if this process stalls, timing
 messages are dropped, never the control path. This process exits when the bridge does (the socket closes).
 
-Threads: ZMQ receive (keeps only the newest frame, counts the skipped ones), publish (size check, stamp --
-which may wait up to ``~camera/max_wait`` for the SensorFrame that follows the frame --, flip, bgr8), timing
-reader, diagnostics (its own ``<node>: camera`` status on ``/diagnostics``).
+Threads: ZMQ receive (keeps only the newest frame, counts the skipped ones and hands the count on: the
+stamper counts render ticks), publish (size check, stamp -- which first applies any timing message still
+waiting in the socket and may wait up to ``~camera/max_wait`` for the SensorFrame that follows the frame --,
+flip, bgr8), timing reader, diagnostics (its own ``<node>: camera`` status on ``/diagnostics``).
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ import time
 
 TIMING = struct.Struct("<qd")  # Tms (or -1: reset), arrival (monotonic seconds)
 RESET = -1
+RCVHWM = 64  # camera frames queued in ZMQ before it drops any (77 MB at 640x480 BGRA)
 
 
 class CameraBridge:
@@ -37,12 +39,17 @@ class CameraBridge:
         self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
                                      use_grid=cfg.use_grid, rule=cfg.camera_bracket)
         self.timing_sock = timing_sock
+        if timing_sock is not None:
+            # non-blocking (not merely MSG_DONTWAIT: a socket in timeout mode, as rospy's default timeout
+            # makes new sockets, would wait for data anyway); the timing thread waits in select()
+            timing_sock.setblocking(False)
         self.rate = RateMeter()
         self.log = LogLimiter(cfg.log_period)
         self.counts = {"received": 0, "skipped": 0, "wrong_size": 0, "published": 0, "timing_messages": 0}
         self._mail = None
         self._cv = threading.Condition()
         self._timing_cv = threading.Condition()  # notified on every SensorFrame timing message
+        self._drain_lock = threading.Lock()  # one reader of the timing socket at a time, in order
         self._running = False
         self._threads: list[threading.Thread] = []
         self.parent_gone = threading.Event()
@@ -91,26 +98,38 @@ class CameraBridge:
 
     # -- the SensorFrame timing from the bridge --------------------------------------------------------------
     def _timing(self) -> None:
+        import select
+
+        while self._running and not self.parent_gone.is_set():
+            if select.select([self.timing_sock], [], [], 0.5)[0]:
+                self._drain_timing()
+
+    def _drain_timing(self) -> None:
+        """Apply every timing message waiting in the socket. Called by the timing thread and, before each
+        stamp, by the publishing thread: on a loaded machine the timing thread may not have run since the
+        SensorFrames that bracket a frame arrived, and a stamp must not be decided without them."""
         s = self.timing_sock
-        s.settimeout(0.5)
-        while self._running:
-            try:
-                data = s.recv(64)
-            except socket.timeout:
-                continue
-            except OSError:
-                data = b""
-            if not data:  # the bridge went away
-                self.parent_gone.set()
-                return
-            tms, arrival = TIMING.unpack(data[:TIMING.size])
-            self.counts["timing_messages"] += 1
-            if tms == RESET:
-                self.stamper.reset()
-            else:
-                self.stamper.on_sensor_frame(tms, arrival)
-            with self._timing_cv:
-                self._timing_cv.notify_all()
+        if s is None:
+            return
+        with self._drain_lock:
+            while True:
+                try:
+                    data = s.recv(64)
+                except BlockingIOError:
+                    return
+                except OSError:
+                    data = b""
+                if not data:  # the bridge went away
+                    self.parent_gone.set()
+                    return
+                tms, arrival = TIMING.unpack(data[:TIMING.size])
+                self.counts["timing_messages"] += 1
+                if tms == RESET:
+                    self.stamper.reset()
+                else:
+                    self.stamper.on_sensor_frame(tms, arrival)
+                with self._timing_cv:
+                    self._timing_cv.notify_all()
 
     # -- frames ------------------------------------------------------------------------------------------------
     def _rx(self) -> None:
@@ -118,7 +137,9 @@ class CameraBridge:
 
         ctx = zmq.Context.instance()
         sock = ctx.socket(zmq.SUB)
-        sock.setsockopt(zmq.RCVHWM, 2)
+        # a long queue: frames are counted, not lost unseen, while this process is held up (the stamper counts
+        # render ticks from frame to frame); the loop below still publishes only the newest
+        sock.setsockopt(zmq.RCVHWM, RCVHWM)
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.SUBSCRIBE, b"")
         sock.connect(self.cfg.camera_endpoint)
@@ -129,15 +150,19 @@ class CameraBridge:
                 msg = sock.recv(copy=False)
                 arrival = time.monotonic()
                 self.counts["received"] += 1
+                drained = 0
                 while sock.poll(0):  # keep only the newest frame
                     msg = sock.recv(copy=False)
                     arrival = time.monotonic()
                     self.counts["received"] += 1
-                    self.counts["skipped"] += 1
+                    drained += 1
                 with self._cv:
-                    if self._mail is not None:
-                        self.counts["skipped"] += 1
-                    self._mail = (arrival, msg)
+                    skipped = drained  # frames dropped unpublished since the last one handed on (for stamping)
+                    if self._mail is not None:  # the publisher has not taken the previous one: skipped too
+                        skipped += 1 + self._mail[2]
+                        drained += 1
+                    self.counts["skipped"] += drained
+                    self._mail = (arrival, msg, skipped)
                     self._cv.notify()
                 with self._timing_cv:  # a stamp waiting for its SensorFrame can decide now
                     self._timing_cv.notify_all()
@@ -155,21 +180,25 @@ class CameraBridge:
         expected = w * h * 4
         frame_id = cfg.frames["camera_optical"]
         info = rm.camera_info(rospy.Time(0), frame_id, w, h, cfg.fx, cfg.fy, cfg.cx, cfg.cy)
+        carried = 0  # skipped frames counted with a wrong-sized message, passed on to the next frame
         while self._running:
             with self._cv:
                 while self._mail is None and self._running:
                     self._cv.wait(0.2)
                 if self._mail is None:
                     continue
-                arrival, msg = self._mail
+                arrival, msg, skipped = self._mail
                 self._mail = None
+            skipped += carried
+            carried = 0
             buf = msg.buffer
             if buf.nbytes != expected:
+                carried = skipped  # not a frame of this camera: the frames skipped before it still count
                 self.counts["wrong_size"] += 1
                 self._warn("size", f"camera: ignoring a frame of {buf.nbytes} bytes (expected {w}x{h}x4 = "
                                    f"{expected}; ~camera/width, ~camera/height)")
                 continue
-            est = self._stamp(arrival)
+            est = self._stamp(arrival, skipped)
             if est is None:
                 self._warn("clock", "camera: frame before any SensorFrame: no simulation time to stamp it with, "
                                     "dropped")
@@ -184,19 +213,20 @@ class CameraBridge:
             self.counts["published"] += 1
             self.rate.tick(arrival)
 
-    def _stamp(self, arrival: float):
+    def _stamp(self, arrival: float, skipped: int):
         """The frame's stamp; waits (briefly) for the SensorFrame after it when the stamper needs it."""
         from ..simtwo.timing import Pending
 
         while True:
+            self._drain_timing()
             with self._timing_cv:
-                est = self.stamper.stamp(arrival)
+                est = self.stamper.stamp(arrival, skipped=skipped)
                 if not isinstance(est, Pending):
                     return est
                 if self._mail is not None:
                     # a newer frame has arrived: it was published after this frame's SensorFrame was sent,
                     # so waiting longer cannot tell more; decide now (this also keeps up with floods)
-                    return self.stamper.stamp(arrival, now=est.deadline)
+                    return self.stamper.stamp(arrival, now=est.deadline, skipped=skipped)
                 self._timing_cv.wait(max(0.0, est.deadline - time.monotonic()) + 1e-4)
 
     # -- diagnostics -------------------------------------------------------------------------------------------
