@@ -10,9 +10,8 @@ import numpy as np
 
 
 def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
-    """Wrap to [-pi, pi)."""
-    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi if isinstance(a, np.ndarray) else \
-        (a + math.pi) % (2 * math.pi) - math.pi
+    """Wrap to (-pi, pi] (the convention of the protocol's ``Theta`` and of ROS's yaw), scalars or arrays."""
+    return math.pi - (math.pi - a) % (2 * math.pi)
 
 
 def inv(T: np.ndarray) -> np.ndarray:

@@ -23,13 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-def wrap_angle(a: float) -> float:
-    """Angle to (-pi, pi]."""
-    a = math.fmod(a + math.pi, 2 * math.pi)
-    if a <= 0:
-        a += 2 * math.pi
-    return a - math.pi
+from .geometry import wrap_angle
 
 
 @dataclass(frozen=True)
