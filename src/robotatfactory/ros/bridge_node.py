@@ -48,7 +48,7 @@ from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
 from ..simtwo.timing import SimClock, SweepAssembler
 from ..simtwo.watchdog import CommandWatchdog
 from . import messages as rm
-from .cli import read_private_params, spin_node
+from .cli import publish_every, read_private_params, spin_node
 from .config import BridgeConfig, load_config
 from .udp import TimestampedUDP
 
@@ -358,15 +358,8 @@ class Bridge:
 
     # ---- diagnostics ---------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:
-        period = self.cfg.diag_period
-        next_t = time.monotonic()
-        while self._running and not rospy.is_shutdown():
-            next_t += period
-            try:
-                self.pub_diag.publish(self.diagnostics())
-            except rospy.ROSException:
-                pass
-            time.sleep(max(0.0, next_t - time.monotonic()))
+        publish_every(self.cfg.diag_period, lambda: self._running and not rospy.is_shutdown(), self.pub_diag,
+                      self.diagnostics, errors=(rospy.ROSException,))
 
     def diagnostics(self, now: float | None = None) -> DiagnosticArray:
         now = time.monotonic() if now is None else now

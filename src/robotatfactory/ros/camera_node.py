@@ -233,15 +233,10 @@ class CameraBridge:
     def _diag_loop(self) -> None:
         import rospy
 
-        period = self.cfg.diag_period
-        nxt = time.monotonic()
-        while self._running:
-            nxt += period
-            try:
-                self.pub_diag.publish(self.diagnostics())
-            except rospy.ROSException:
-                pass
-            time.sleep(max(0.0, nxt - time.monotonic()))
+        from .cli import publish_every
+
+        publish_every(self.cfg.diag_period, lambda: self._running, self.pub_diag, self.diagnostics,
+                      errors=(rospy.ROSException,))
 
     def diagnostics(self, now: float | None = None):
         import rospy

@@ -1,8 +1,10 @@
-"""What ``raf bridge`` and ``raf localize`` share: a master, the node's parameters, init, spin, clean-up."""
+"""What the nodes and their commands share: a master, the node's parameters, init, spin, clean-up, and the
+periodic diagnostics publisher."""
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from typing import Callable
 
 
@@ -82,3 +84,21 @@ def spin_node(name: str, make_node: Callable[[], object], argv: list[str] | None
     rospy.spin()
     node.stop()
     return 0
+
+
+def publish_every(period: float, running: Callable[[], bool], pub, make: Callable[[], object],
+                  errors: tuple = (), on_error: Callable[[Exception], None] | None = None) -> None:
+    """Publish ``make()`` on ``pub`` every ``period`` seconds of wall time while ``running()`` (a thread's body).
+
+    Wall time, not simulation time, so that diagnostics keep coming when the simulation stops. An exception
+    of a type in ``errors`` is passed to ``on_error`` (if given) and the loop goes on; others propagate.
+    """
+    nxt = time.monotonic()
+    while running():
+        nxt += period
+        try:
+            pub.publish(make())
+        except errors as e:
+            if on_error is not None:
+                on_error(e)
+        time.sleep(max(0.0, nxt - time.monotonic()))

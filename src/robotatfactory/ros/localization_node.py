@@ -37,7 +37,7 @@ from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from ..robot import load_robot
 from . import messages as rm
-from .cli import read_private_params, spin_node
+from .cli import publish_every, read_private_params, spin_node
 
 
 class LocalizationNode:
@@ -291,15 +291,9 @@ class LocalizationNode:
 
     # ------------------------------------------------------------------ diagnostics
     def _diag_loop(self) -> None:
-        period = self.cfg.node.diagnostics_period
-        nxt = time.monotonic()
-        while self._running and not rospy.is_shutdown():
-            nxt += period
-            try:
-                self.pub_diag.publish(self.diagnostics())
-            except Exception as e:  # noqa: BLE001
-                self._warn("diag", f"localization: diagnostics failed: {e!r}")
-            time.sleep(max(0.0, nxt - time.monotonic()))
+        publish_every(self.cfg.node.diagnostics_period, lambda: self._running and not rospy.is_shutdown(),
+                      self.pub_diag, self.diagnostics, errors=(Exception,),
+                      on_error=lambda e: self._warn("diag", f"localization: diagnostics failed: {e!r}"))
 
     def diagnostics(self) -> DiagnosticArray:
         name = rospy.get_name()
