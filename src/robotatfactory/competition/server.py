@@ -22,7 +22,7 @@ import time
 from typing import Callable
 
 from ..errors import ConfigError
-from ..simtwo.ports import LOCALHOST, SERVER_UDP_PORT
+from ..simtwo.ports import LOCALHOST, SERVER_UDP_PORT, bind_udp
 from ._ratelog import RateLimitedLog
 from .factory import Factory
 
@@ -121,13 +121,8 @@ class FactoryServer:
         """Bind the socket and serve from a daemon thread. Raises ConfigError if the address is taken."""
         if self._thread is not None:
             return self
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            sock.bind((self.host, self.port))
-        except OSError as e:
-            sock.close()
-            raise ConfigError(f"factory-state server cannot bind udp {self.host}:{self.port}: {e.strerror or e} "
-                              "(another server, e.g. raf sim, already there? choose another port)") from None
+        sock = bind_udp(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), self.host, self.port,
+                        "the factory-state server", "another server, e.g. raf sim, already there? choose another port")
         sock.settimeout(0.1)
         self._sock = sock
         self._stopping.clear()

@@ -39,7 +39,6 @@ from std_msgs.msg import Bool
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-from ..errors import ConfigError
 from ..localization.odometry import DiffDriveOdometry
 from ..simtwo import Command, ProtocolError, SensorFrame
 from ..simtwo.labels import LabelledValues
@@ -105,10 +104,7 @@ class Bridge:
     # ---- setup -----------------------------------------------------------------------------------------
     def start(self) -> "Bridge":
         cfg, t = self.cfg, self.cfg.topics
-        try:
-            self.udp = TimestampedUDP(cfg.bind_host, cfg.port)
-        except OSError as e:
-            raise ConfigError(f"cannot listen on UDP {cfg.bind_host}:{cfg.port} (~udp/bind_host, ~udp/port): {e}")
+        self.udp = TimestampedUDP(cfg.bind_host, cfg.port)  # ConfigError if the port is taken
         self.sock = self.udp.sock
         self.bound_port = self.udp.port
         # the GIL is handed between threads every 5 ms by default: a camera frame being converted would

@@ -4,13 +4,15 @@ The bridge compares the arrival of SensorFrames with the arrival of camera frame
 (see ``simtwo.timing``). Measuring a datagram's arrival only when a Python thread gets round to it would
 add the thread's scheduling delay (GIL, a previous frame still being published); the kernel's receive
 timestamp does not. Times are returned on ``time.monotonic()``'s clock. Where the option is missing the
-socket falls back to the time ``recvmsg`` returned.
+socket falls back to the time ``recvmsg`` returned. A port that cannot be bound raises ConfigError.
 """
 from __future__ import annotations
 
 import socket
 import struct
 import time
+
+from ..simtwo.ports import bind_udp
 
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux (asm-generic and x86)
 SCM_TIMESTAMPNS = SO_TIMESTAMPNS
@@ -26,11 +28,7 @@ class TimestampedUDP:
             self.kernel_timestamps = True
         except OSError:
             self.kernel_timestamps = False
-        try:
-            s.bind((host, port))
-        except OSError:
-            s.close()
-            raise
+        bind_udp(s, host, port, "the bridge", "~udp/bind_host, ~udp/port")
         s.settimeout(timeout)
         self._anc = socket.CMSG_SPACE(_TIMESPEC.size)
 

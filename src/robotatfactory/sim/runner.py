@@ -35,7 +35,7 @@ from ..errors import ConfigError
 from ..simtwo import Command, ProtocolError
 from ..simtwo.labels import format_real
 from ..simtwo.messages import LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, encode_ranges
-from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
+from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT, bind_udp
 
 log = logging.getLogger(__name__)
 
@@ -211,13 +211,8 @@ class SimRunner:
         if self._opened:
             return self
         c = self.config
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            sock.bind((c.host, c.port))
-        except OSError as e:
-            sock.close()
-            raise ConfigError(f"cannot bind the command socket udp {c.host}:{c.port}: {e.strerror or e} "
-                              "(another simulator running? choose --port)") from None
+        sock = bind_udp(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), c.host, c.port, "the command socket",
+                        "another simulator running? choose --port")
         sock.setblocking(False)
         self._sock = sock
         try:
