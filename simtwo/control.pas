@@ -152,6 +152,42 @@ begin
   result := (c >= '0') and (c <= '9');
 end;
 
+// Skips an optional sign at s[i]; true when it was '-'.
+function ReadSign(s: string; var i: integer): boolean;
+begin
+  result := false;
+  if i <= Length(s) then
+    if (s[i] = '+') or (s[i] = '-') then begin
+      result := (s[i] = '-');
+      i := i + 1;
+    end;
+end;
+
+// Decimal digits from s[i] into the mantissa m (value = m * 10^e10), keeping at most 18 significant
+// ones: further integer digits raise e10, further fraction digits are dropped; each kept fraction
+// digit lowers e10. True when at least one digit was read.
+function ReadMantissa(s: string; var i: integer; var m: double; var nd, e10: integer;
+                      fraction: boolean): boolean;
+var n: integer;
+    go: boolean;
+begin
+  result := false;
+  n := Length(s);
+  go := true;
+  while go do begin
+    if i > n then go := false
+    else if IsDigit(s[i]) then begin
+      result := true;
+      if nd < 18 then begin
+        m := m * 10 + (Ord(s[i]) - Ord('0'));
+        if m > 0 then nd := nd + 1;
+        if fraction then e10 := e10 - 1;
+      end else if not fraction then e10 := e10 + 1;
+      i := i + 1;
+    end else go := false;
+  end;
+end;
+
 // An integer: optional sign, decimal digits, blanks around. At most 9 significant digits.
 function ParseIntStr(s: string; var v: integer): boolean;
 var i, n, nd, d: integer;
@@ -163,11 +199,7 @@ begin
   n := Length(s);
   if n = 0 then exit;
   i := 1;
-  neg := false;
-  if (s[1] = '+') or (s[1] = '-') then begin
-    neg := (s[1] = '-');
-    i := 2;
-  end;
+  neg := ReadSign(s, i);
   if i > n then exit;
   nd := 0;
   go := true;
@@ -199,60 +231,23 @@ begin
   n := Length(s);
   if n = 0 then exit;
   i := 1;
-  neg := false;
-  if (s[1] = '+') or (s[1] = '-') then begin
-    neg := (s[1] = '-');
-    i := 2;
-  end;
+  neg := ReadSign(s, i);
   m := 0;
   nd := 0;                   // significant digits kept in m (at most 18)
   e10 := 0;                  // value = m * 10^e10
-  sawDigit := false;
-  // integer part
-  go := true;
-  while go do begin
-    if i > n then go := false
-    else if IsDigit(s[i]) then begin
-      sawDigit := true;
-      if nd < 18 then begin
-        m := m * 10 + (Ord(s[i]) - Ord('0'));
-        if m > 0 then nd := nd + 1;
-      end else e10 := e10 + 1;
-      i := i + 1;
-    end else go := false;
-  end;
-  // fraction
-  if i <= n then begin
+  sawDigit := ReadMantissa(s, i, m, nd, e10, false);
+  if i <= n then
     if s[i] = '.' then begin
       i := i + 1;
-      go := true;
-      while go do begin
-        if i > n then go := false
-        else if IsDigit(s[i]) then begin
-          sawDigit := true;
-          if nd < 18 then begin
-            m := m * 10 + (Ord(s[i]) - Ord('0'));
-            if m > 0 then nd := nd + 1;
-            e10 := e10 - 1;
-          end;
-          i := i + 1;
-        end else go := false;
-      end;
+      if ReadMantissa(s, i, m, nd, e10, true) then sawDigit := true;
     end;
-  end;
   if not sawDigit then exit;
   // exponent
   if i <= n then begin
     c := s[i];
     if (c = 'e') or (c = 'E') then begin
       i := i + 1;
-      eneg := false;
-      if i <= n then begin
-        if (s[i] = '+') or (s[i] = '-') then begin
-          eneg := (s[i] = '-');
-          i := i + 1;
-        end;
-      end;
+      eneg := ReadSign(s, i);
       ev := 0;
       sawExpDigit := false;
       go := true;
