@@ -23,8 +23,9 @@ DEB_PACKAGES=(
   libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri xvfb x11-apps xauth
   # the project's Python environment
   python3-venv python3-dev
-  # Free Pascal: compiles simtwo/control.pas in the test suite
-  fp-compiler fp-units-base fp-units-fcl
+  # Free Pascal, and RemObjects PascalScript's sources (SimTwo's script engine, shipped by Lazarus):
+  # the test suite builds PascalScript with FPC and compiles simtwo/control.pas in it as SimTwo would
+  fp-compiler fp-units-base fp-units-fcl lazarus-src-2.2
   # tools the docs and experiments use
   graphviz
 )
