@@ -16,6 +16,16 @@ import numpy as np
 
 @dataclass(frozen=True)
 class CameraSpec:
+    """The camera: mount on ``base_link`` and pinhole intrinsics with OpenCV's distortion model.
+
+    ``xyz`` (m) is camera_link's origin in base_link; camera_link is base_link pitched down by
+    ``pitch_down_deg`` (about base_link's y), then rolled by ``roll_deg`` about its own x (the optical axis;
+    right-handed: positive raises the camera's left side and lowers its right). ``fx, fy, cx, cy`` in pixels with pixel
+    centres at integers (``cx = 319.5`` is the centre of a 640-wide image). ``distortion`` is OpenCV's
+    (k1, k2, p1, p2, k3) (ROS's ``plumb_bob``); zeros for SimTwo's GLScene camera, an ideal pinhole.
+    ``raf calibrate`` estimates all but the image size and the timing (docs/calibration.md).
+    """
+
     xyz: tuple[float, float, float]
     pitch_down_deg: float
     width: int
@@ -27,17 +37,40 @@ class CameraSpec:
     bottom_up: bool
     render_fps: float
     decimation: int
+    roll_deg: float = 0.0
+    distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        object.__setattr__(self, "xyz", tuple(float(v) for v in self.xyz))
+        d = tuple(float(v) for v in (self.distortion or ()))
+        if len(d) > 5 or not all(math.isfinite(v) for v in d):
+            raise ValueError(f"camera distortion must be up to five finite numbers (k1, k2, p1, p2, k3), "
+                             f"got {self.distortion!r}")
+        object.__setattr__(self, "distortion", d + (0.0,) * (5 - len(d)))
 
     @property
     def K(self) -> np.ndarray:
         return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
 
+    @property
+    def D(self) -> np.ndarray:
+        """OpenCV distortion coefficients (k1, k2, p1, p2, k3) as a float64 array of 5."""
+        return np.array(self.distortion, dtype=np.float64)
+
+    @property
+    def has_distortion(self) -> bool:
+        return any(v != 0.0 for v in self.distortion)
+
     def base_to_link(self) -> np.ndarray:
-        """4x4 transform base_link <- camera_link (x forward, pitched down by ``pitch_down_deg``)."""
-        p = math.radians(self.pitch_down_deg)
+        """4x4 transform base_link <- camera_link (x forward, pitched down by ``pitch_down_deg``, then rolled
+        by ``roll_deg`` about its own x axis)."""
+        p, r = math.radians(self.pitch_down_deg), math.radians(self.roll_deg)
         c, s = math.cos(p), math.sin(p)
+        cr, sr = math.cos(r), math.sin(r)
+        Ry = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+        Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
         T = np.eye(4)
-        T[:3, :3] = [[c, 0, s], [0, 1, 0], [-s, 0, c]]
+        T[:3, :3] = Ry @ Rx
         T[:3, 3] = self.xyz
         return T
 
