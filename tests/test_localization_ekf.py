@@ -241,3 +241,39 @@ def test_reinitialises_after_the_robot_is_moved():
             ekf.pose_fix(t, run.fix(t, R_CAM), R_CAM)
     assert ekf.counts[reasons.GATED] == 4 and ekf.counts[reasons.REINITIALISED] == 1
     assert _err(ekf, run.truth[-1][1:])[0] < 0.01
+
+
+def test_final_outcomes_of_fixes_are_reported_once_they_leave_the_history():
+    run = Run(seed=5)
+    ekf = Ekf(EkfConfig(history_s=1.0))
+    t = run.step(1)
+    ekf.odometry_wheels(t, 0.0, 0.0)
+    ekf.pose_fix(t, run.pose_at(t), R_CAM)  # initialises
+    good, bad = [], []
+    for k in range(2, 150):
+        t = run.step(k)
+        ekf.odometry_wheels(t, *run.odo[-1][1:])
+        if k % 10 == 0:
+            ts = t - 0.02  # a little late
+            if k == 60:  # 30 cm off: gated
+                z = np.array(run.pose_at(ts)) + [0.3, 0.0, 0.0]
+                bad.append(ts)
+            else:
+                z = run.fix(ts, R_CAM)
+                good.append(ts)
+            ekf.pose_fix(ts, z, R_CAM)
+    done = ekf.pop_finished_fixes()
+    assert ekf.pop_finished_fixes() == []  # handed out once
+    t_last = ekf.t
+    # every fix older than the history is final; the initialising one counts as accepted
+    assert len(done) == 1 + len([s for s in good + bad if s < t_last - 1.0])
+    assert [f.accepted for f in done if f.t in bad] == [False]
+    assert all(f.accepted for f in done if f.t not in bad)
+    assert [f.reason for f in done if f.t in bad] == [reasons.GATED]
+    gated = next(f for f in done if f.t in bad)
+    assert gated.z[0] - run.pose_at(gated.t)[0] == pytest.approx(0.3) and gated.source == "camera"
+    assert all(a.t <= b.t for a, b in zip(done, done[1:]))
+    # a re-initialisation finishes what is in the history
+    n_left = len([s for s in good + bad if s >= t_last - 1.0])
+    ekf.initialise(t_last, run.pose_at(t_last), R_CAM)
+    assert len(ekf.pop_finished_fixes()) == n_left

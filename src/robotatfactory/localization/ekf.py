@@ -17,6 +17,10 @@
 - **Re-initialisation**: uninitialised until the first confident fix; re-initialised from a confident fix
   that is gated after a long time without accepted fixes (``reinit_after_s``) or after
   ``reinit_after_gated`` gated confident fixes in a row (the filter was wrong, e.g. the robot was moved).
+- **Final outcomes**: a camera fix can be gated when it arrives and accepted after a later (late-stamped)
+  measurement is inserted before it, or the other way round; its outcome is final when it leaves the
+  history. :meth:`Ekf.pop_finished_fixes` hands out those final outcomes (the experiment counts accepted
+  fixes that were far from the truth).
 - **Never NaN**: inputs and results are checked; a bad input or a numerically failed update is counted and
   skipped; covariances are symmetrised and kept within bounds.
 
@@ -104,6 +108,19 @@ class _Beacons:
     laser_yaw: float
 
 
+@dataclass(frozen=True)
+class FinishedFix:
+    """The final outcome of one absolute pose measurement (it left the filter's history or the filter was
+    re-initialised): stamp t (s), z = (x, y, heading), its covariance R, accepted (incl. re-initialising)."""
+
+    t: float
+    z: tuple[float, float, float]
+    R: np.ndarray
+    source: str
+    accepted: bool
+    reason: str | None
+
+
 @dataclass
 class UpdateResult:
     """What happened to one measurement (for diagnostics). ``accepted`` False: see ``reason``."""
@@ -121,6 +138,9 @@ class Ekf:
         self.cfg = cfg or EkfConfig()
         self._log: list[tuple[float, object]] = []  # (time, record), time-ordered
         self._states: list[FilterState] = []  # state after each record
+        self._results: list[UpdateResult | None] = []  # outcome of each record (None: odometry)
+        self._finished: list[FinishedFix] = []
+        self.max_finished = 10000  # finished fixes kept until popped
         self._base = FilterState(None, None, -math.inf)  # state before the first record
         self._pending: list[_Pose | _Beacons] = []
         self._last_odom_pose: tuple[float, tuple] | None = None
@@ -155,8 +175,10 @@ class Ekf:
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(R))):
             self.counts[reasons.BAD_INPUT] += 1
             return
+        self._finish(len(self._log))
         self._log.clear()
         self._states.clear()
+        self._results.clear()
         self._pending.clear()
         self._base = FilterState(self._wrap(z), self._bound(R), t, t, 0)
 
@@ -257,6 +279,7 @@ class Ekf:
         tail = self._log[k:]
         del self._log[k:]
         del self._states[k:]
+        del self._results[k:]
         result = None
         if isinstance(rec, _Odom) and rec.t0 < m.t < rec.t1:
             f = (m.t - rec.t0) / (rec.t1 - rec.t0)
@@ -287,6 +310,7 @@ class Ekf:
             self.counts[res.reason or "accepted"] += 1
         self._log.append((t, rec))
         self._states.append(ns)
+        self._results.append(res)
         return res
 
     def _prune(self) -> None:
@@ -296,8 +320,24 @@ class Ekf:
             n += 1
         if n:
             self._base = self._states[n - 1]
+            self._finish(n)
             del self._log[:n]
             del self._states[:n]
+            del self._results[:n]
+
+    def _finish(self, n: int) -> None:
+        """Record the final outcome of the pose measurements among the first ``n`` records."""
+        for (t, rec), res in zip(self._log[:n], self._results[:n]):
+            if isinstance(rec, _Pose) and res is not None:
+                self._finished.append(FinishedFix(t, tuple(float(v) for v in rec.z), rec.R, rec.source,
+                                                  bool(res.accepted), res.reason))
+        if len(self._finished) > self.max_finished:
+            del self._finished[:len(self._finished) - self.max_finished]
+
+    def pop_finished_fixes(self) -> list[FinishedFix]:
+        """Pose measurements whose outcome became final since the last call (oldest first)."""
+        out, self._finished = self._finished, []
+        return out
 
     # ------------------------------------------------------------------ maths
     def _bound(self, P: np.ndarray) -> np.ndarray:
