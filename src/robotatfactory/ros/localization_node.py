@@ -75,6 +75,9 @@ class LocalizationNode:
         self.pub_camera_pose = rospy.Publisher(t["camera_pose"], PoseWithCovarianceStamped, queue_size=5)
         self.pub_fix = {m: rospy.Publisher(f"{t['fixes']}/{m}", PoseWithCovarianceStamped, queue_size=5)
                         for m in nc.methods()}
+        # the filter's final verdict on each camera fix (once it leaves the filter's history): accepted / gated
+        self.pub_verdict = {ok: rospy.Publisher(f"{t['fixes']}/filter_{'accepted' if ok else 'rejected'}",
+                                                PoseWithCovarianceStamped, queue_size=50) for ok in (True, False)}
         self.pub_pose = rospy.Publisher(t["pose"], PoseWithCovarianceStamped, queue_size=10)
         self.pub_tf = rospy.Publisher("/tf", TFMessage, queue_size=50)
         self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=5)
@@ -154,9 +157,21 @@ class LocalizationNode:
                 self.ekf.initialise(t, (sp.x, sp.y, sp.theta), np.diag(
                     [s.initial_sigma_xy ** 2, s.initial_sigma_xy ** 2, math.radians(s.initial_sigma_theta_deg) ** 2]))
             self.ekf.odometry_pose(t, pose)
+            finished = self.ekf.pop_finished_fixes()
             self._odom = (t, pose)
             self.counts["odom"] += 1
             self._publish_filter(t, pose)
+        for f in finished:
+            if f.source == "camera":
+                self.pub_verdict[f.accepted].publish(self._verdict_msg(f))
+
+    def _verdict_msg(self, f) -> PoseWithCovarianceStamped:
+        m = PoseWithCovarianceStamped()
+        m.header.stamp = rm.stamp_s(f.t)
+        m.header.frame_id = self.frames["map"]
+        m.pose.pose = rm.pose_from_matrix(se2_matrix(*f.z))
+        m.pose.covariance = rm.pose_cov6(f.R)
+        return m
 
     def _publish_filter(self, t: float, odom_pose) -> None:
         x, P = self.ekf.pose(), self.ekf.covariance()
