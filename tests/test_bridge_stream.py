@@ -35,13 +35,16 @@ def test_gap_duplicate_and_reordering():
     assert (c.received, c.accepted, c.lost, c.gaps, c.duplicates, c.stale, c.restarts) == (8, 5, 2, 1, 1, 2, 0)
 
 
-def test_restart_after_a_long_run_is_detected_at_once():
-    tr = StreamTracker(reorder_window=25)
+def test_restart_after_a_long_run_needs_a_chain_of_frames():
+    """One datagram never restarts the stream: a frame like a restart's is held until two more follow it."""
+    tr = StreamTracker(reorder_window=25, restart_confirm=3)
     feed(tr, range(100))
-    e = tr.offer(0, 40, 200.0)
-    assert e.verdict is Verdict.RESTART and e.from_zero
-    assert tr.offer(1, 80, 201.0).verdict is Verdict.NEXT
-    assert tr.counters.restarts == 1
+    assert tr.offer(0, 40, 200.0).verdict is Verdict.HELD
+    assert tr.offer(1, 80, 201.0).verdict is Verdict.HELD
+    e = tr.offer(2, 120, 202.0)
+    assert e.verdict is Verdict.RESTART and e.from_zero and e.run_length == 3
+    assert tr.offer(3, 160, 203.0).verdict is Verdict.NEXT
+    assert tr.counters.restarts == 1 and tr.counters.held == 0
 
 
 def test_restart_soon_after_start_is_confirmed_by_a_run_of_frames():
@@ -62,19 +65,22 @@ def test_scattered_old_frames_do_not_make_a_restart():
     assert tr.counters.restarts == 0
 
 
-def test_clock_going_backwards_with_seq_ahead_is_a_restart():
+def test_clock_going_backwards_with_seq_ahead_is_a_restart_once_confirmed():
     tr = StreamTracker()
     feed(tr, range(10))
     e = tr.offer(50, 2040, 30.0)  # seq and time ahead: a gap
     assert e.verdict is Verdict.GAP
-    e = tr.offer(60, 100, 31.0)  # restarted while we were not receiving: time went backwards
+    assert tr.offer(60, 100, 31.0).verdict is Verdict.HELD  # restarted while we were not receiving?
+    assert tr.offer(61, 140, 32.0).verdict is Verdict.HELD
+    e = tr.offer(62, 180, 33.0)
     assert e.verdict is Verdict.RESTART and not e.from_zero
 
 
 def test_far_behind_restart_from_nonzero_seq_does_not_count_from_zero():
     tr = StreamTracker(reorder_window=25)
     feed(tr, range(200))
-    e = tr.offer(7, 320, 300.0)
+    assert [tr.offer(s, (s + 1) * 40, 300.0 + s).verdict for s in (77, 78)] == [Verdict.HELD] * 2
+    e = tr.offer(79, 3200, 400.0)
     assert e.verdict is Verdict.RESTART and not e.from_zero
 
 
@@ -108,7 +114,7 @@ def test_accepted_frames_are_strictly_increasing_without_restarts(seqs):
     assert acc == sorted(set(acc))
     assert tr.counters.accepted + tr.counters.lost == acc[-1] - acc[0] + 1
     c = tr.counters
-    assert c.received == c.accepted + c.duplicates + c.stale
+    assert c.received == c.accepted + c.duplicates + c.stale + c.held
 
 
 def test_rate_meter():

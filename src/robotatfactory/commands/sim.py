@@ -38,6 +38,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help=f"UDP port of the factory-state server (default {SERVER_UDP_PORT}, on --host)")
     srv.add_argument("--no-server", action="store_true", help="no factory-state server")
 
+    g.add_argument("--controller", default=None, metavar="HOST:PORT",
+                   help="accept commands from this source only (default: the first that sends a valid command; "
+                        "another takes over after it has been silent for --takeover-after seconds)")
+    g.add_argument("--takeover-after", type=float, default=2.0, metavar="S",
+                   help="wall seconds the controller must be silent before another source may take over "
+                        "(default 2.0)")
+
     g = p.add_argument_group("timing")
     mode = g.add_mutually_exclusive_group()
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
@@ -51,6 +58,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--on-timeout", choices=("stop", "hold", "exit"), default="stop",
                    help="when no reply comes in time: stop the robot (V=W=0, magnet kept), hold the last "
                         "command, or exit (code 3); always with a warning (default stop)")
+    g.add_argument("--command-timeout", type=float, default=0.5, metavar="S",
+                   help="simulation seconds without a valid command before the robot stops, as SimTwo's "
+                        "control.pas does (default 0.5; 0: keep the last command forever)")
     g.add_argument("--duration", type=float, default=None, metavar="S",
                    help="simulation seconds to run, then print the score and exit (default: until Ctrl-C)")
 
@@ -124,7 +134,9 @@ def run(args) -> int:
         camera_bind=None if args.no_camera else args.camera_bind,
         server_host=args.host, server_port=None if args.no_server else args.server_port,
         mode=args.mode, lockstep=args.lockstep, lockstep_timeout=args.lockstep_timeout,
-        on_timeout=args.on_timeout, duration=args.duration, status_every=args.status_every, quiet=args.quiet)
+        on_timeout=args.on_timeout, duration=args.duration, status_every=args.status_every, quiet=args.quiet,
+        controller=parse_address(args.controller) if args.controller else None, takeover_after=args.takeover_after,
+        command_timeout=args.command_timeout or None)
     from ..sim.runner import SimRunner
 
     sim = Simulator(field, robot, config)
@@ -153,7 +165,7 @@ def run(args) -> int:
     print(f"raf sim: {result.reason} at t = {result.sim_time:.2f} s of simulation in {result.wall_time:.2f} s "
           f"(real-time factor {result.real_time_factor:.2f}); frames sent {cnt['frames_sent']}, commands "
           f"{cnt['commands']} (rejected {cnt['rejected']}: malformed {cnt['malformed']}, foreign "
-          f"{cnt['foreign']}, version {cnt['version']}), lockstep timeouts {cnt['timeouts']}, camera frames "
+          f"{cnt['foreign']}, version {cnt['version']}, other sources {cnt['foreign_source']}), lockstep timeouts {cnt['timeouts']}, camera frames "
           f"{cnt['camera_frames']}", flush=True)
     if result.report is not None:
         print(result.report, flush=True)

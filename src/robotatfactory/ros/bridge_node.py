@@ -43,7 +43,8 @@ from ..localization.odometry import DiffDriveOdometry
 from ..simtwo import Command, ProtocolError, SensorFrame
 from ..simtwo.labels import LabelledValues
 from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
-from ..simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
+from ..simtwo.stream import (LogLimiter, RateMeter, SourceGate, StreamTracker, Verdict, source_key,
+                             stream_health)
 from ..simtwo.timing import SimClock, SweepAssembler
 from ..simtwo.watchdog import CommandWatchdog
 from . import messages as rm
@@ -52,6 +53,10 @@ from .config import BridgeConfig, load_config
 from .udp import TimestampedUDP
 
 JOINT_NAMES = ("left_wheel_joint", "right_wheel_joint")
+_VERDICT_HINT = {
+    Verdict.HELD: ": held until further frames confirm the jump (forged or corrupt datagrams never do)",
+    Verdict.IMPLAUSIBLE: ": its encoder totals moved faster than ~stream/max_wheel_speed allows",
+}
 
 
 def classify_protocol_error(data: bytes) -> str:
@@ -78,7 +83,10 @@ class Bridge:
 
             field = load_field(cfg.field)
         self.field = field
-        self.tracker = StreamTracker(cfg.reorder_window, cfg.restart_confirm)
+        self.tracker = StreamTracker(cfg.reorder_window, cfg.restart_confirm, max_jump=cfg.max_jump,
+                                     period_ms=cfg.control_period_ms, max_ticks_per_s=cfg.max_ticks_per_s)
+        self.gate = SourceGate(cfg.source, cfg.takeover_after, cfg.restart_confirm, cfg.control_period_ms,
+                               cfg.reorder_window)
         self.camera = None  # CameraLink: the camera half runs in its own process (camera_node)
         self.clock = SimClock()
         self.odo = DiffDriveOdometry(wheel_radius=cfg.wheel_radius, track=cfg.track, ticks_per_rev=cfg.ticks_per_rev,
@@ -94,7 +102,7 @@ class Bridge:
         self._map_odom_sent = False
         self._running = False
         self._threads: list[threading.Thread] = []
-        self._rejects_at_last_diag = 0
+        self._counters_at_last_diag: dict = {}
         # wall seconds from the kernel receiving a datagram to its reply sent / its odom written
         self.reply_delay: deque = deque(maxlen=2000)
         self.odom_delay: deque = deque(maxlen=2000)
@@ -235,11 +243,9 @@ class Bridge:
             self.handle_datagram(data, addr, arrival)
 
     def handle_datagram(self, data: bytes, addr, arrival: float) -> None:
-        cfg, tr = self.cfg, self.tracker
-        if cfg.sim_host != "*" and addr[0] != cfg.sim_host:
-            tr.reject("foreign_source")
-            self._warn("foreign_source", f"bridge: ignoring a datagram from {addr[0]}:{addr[1]} (accepted "
-                                         f"simulator host: {cfg.sim_host}, parameter ~simulator/host)")
+        cfg, tr, gate = self.cfg, self.tracker, self.gate
+        if (cfg.sim_host != "*" and addr[0] != cfg.sim_host) or not gate.open_to(addr, arrival):
+            self._foreign(addr)
             return
         if len(data) > cfg.max_datagram:
             tr.reject("oversized")
@@ -253,11 +259,40 @@ class Bridge:
             tr.reject(kind)
             self._warn(kind, f"bridge: rejected datagram from {addr[0]}:{addr[1]} ({kind}): {e}")
             return
-        ev = tr.offer(frame.seq, frame.time_ms, arrival)
-        if ev.verdict is Verdict.RESTART:
-            self._reset_commands()
-        t_eval = frame.time_ms if ev.accepted else (tr.last_time_ms if tr.last_time_ms is not None else frame.time_ms)
-        cmd = self.command_for(frame.seq, t_eval)
+        if gate.is_bound(addr):
+            gate.seen(arrival)
+            self.handle_frame(frame, addr, arrival)
+            return
+        # a sender not (yet) bound: it binds the stream once its frames form a consistent chain
+        previous = gate.bound
+        chain = gate.candidate(addr, frame.seq, frame.time_ms, (frame, arrival), arrival)
+        if chain is None:
+            if previous is None:  # nothing bound yet (bridge starting): answer with a stop, nothing published
+                self._reply(Command(0.0, 0.0, self.watchdog.magnet, frame.seq), addr, arrival)
+            else:
+                self._foreign(addr)
+            return
+        if previous is None:
+            rospy.loginfo(f"bridge: SensorFrame stream bound to {source_key(addr)}")
+        else:
+            rospy.logwarn(f"bridge: {source_key(previous)} silent for more than {cfg.takeover_after} s; "
+                          f"{source_key(addr)} takes over the SensorFrame stream")
+        tr.reset()
+        for i, (f, a) in enumerate(chain):  # the chain's frames, in order (the earlier ones were held back)
+            self.handle_frame(f, addr, a, reply=(i == len(chain) - 1))
+
+    def _foreign(self, addr) -> None:
+        """A datagram from a source other than the stream's: dropped, counted by source, never answered."""
+        self.tracker.reject("foreign_source")
+        self.gate.count_foreign(addr)
+        key = source_key(addr)
+        bound = source_key(self.gate.bound) if self.gate.bound else "none yet"
+        self._warn(f"foreign:{key if key in self.gate.foreign else 'other'}",
+                   f"bridge: ignoring datagrams from {key} (the stream is bound to {bound}; accepted host "
+                   f"~simulator/host = {self.cfg.sim_host}): two simulators sending to udp port {self.bound_port}?")
+
+    def _reply(self, cmd: Command, addr, arrival: float) -> None:
+        cfg = self.cfg
         try:
             self.sock.sendto(cmd.encode(), (addr[0], cfg.reply_port or addr[1]))
             self.counts["replies"] += 1
@@ -265,10 +300,21 @@ class Bridge:
         except OSError as e:
             self.counts["reply_errors"] += 1
             self._warn("send", f"bridge: cannot reply to {addr[0]}:{cfg.reply_port or addr[1]}: {e}")
+
+    def handle_frame(self, frame: SensorFrame, addr, arrival: float, reply: bool = True) -> None:
+        """One decoded frame of the bound source: classify, answer, publish what is accepted."""
+        tr = self.tracker
+        ev = tr.offer(frame.seq, frame.time_ms, arrival, frame.enc_total)
+        if ev.verdict is Verdict.RESTART:
+            self._reset_commands()
+        t_eval = frame.time_ms if ev.accepted else (tr.last_time_ms if tr.last_time_ms is not None else frame.time_ms)
+        if reply:
+            self._reply(self.command_for(frame.seq, t_eval), addr, arrival)
         self.datagram_rate.tick(arrival)
         if not ev.accepted:
-            self._warn(ev.verdict.value, f"bridge: dropped a {ev.verdict.value} frame (Seq {frame.seq}, last "
-                                         f"accepted {tr.last_seq})")
+            self._warn(ev.verdict.value, f"bridge: dropped a {ev.verdict.value} frame (Seq {frame.seq}, Tms "
+                                         f"{frame.time_ms}; last accepted Seq {tr.last_seq}, Tms {tr.last_time_ms})"
+                                         + _VERDICT_HINT.get(ev.verdict, ""))
             return
         if ev.verdict in (Verdict.FIRST, Verdict.RESTART):
             self._start_stream(ev, frame)
@@ -368,23 +414,20 @@ class Bridge:
 
         # the SensorFrame stream
         stale = tr.staleness(now)
-        rejects = tr.counters.rejected_total
-        new_rejects = rejects - self._rejects_at_last_diag
-        self._rejects_at_last_diag = rejects
-        if stale is None:
-            level, text = DiagnosticStatus.WARN, f"waiting for SensorFrames on udp port {self.bound_port}"
-        elif stale > cfg.stale_error:
-            level, text = DiagnosticStatus.ERROR, f"stale: no SensorFrame for {stale:.1f} s"
-        elif stale > cfg.stale_warn:
-            level, text = DiagnosticStatus.WARN, f"stale: no SensorFrame for {stale:.1f} s"
-        elif new_rejects:
-            level, text = DiagnosticStatus.WARN, f"{new_rejects} datagram(s) rejected since the last report"
-        else:
-            level, text = DiagnosticStatus.OK, "receiving"
+        counters = tr.counters.as_dict()
+        level, text = stream_health(counters, self._counters_at_last_diag, stale, self.gate, self.bound_port,
+                                    cfg.stale_warn, cfg.stale_error)
+        self._counters_at_last_diag = counters
         vals = {"datagram_rate_hz": self.datagram_rate.rate(now), "staleness_s": -1.0 if stale is None else stale,
                 "sim_time_s": -1.0 if ms is None else ms / 1000, "real_time_factor": self.clock.real_time_factor(now),
                 "last_seq": tr.last_seq if tr.last_seq is not None else -1}
-        vals.update(tr.counters.as_dict())
+        vals.update(counters)
+        g = self.gate
+        vals.update({"bound_source": source_key(g.bound) if g.bound else "none", "source_takeovers": g.takeovers,
+                     "foreign_source_datagrams": g.foreign_total,
+                     "foreign_sources": ", ".join(f"{k}={v}" for k, v in sorted(g.foreign.items(),
+                                                                                 key=lambda kv: -kv[1])[:8]) or "none",
+                     "forged_or_corrupt_frames": counters["held"] + counters["implausible"]})
         for key, dq in (("reply", self.reply_delay), ("odom", self.odom_delay)):
             if dq:
                 a = np.array(dq) * 1000

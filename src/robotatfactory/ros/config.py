@@ -50,6 +50,14 @@ DEFAULT_FRAMES = {
 ROBOT_FRAMES = ("odom", "base_link", "laser", "camera_link", "camera_optical", "left_wheel", "right_wheel")
 
 
+def _max_wheel_speed(r: RobotSpec) -> float:
+    """Twice the free wheel's no-load speed at the motor's full voltage (rad/s): faster encoder counts are
+    forged or corrupt (the stream's plausibility check)."""
+    from ..sim.motor import MotorParams
+
+    return round(2.0 * MotorParams.from_spec(r.motor).no_load_speed(), 1)
+
+
 def default_params(robot: RobotSpec | None = None) -> dict:
     """The full nested parameter tree with its defaults (the robot spec gives the geometry)."""
     r = robot or load_robot()
@@ -58,9 +66,10 @@ def default_params(robot: RobotSpec | None = None) -> dict:
         "field": "rules2026",
         "robot": "simtwo",
         "frame_prefix": "",
-        "udp": {"bind_host": "0.0.0.0", "port": 9810, "max_datagram": 16384},
-        "simulator": {"host": "127.0.0.1", "reply_port": 0},
-        "stream": {"reorder_window": 25, "restart_confirm": 3},
+        "udp": {"bind_host": "auto", "port": 9810, "max_datagram": 16384},
+        "simulator": {"host": "127.0.0.1", "port": 0, "reply_port": 0},
+        "stream": {"reorder_window": 25, "restart_confirm": 3, "max_jump": 250, "takeover_after": 2.0,
+                   "max_wheel_speed": _max_wheel_speed(r)},
         "watchdog": {"timeout": 0.5},
         "geometry": {
             "control_period": r.control_period, "physics_step": r.physics_step,
@@ -191,6 +200,15 @@ def _host(d: dict, path: tuple[str, ...], allow_any: bool) -> str:
     return v
 
 
+def _bind_host(p: dict) -> str:
+    """``udp/bind_host``: ``auto`` listens on loopback when the simulator is on this machine (the default), on
+    every interface when ``simulator/host`` names another machine or any host; else the address given."""
+    if _str(p, ("udp", "bind_host")) != "auto":
+        return _host(p, ("udp", "bind_host"), allow_any=False)
+    sim = _host(p, ("simulator", "host"), allow_any=True)
+    return "127.0.0.1" if sim != "*" and ipaddress.ip_address(sim).is_loopback else "0.0.0.0"
+
+
 # ---- the typed result ----------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -247,6 +265,19 @@ class BridgeConfig:
     log_period: float
     topics: dict
     frames: dict  # final frame ids, prefix applied
+    sim_port: int = 0  # 0: the first consistent sender's port
+    max_jump: int = 250  # cycles
+    takeover_after: float = 2.0  # wall s
+    max_wheel_speed: float = 54.0  # rad/s
+
+    @property
+    def source(self) -> tuple[str, int] | None:
+        """The configured sender (host, port), or None: the first consistent one binds the stream."""
+        return (self.sim_host, self.sim_port) if self.sim_host != "*" and self.sim_port else None
+
+    @property
+    def max_ticks_per_s(self) -> float:
+        return self.max_wheel_speed * self.ticks_per_rev / (2 * math.pi)
 
     @property
     def camera(self) -> CameraSpec:
@@ -304,11 +335,15 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
         field=_str(p, ("field",)),
         robot=_str(p, ("robot",)),
         frame_prefix=prefix,
-        bind_host=_host(p, ("udp", "bind_host"), allow_any=False),
+        bind_host=_bind_host(p),
         port=_int(p, ("udp", "port"), 0, 65535),
         max_datagram=_int(p, ("udp", "max_datagram"), 64, 65507),
         sim_host=_host(p, ("simulator", "host"), allow_any=True),
         reply_port=_int(p, ("simulator", "reply_port"), 0, 65535),
+        sim_port=_int(p, ("simulator", "port"), 0, 65535),
+        max_jump=_int(p, ("stream", "max_jump"), 1, 10 ** 9),
+        takeover_after=_real(p, ("stream", "takeover_after"), 0.0),
+        max_wheel_speed=_real(p, ("stream", "max_wheel_speed"), 0.0, lo_open=True),
         reorder_window=_int(p, ("stream", "reorder_window"), 1, 10 ** 6),
         restart_confirm=_int(p, ("stream", "restart_confirm"), 1, 1000),
         watchdog_timeout=_real(p, ("watchdog", "timeout"), 0.0, lo_open=True),

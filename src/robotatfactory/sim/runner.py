@@ -4,7 +4,11 @@ Each control cycle (40 ms of simulation time):
 
 1. drain the command socket without blocking; the latest valid :class:`Command` wins (malformed and foreign
    datagrams are counted and logged, rate-limited, with the sender and the reason; the last valid command
-   stays in force);
+   stays in force). Commands come from one controller: the configured ``controller`` address or the first
+   that sends a valid command; another source is ignored and counted (``foreign_source``) until the
+   controller has been silent for ``takeover_after`` wall seconds. With no valid command for
+   ``command_timeout`` simulation seconds the robot stops (V = W = 0, magnet kept), as SimTwo's
+   ``control.pas`` does (``COMMAND_TIMEOUT_MS``);
 2. ``Simulator.step_cycle`` with that command;
 3. publish the camera frames rendered during the cycle (ZMQ PUB, raw B G R A bottom-up, SNDHWM 2) --
    before step 4, which is the frame ordering rule of docs/dev/interfaces.md;
@@ -63,6 +67,9 @@ class RunnerConfig:
     status_every: float = 1.0
     quiet: bool = False
     log_period: float = 5.0  # rate limit of repeated warnings
+    controller: tuple[str, int] | None = None  # the only source of commands; None: the first valid sender
+    takeover_after: float = 2.0  # wall s the controller must be silent before another source may take over
+    command_timeout: float | None = None  # simulation s without a valid command: stop (raf sim: 0.5); None: keep
 
     def __post_init__(self):
         if self.mode not in MODES:
@@ -71,6 +78,11 @@ class RunnerConfig:
             raise ConfigError(f"--on-timeout {self.on_timeout!r}: choose one of {', '.join(TIMEOUT_POLICIES)}")
         if not (self.lockstep_timeout > 0 and math.isfinite(self.lockstep_timeout)):
             raise ConfigError(f"--lockstep-timeout {self.lockstep_timeout}: must be a positive number of seconds")
+        if self.command_timeout is not None and not (self.command_timeout > 0 and math.isfinite(self.command_timeout)):
+            raise ConfigError(f"--command-timeout {self.command_timeout}: must be a positive number of simulation "
+                              "seconds")
+        if not (self.takeover_after >= 0 and math.isfinite(self.takeover_after)):
+            raise ConfigError(f"--takeover-after {self.takeover_after}: must be >= 0 seconds")
         if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
             raise ConfigError(f"--duration {self.duration}: must be a positive number of simulation seconds")
         for name, port in (("--port", self.port), ("--bridge port", self.bridge[1]),
@@ -165,6 +177,9 @@ class RunnerCounters:
     foreign: int = 0
     version: int = 0
     timeouts: int = 0
+    foreign_source: int = 0  # datagrams from a source other than the controller (not decoded)
+    takeovers: int = 0  # another source took over after the controller fell silent
+    command_timeouts: int = 0  # times the robot was stopped for want of a valid command
     camera_frames: int = 0
     camera_errors: int = 0
 
@@ -204,6 +219,9 @@ class SimRunner:
         self.command = Command.stop()
         self._encoder = CachedFrameEncoder()
         self._opened = False
+        self.controller: tuple[str, int] | None = self.config.controller
+        self._controller_seen: float | None = None  # wall (monotonic) time of its last valid command
+        self._command_sim_time: float | None = None  # simulation time of the last valid command
 
     # ------------------------------------------------------------------------------------------ setup
     def open(self) -> "SimRunner":
@@ -276,6 +294,17 @@ class SimRunner:
     def _accept(self, data: bytes, addr, expect_seq: int | None) -> bool:
         """Decode one datagram; returns True when it is the reply to ``expect_seq``."""
         c = self.counters
+        src = (addr[0], addr[1])
+        now = time.monotonic()
+        foreign = self.controller is not None and src != self.controller
+        if foreign and (self.config.controller is not None or self._controller_seen is None
+                        or now - self._controller_seen < self.config.takeover_after):
+            c.foreign_source += 1
+            c.rejected += 1
+            self._rlog.warn("rx-foreign-source", f"ignoring a datagram from {src[0]}:{src[1]}: commands come from "
+                                                 f"{self.controller[0]}:{self.controller[1]} (another controller "
+                                                 f"sending to port {self.address[1]}?)")
+            return False
         try:
             cmd = Command.decode(data)
         except (ProtocolError, UnicodeDecodeError, ValueError) as e:
@@ -294,6 +323,14 @@ class SimRunner:
                                           f"{addr[0]}:{addr[1]}: {msg}; keeping V={self.command.v:g} "
                                           f"W={self.command.w:g} S={int(self.command.magnet)}")
             return False
+        if self.controller != src:
+            if self.controller is not None:
+                c.takeovers += 1
+                log.warning("controller %s:%d silent for %.1f s: commands now come from %s:%d", *self.controller,
+                            now - self._controller_seen, *src)
+            self.controller = src
+        self._controller_seen = now
+        self._command_sim_time = self.sim.time
         c.commands += 1
         self.command = cmd
         if expect_seq is not None and cmd.seq >= 0 and cmd.seq < expect_seq:
@@ -302,6 +339,18 @@ class SimRunner:
             c.replies += 1
             return True
         return False
+
+    def _check_command_age(self) -> None:
+        """No valid command for ``command_timeout`` simulation seconds: stop the wheels (magnet kept)."""
+        t = self.config.command_timeout
+        if t is None or self._command_sim_time is None or self.sim.time - self._command_sim_time <= t + 1e-9:
+            return
+        if self.command.v or self.command.w:
+            self.counters.command_timeouts += 1
+            self._rlog.warn("command-timeout", f"no valid command for {self.sim.time - self._command_sim_time:.2f} "
+                                               f"s of simulation time (> {t:g} s): stopping the robot (V = W = 0, "
+                                               "magnet kept)")
+            self.command = Command(0.0, 0.0, self.command.magnet, -1)
 
     def _drain(self, expect_seq: int | None = None) -> bool:
         """Read every queued datagram; True if the reply to ``expect_seq`` was among them."""
@@ -411,6 +460,7 @@ class SimRunner:
                     break
                 if not c.lockstep:
                     self._drain()
+                self._check_command_age()
                 frame = sim.step_cycle(self.command)
                 self.counters.cycles += 1
                 self._publish(sim.take_frames())
