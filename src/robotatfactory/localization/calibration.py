@@ -1,0 +1,678 @@
+"""Camera calibration against the field: intrinsics and mount from many frames of a robot moving on it.
+
+The markers' world corners are known (the field map), the robot's pose in each frame is not. One joint
+least-squares problem over all frames (:func:`calibrate`) estimates
+
+* the camera's intrinsics ``fx, fy, cx, cy`` (pixels; OpenCV's convention, pixel centres at integers) and,
+  on request, radial/tangential distortion (OpenCV's k1, k2, p1, p2, k3);
+* its mount on ``base_link``: height ``z``, forward offset ``x`` (only with odometry, see below), the pitch
+  down and the roll about the optical axis (degrees; :class:`~robotatfactory.robot.CameraSpec`'s
+  conventions); the lateral offset ``y`` and the yaw are held at their initial values;
+* every frame's robot pose (x, y, heading) on the floor,
+
+by minimising the reprojection error of every detected corner (pixels), with odometry (relative motion
+between consecutive frames) as an optional prior on the poses and a weak prior on the camera towards its
+initial values (it only decides directions the data leave free, and :class:`CalibrationResult.degenerate`
+names them). ``scipy.optimize.least_squares`` (trust region, Huber loss) with the Jacobian's sparsity
+pattern given: each corner depends on the camera and on its own frame's pose only.
+
+Robustness: each frame is seeded by the planar pose fit (:func:`~.estimators.planar_fit`, lenient settings)
+with the initial camera; detections whose RMS residual is far above the fit's robust scale are rejected
+(and readmitted when they fit again) over a few rounds.
+
+Uncertainty: the covariance of the camera parameters is ``(J^T J)^-1`` at the solution, scaled by the
+residuals' a-posteriori variance; the standard deviations are reported per parameter.
+
+What the data must contain (degeneracies):
+
+* Floor markers alone cannot separate focal length, height and pitch. All floor views share one plane whose
+  orientation relative to the camera never changes (the robot only moves in that plane): the frames' floor
+  homographies differ only by a planar motion, which leaves 5 identifiable combinations of the 7 camera
+  parameters. Markers on a second plane at a known height (the field's wall markers, vertical, 0.1 m up,
+  facing four directions) break it: the data must contain wall markers in a good share of the frames, seen
+  at several places in the image.
+* The forward offset of the camera is absorbed by the per-frame poses (shifting every pose along its heading
+  reproduces the same views) unless the poses are tied together: with odometry and turns (the camera moves on
+  a circle of radius ``x`` when the robot turns on the spot) it is observable; without odometry it is held.
+* Frames should cover the image (corners near its edges pin cx, cy and distortion) and the robot should
+  turn and drive at different distances to the walls.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..field.model import Field
+from ..robot import CameraSpec, RobotSpec
+from .detect import Detection
+from .geometry import between2, wrap_angle
+
+#: The camera parameters of the model, in the order of the parameter vector (units in docs above).
+PARAMS = ("fx", "fy", "cx", "cy", "x", "y", "z", "pitch_down_deg", "roll_deg", "k1", "k2", "p1", "p2", "k3")
+DEFAULT_FREE = ("fx", "fy", "cx", "cy", "z", "pitch_down_deg", "roll_deg")
+DISTORTION = ("k1", "k2", "p1", "p2", "k3")
+UNITS = {"fx": "px", "fy": "px", "cx": "px", "cy": "px", "x": "m", "y": "m", "z": "m", "pitch_down_deg": "deg",
+         "roll_deg": "deg", "k1": "", "k2": "", "p1": "", "p2": "", "k3": ""}
+
+
+@dataclass
+class CalibrationConfig:
+    """Settings of the fit (units in the names).
+
+    ``free``: camera parameters to estimate (from :data:`PARAMS`); ``x`` is added automatically when
+    odometry is given and ``fit_forward`` is True; ``fit_distortion`` adds k1, k2 (``distortion_terms``
+    picks which of k1..k3, p1, p2)."""
+
+    free: tuple[str, ...] = DEFAULT_FREE
+    fit_forward: bool = True
+    fit_distortion: bool = False
+    distortion_terms: tuple[str, ...] = ("k1", "k2")
+    sigma_px: float = 0.5  # corner noise, 1 sigma per coordinate (scales the residuals)
+    huber_sigmas: float = 3.0  # residuals beyond this many sigmas count linearly (Huber)
+    outlier_px: float = 3.0  # a marker whose RMS residual exceeds max(this, outlier_scales * robust scale)
+    outlier_scales: float = 6.0  # is rejected (readmitted when it fits again)
+    rounds: int = 4  # fit / reject rounds at most
+    # odometry prior between consecutive frames: sigma = base + per metre (or per radian) of motion
+    odom_sigma_xy_m: float = 0.002
+    odom_sigma_xy_per_m: float = 0.02
+    odom_sigma_theta_deg: float = 0.3
+    odom_sigma_theta_per_rad: float = 0.02
+    odom_max_gap_s: float = 2.0  # consecutive frames further apart than this are not tied by odometry
+    # weak prior on the camera towards its initial values (decides only what the data leave free)
+    prior_sigma: dict = field(default_factory=lambda: {
+        "fx": 0.2, "fy": 0.2, "cx": 0.1, "cy": 0.1,  # relative to fx (cx, cy: fraction of the width)
+        "x": 0.05, "y": 0.05, "z": 0.05, "pitch_down_deg": 10.0, "roll_deg": 10.0,
+        "k1": 0.5, "k2": 0.5, "p1": 0.05, "p2": 0.05, "k3": 0.5})
+    degenerate_ratio: float = 0.3  # a parameter whose sigma exceeds this share of its prior's is "degenerate"
+    min_frames: int = 10
+    min_detections: int = 40
+    max_nfev: int = 200
+
+    def check(self) -> None:
+        bad = sorted(set(self.free) - set(PARAMS))
+        if bad:
+            raise ConfigError(f"calibration: unknown camera parameter(s) {bad}; known: {list(PARAMS)}")
+        bad = sorted(set(self.distortion_terms) - set(DISTORTION))
+        if bad:
+            raise ConfigError(f"calibration: unknown distortion term(s) {bad}; known: {list(DISTORTION)}")
+        for k in ("sigma_px", "huber_sigmas", "outlier_px", "odom_sigma_xy_m", "odom_sigma_theta_deg"):
+            if not float(getattr(self, k)) > 0:
+                raise ConfigError(f"calibration: {k} must be > 0, got {getattr(self, k)!r}")
+
+
+@dataclass
+class FrameData:
+    """One frame's detections of known markers (pixels, as detected, i.e. distorted) and its odometry."""
+
+    stamp: float
+    detections: list[Detection]
+    odom: tuple[float, float, float] | None = None  # base_link in odom (m, m, rad) at the frame's stamp
+
+
+# -------------------------------------------------------------------------------------------- camera model
+
+
+def camera_vector(cam: CameraSpec) -> np.ndarray:
+    """The :data:`PARAMS` vector of a camera."""
+    return np.array([cam.fx, cam.fy, cam.cx, cam.cy, *cam.xyz, cam.pitch_down_deg, cam.roll_deg, *cam.distortion],
+                    dtype=float)
+
+
+def camera_from_vector(base: CameraSpec, v: Sequence[float]) -> CameraSpec:
+    """``base`` (image size, timing) with the parameters of a :data:`PARAMS` vector."""
+    v = [float(a) for a in v]
+    return replace(base, fx=v[0], fy=v[1], cx=v[2], cy=v[3], xyz=(v[4], v[5], v[6]), pitch_down_deg=v[7],
+                   roll_deg=v[8], distortion=tuple(v[9:14]))
+
+
+def _rot_base_optical(pitch_deg: float, roll_deg: float) -> np.ndarray:
+    p, r = math.radians(pitch_deg), math.radians(roll_deg)
+    c, s, cr, sr = math.cos(p), math.sin(p), math.cos(r), math.sin(r)
+    Ry = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    L = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], dtype=float)
+    return Ry @ Rx @ L
+
+
+def distort(xn: np.ndarray, yn: np.ndarray, d: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's plumb-bob model on normalised coordinates."""
+    k1, k2, p1, p2, k3 = d
+    if not (k1 or k2 or p1 or p2 or k3):
+        return xn, yn
+    r2 = xn * xn + yn * yn
+    rad = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = xn * rad + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+    yd = yn * rad + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+    return xd, yd
+
+
+def project_corners(v: np.ndarray, poses: np.ndarray, P: np.ndarray, fi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (Mx2) and depths (M) of world points ``P`` (Mx3) seen from the robot poses ``poses[fi]`` (x, y,
+    heading) by the camera of parameter vector ``v`` (:data:`PARAMS`)."""
+    R_bo = _rot_base_optical(v[7], v[8])
+    R_cb = R_bo.T
+    t_cb = -R_cb @ v[4:7]
+    x, y, th = poses[fi, 0], poses[fi, 1], poses[fi, 2]
+    c, s = np.cos(th), np.sin(th)
+    qx, qy = P[:, 0] - x, P[:, 1] - y
+    b = np.stack([c * qx + s * qy, -s * qx + c * qy, P[:, 2]], axis=1)
+    pc = b @ R_cb.T + t_cb
+    Z = pc[:, 2]
+    iz = 1.0 / np.where(np.abs(Z) < 1e-6, 1e-6, Z)
+    xd, yd = distort(pc[:, 0] * iz, pc[:, 1] * iz, v[9:14])
+    return np.stack([v[0] * xd + v[2], v[1] * yd + v[3]], axis=1), Z
+
+
+# -------------------------------------------------------------------------------------------- the result
+
+
+@dataclass
+class CalibrationResult:
+    """The fitted camera and how well the data determine it."""
+
+    camera: CameraSpec
+    initial: CameraSpec
+    free: tuple[str, ...]
+    sigma: dict[str, float]  # 1-sigma uncertainty of each free parameter (units of :data:`UNITS`)
+    residual_px_rms: float  # RMS of the inlier corners' residuals (pixels, per coordinate)
+    residual_px_median: float  # median corner residual distance (pixels)
+    frames: int  # frames used
+    detections: int  # marker detections used (inliers)
+    rejected: int  # detections rejected as outliers
+    frames_dropped: int  # frames without a usable pose seed or without inliers
+    wall_detections: int
+    floor_detections: int
+    odometry_links: int  # consecutive-frame odometry constraints used
+    degenerate: tuple[str, ...]  # free parameters the data hardly determine (see module doc)
+    correlation: dict[str, float]  # the largest correlations between free parameters ("a/b": r)
+    poses: np.ndarray  # Nx3 fitted robot poses of the frames used
+    stamps: np.ndarray  # N frame stamps
+    residuals: np.ndarray  # Mx2 inlier corner residuals (observed - predicted... predicted - observed, px)
+    points_px: np.ndarray  # Mx2 the inlier corners' observed pixels
+    cost: float = float("nan")
+    nfev: int = 0
+    notes: tuple[str, ...] = ()
+
+    def summary(self) -> dict:
+        """Flat dictionary of the fit (for YAML ``fit:`` and the experiments)."""
+        return {
+            "residual_px_rms": round(self.residual_px_rms, 4),
+            "residual_px_median": round(self.residual_px_median, 4),
+            "frames": self.frames, "detections": self.detections, "rejected": self.rejected,
+            "frames_dropped": self.frames_dropped, "wall_detections": self.wall_detections,
+            "floor_detections": self.floor_detections, "odometry_links": self.odometry_links,
+            "free": list(self.free),
+            "sigma": {k: float(f"{v:.4g}") for k, v in self.sigma.items()},
+            "degenerate": list(self.degenerate),
+            "correlation": {k: round(v, 3) for k, v in self.correlation.items()},
+            "notes": list(self.notes),
+        }
+
+
+# ---------------------------------------------------------------------------------------------- the fit
+
+
+def _seed_poses(frames: list[FrameData], fld: Field, robot: RobotSpec) -> list[tuple[tuple, set[int]] | None]:
+    """Per frame: (pose, ids of markers the planar fit kept) with the initial camera, or None."""
+    from .markerpose import PoseConfig
+    from .pipeline import FrameLocalizer
+
+    lenient = PoseConfig(mount_max_height_m=0.08, mount_max_tilt_deg=15.0, marker_max_rms_px=12.0,
+                         marker_rms_sigmas=40.0, lone_marker_max_distance_m=1.2, marker_outlier_chi2=3.0e4,
+                         max_rms_px=12.0, max_position_sigma_m=0.2, max_heading_sigma_deg=20.0,
+                         consensus_px=25.0, max_marker_distance_m=3.0)
+    loc = FrameLocalizer(fld, robot, pose=lenient, methods=("planar",))
+    out = []
+    for f in frames:
+        res = loc.process_detections(f.detections)
+        e = res.estimates.get("planar")
+        if e is None or not e.ok:
+            out.append(None)
+        else:
+            out.append((e.base, set(e.marker_ids)))
+    return out
+
+
+def _stack_frames(frames, seeds, fld: Field):
+    """Corner arrays of every detection of a seeded frame: world P (Mx3), observed uv (Mx2), frame index
+    (M), detection index (M), and per detection (frame, marker id, is wall, initially inlier)."""
+    P, uv, fi, di, dets = [], [], [], [], []
+    poses, stamps, odom = [], [], []
+    for f, s in zip(frames, seeds):
+        if s is None:
+            continue
+        k = len(poses)
+        poses.append(s[0])
+        stamps.append(f.stamp)
+        odom.append(f.odom)
+        seen = [d.id for d in f.detections]
+        for d in f.detections:
+            if not fld.has_marker(d.id) or seen.count(d.id) > 1:
+                continue
+            m = fld.marker(d.id)
+            c = np.asarray(d.corners, dtype=float).reshape(4, 2)
+            if not np.all(np.isfinite(c)):
+                continue
+            j = len(dets)
+            dets.append((k, d.id, m.kind == "wall", d.id in s[1]))
+            P.append(m.corners)
+            uv.append(c)
+            fi.extend([k] * 4)
+            di.extend([j] * 4)
+    if not dets:
+        return None
+    return (np.concatenate(P), np.concatenate(uv), np.array(fi), np.array(di), dets,
+            np.array(poses, dtype=float), np.array(stamps, dtype=float), odom)
+
+
+def _odometry_links(odom: list, stamps: np.ndarray, cfg: CalibrationConfig) -> list[tuple[int, int, tuple, np.ndarray]]:
+    """(i, j, relative odometry motion, its sigmas) for consecutive frames that both have odometry."""
+    links = []
+    for i in range(len(odom) - 1):
+        a, b = odom[i], odom[i + 1]
+        if a is None or b is None or not (0 <= stamps[i + 1] - stamps[i] <= cfg.odom_max_gap_s):
+            continue
+        d = between2(a, b)
+        dist = math.hypot(d[0], d[1])
+        sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_xy_per_m * dist
+        sth = math.radians(cfg.odom_sigma_theta_deg) + cfg.odom_sigma_theta_per_rad * abs(d[2])
+        links.append((i, i + 1, d, np.array([sxy, sxy, sth])))
+    return links
+
+
+def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: CalibrationConfig | None = None,
+              initial: CameraSpec | None = None) -> CalibrationResult:
+    """The joint fit (see the module doc). ``robot.camera`` (or ``initial``) is the starting camera and the
+    centre of the weak prior. Raises :class:`ConfigError` when the data are too few."""
+    from scipy.optimize import least_squares
+    from scipy.sparse import coo_matrix
+
+    cfg = cfg or CalibrationConfig()
+    cfg.check()
+    frames = [f for f in frames if f.detections]
+    cam0 = initial or robot.camera
+    n_det = sum(1 for f in frames for d in f.detections if fld.has_marker(d.id))
+    if len(frames) < cfg.min_frames or n_det < cfg.min_detections:
+        raise ConfigError(f"calibration needs at least {cfg.min_frames} frames with markers and "
+                          f"{cfg.min_detections} detections of the field's markers; got {len(frames)} frames and "
+                          f"{n_det} detections (drive the robot round the field, walls in view)")
+    seeds = _seed_poses(frames, fld, replace(robot, camera=cam0))
+    stacked = _stack_frames(frames, seeds, fld)
+    if stacked is None:
+        raise ConfigError("calibration: no frame gave a first pose estimate with the initial camera (is the "
+                          "field right, --field, and the initial camera roughly right, --robot?)")
+    P, uv, fi, di, dets, poses, stamps, odom = stacked
+    nF = len(poses)
+    if nF < cfg.min_frames:
+        raise ConfigError(f"calibration: only {nF} frames gave a first pose estimate (at least {cfg.min_frames} "
+                          f"needed); the initial camera may be far off")
+    links = _odometry_links(odom, stamps, cfg)
+    notes = []
+    free = list(dict.fromkeys(cfg.free))
+    if cfg.fit_distortion:
+        free += [t for t in cfg.distortion_terms if t not in free]
+    if cfg.fit_forward and links and "x" not in free:
+        free.append("x")
+    if "x" in free and not links:
+        free.remove("x")
+        notes.append("no odometry: the forward offset x is held at its initial value (not observable)")
+    fidx = [PARAMS.index(k) for k in free]
+    LI = np.array([q[0] for q in links], dtype=int)
+    LJ = np.array([q[1] for q in links], dtype=int)
+    LD = np.array([q[2] for q in links], dtype=float).reshape(-1, 3)
+    LS = np.array([q[3] for q in links], dtype=float).reshape(-1, 3)
+    v0 = camera_vector(cam0)
+    prior_sig = np.array([_prior_sigma(k, cam0, cfg) for k in free])
+    nC = len(fidx)
+    n_det_all = len(dets)
+    inlier = np.array([d[3] for d in dets], dtype=bool)
+
+    def unpack(z):
+        v = v0.copy()
+        v[fidx] = z[:nC]
+        return v, z[nC:].reshape(nF, 3)
+
+    def build(active_corners: np.ndarray):
+        Pa, uva, fia = P[active_corners], uv[active_corners], fi[active_corners]
+        M = len(Pa)
+
+        def fun(z):
+            v, ps = unpack(z)
+            pred, Z = project_corners(v, ps, Pa, fia)
+            r = ((pred - uva) / cfg.sigma_px).ravel()
+            r = np.where(np.repeat(Z, 2) > 1e-3, r, 1e3)
+            out = [r]
+            if links:
+                a, b = ps[LI], ps[LJ]
+                c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+                dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+                lr = np.stack([c * dx + s * dy - LD[:, 0], -s * dx + c * dy - LD[:, 1],
+                               wrap_angle(b[:, 2] - a[:, 2] - LD[:, 2])], axis=1) / LS
+                out.append(lr.ravel())
+            out.append((z[:nC] - v0[fidx]) / prior_sig)
+            return np.concatenate(out)
+
+        n_rows = 2 * M + 3 * len(links) + nC
+        r_i, c_i = [], []
+        rows = np.arange(2 * M)
+        r_i.append(np.repeat(rows, nC))  # every corner: the camera block
+        c_i.append(np.tile(np.arange(nC), 2 * M))
+        pose_col = nC + 3 * np.repeat(fia, 2)  # and its frame's pose
+        for k in range(3):
+            r_i.append(rows)
+            c_i.append(pose_col + k)
+        for q, (i, j, _, _) in enumerate(links):
+            rr = np.repeat(2 * M + 3 * q + np.arange(3), 6)
+            cc = np.tile(np.concatenate([nC + 3 * i + np.arange(3), nC + 3 * j + np.arange(3)]), 3)
+            r_i.append(rr)
+            c_i.append(cc)
+        r_i.append(2 * M + 3 * len(links) + np.arange(nC))
+        c_i.append(np.arange(nC))
+        S = coo_matrix((np.ones(sum(len(a) for a in r_i), dtype=np.int8), (np.concatenate(r_i), np.concatenate(c_i))),
+                       shape=(n_rows, nC + 3 * nF))
+        return fun, S.tocsr(), M
+
+    z = np.concatenate([v0[fidx], poses.ravel()])
+    res = None
+    rounds_done = 0
+    for _ in range(max(1, cfg.rounds)):
+        rounds_done += 1
+        frame_has = np.zeros(nF, dtype=bool)
+        frame_has[[dets[j][0] for j in np.flatnonzero(inlier)]] = True
+        active_corners = inlier[di] & frame_has[fi]
+        fun, S, M = build(active_corners)
+        res = least_squares(fun, z, jac_sparsity=S, method="trf", loss="huber", f_scale=cfg.huber_sigmas,
+                            x_scale="jac", max_nfev=cfg.max_nfev, xtol=1e-10, ftol=1e-10,
+                            tr_options={"atol": 1e-12, "btol": 1e-12, "maxiter": 2000}, verbose=0)
+        z = res.x
+        # re-decide every detection of the seeded frames with the new camera and poses
+        v, ps = unpack(z)
+        pred, Z = project_corners(v, ps, P, fi)
+        e = pred - uv
+        per_det = np.sqrt(np.bincount(di, weights=np.sum(e ** 2, axis=1), minlength=n_det_all) / 4)
+        behind = np.bincount(di, weights=(Z <= 1e-3).astype(float), minlength=n_det_all) > 0
+        scale = 1.4826 * float(np.median(np.abs(e[inlier[di]]))) if inlier.any() else cfg.sigma_px
+        limit = max(cfg.outlier_px, cfg.outlier_scales * scale)
+        new = (per_det <= limit) & ~behind
+        if np.array_equal(new, inlier):
+            break
+        inlier = new
+    frame_has = np.zeros(nF, dtype=bool)
+    frame_has[[dets[j][0] for j in np.flatnonzero(inlier)]] = True
+    active_corners = inlier[di] & frame_has[fi]
+    fun, S, M = build(active_corners)
+    if not np.array_equal(fun(z).shape, (S.shape[0],)):
+        raise AssertionError("residual count and sparsity disagree")
+    v, ps = unpack(z)
+    pred, _ = project_corners(v, ps, P[active_corners], fi[active_corners])
+    resid = pred - uv[active_corners]
+    cov_c = _camera_covariance(res, nC, n_rows=S.shape[0], n_params=len(z))
+    sig = {k: float(math.sqrt(max(cov_c[i, i], 0.0))) for i, k in enumerate(free)}
+    degenerate = tuple(k for i, k in enumerate(free) if sig[k] > cfg.degenerate_ratio * prior_sig[i])
+    corr = {}
+    d = np.sqrt(np.maximum(np.diag(cov_c), 1e-300))
+    R = cov_c / np.outer(d, d)
+    pairs = sorted(((abs(R[i, j]), i, j) for i in range(nC) for j in range(i + 1, nC)), reverse=True)[:4]
+    for _, i, j in pairs:
+        corr[f"{free[i]}/{free[j]}"] = float(R[i, j])
+    walls = sum(1 for j in np.flatnonzero(inlier) if dets[j][2] and frame_has[dets[j][0]])
+    used = int(np.count_nonzero(inlier & frame_has[[d[0] for d in dets]]))
+    if walls == 0:
+        notes.append("no wall markers: focal length, height and pitch are not separable from floor markers alone")
+    if degenerate:
+        notes.append(f"poorly determined by these data (sigma above {cfg.degenerate_ratio:g} of the prior's): "
+                     f"{', '.join(degenerate)}")
+    dist = np.linalg.norm(resid, axis=1)
+    return CalibrationResult(
+        camera=camera_from_vector(cam0, v), initial=cam0, free=tuple(free), sigma=sig,
+        residual_px_rms=float(np.sqrt(np.mean(resid ** 2))) if len(resid) else float("nan"),
+        residual_px_median=float(np.median(dist)) if len(dist) else float("nan"),
+        frames=int(frame_has.sum()), detections=used, rejected=int(n_det_all - np.count_nonzero(inlier)),
+        frames_dropped=int(len(frames) - frame_has.sum()), wall_detections=int(walls),
+        floor_detections=int(used - walls), odometry_links=len(links), degenerate=degenerate, correlation=corr,
+        poses=ps[frame_has].copy(), stamps=stamps[frame_has].copy(), residuals=resid,
+        points_px=uv[active_corners].copy(), cost=float(res.cost), nfev=int(res.nfev), notes=tuple(notes))
+
+
+def _prior_sigma(name: str, cam: CameraSpec, cfg: CalibrationConfig) -> float:
+    s = float(cfg.prior_sigma.get(name, 1.0))
+    if name in ("fx", "fy"):
+        return s * (cam.fx if name == "fx" else cam.fy)
+    if name in ("cx", "cy"):
+        return s * cam.width
+    return s
+
+
+def _camera_covariance(res, nC: int, n_rows: int, n_params: int) -> np.ndarray:
+    """Covariance of the camera block: inverse of J^T J (Huber-weighted) by the Schur complement over the
+    pose blocks, scaled by the a-posteriori variance factor 2*cost/(m - n)."""
+    J = res.jac.tocsc() if hasattr(res.jac, "tocsc") else np.asarray(res.jac)
+    H = (J.T @ J)
+    H = H.toarray() if hasattr(H, "toarray") else np.asarray(H)
+    try:
+        Hinv = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        Hinv = np.linalg.pinv(H)
+    dof = max(1, n_rows - n_params)
+    s2 = max(2.0 * float(res.cost) / dof, 1e-12)
+    C = Hinv[:nC, :nC] * s2
+    return 0.5 * (C + C.T)
+
+
+# ------------------------------------------------------------------------------------ files and robots
+
+
+def calibration_dict(result: CalibrationResult) -> dict:
+    """The YAML document: ``camera:`` (what bridge and localize load) and ``fit:``."""
+    c = result.camera
+    return {"camera": camera_dict(c), "fit": result.summary()}
+
+
+def camera_dict(c: CameraSpec) -> dict:
+    def r(v, n=6):
+        return float(round(float(v), n))
+    return {"fx": r(c.fx, 4), "fy": r(c.fy, 4), "cx": r(c.cx, 4), "cy": r(c.cy, 4),
+            "distortion": [r(v, 8) for v in c.distortion], "xyz": [r(v, 5) for v in c.xyz],
+            "pitch_down_deg": r(c.pitch_down_deg, 4), "roll_deg": r(c.roll_deg, 4),
+            "width": int(c.width), "height": int(c.height)}
+
+
+def write_calibration(path: str | Path, result_or_camera, fit: dict | None = None) -> Path:
+    """Write a calibration YAML from a :class:`CalibrationResult` (or a CameraSpec and a ``fit`` dict)."""
+    import yaml
+
+    if isinstance(result_or_camera, CalibrationResult):
+        doc = calibration_dict(result_or_camera)
+    else:
+        doc = {"camera": camera_dict(result_or_camera), "fit": dict(fit or {})}
+    p = Path(path)
+    if p.parent and not p.parent.exists():
+        p.parent.mkdir(parents=True, exist_ok=True)
+    header = ("# camera calibration (raf calibrate; docs/calibration.md). Pixels with centres at integers,\n"
+              "# distortion: OpenCV (k1, k2, p1, p2, k3); xyz: base_link -> camera_link (m); pitch down and roll\n"
+              "# about the optical axis in degrees. Load with: raf bridge --calibration FILE, raf localize\n"
+              "# --calibration FILE.\n")
+    p.write_text(header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
+    return p
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A loaded calibration file: the camera values it sets (a subset of the keys is allowed)."""
+
+    path: str
+    camera: dict
+    fit: dict
+
+    def apply(self, cam: CameraSpec) -> CameraSpec:
+        """``cam`` with this file's values."""
+        c = self.camera
+        kw = {}
+        for k in ("fx", "fy", "cx", "cy", "pitch_down_deg", "roll_deg"):
+            if k in c:
+                kw[k] = float(c[k])
+        if "xyz" in c:
+            kw["xyz"] = tuple(float(v) for v in c["xyz"])
+        if "distortion" in c:
+            kw["distortion"] = tuple(float(v) for v in c["distortion"])
+        for k in ("width", "height"):
+            if k in c and int(c[k]) != getattr(cam, k):
+                raise ConfigError(f"calibration {self.path}: camera/{k} is {c[k]} but the camera's image is "
+                                  f"{cam.width}x{cam.height} (a calibration holds for one image size)")
+        return replace(cam, **kw)
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read and check a calibration YAML (``camera:`` mapping; ``fit:`` optional)."""
+    from ..settings import read_yaml
+
+    d = read_yaml(path, "calibration file")
+    cam = d.get("camera")
+    if not isinstance(cam, dict) or not cam:
+        raise ConfigError(f"calibration file {path}: needs a 'camera:' mapping (fx, fy, cx, cy, distortion, xyz, "
+                          f"pitch_down_deg, roll_deg)")
+    known = {"fx", "fy", "cx", "cy", "distortion", "xyz", "pitch_down_deg", "roll_deg", "width", "height"}
+    bad = sorted(set(cam) - known)
+    if bad:
+        raise ConfigError(f"calibration file {path}: unknown camera key(s) {bad}; known: {sorted(known)}")
+
+    def num(k, v, positive=False):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or (positive and v <= 0):
+            raise ConfigError(f"calibration file {path}: camera/{k} must be a finite "
+                              f"{'positive ' if positive else ''}number, got {v!r}")
+        return float(v)
+    for k in ("fx", "fy"):
+        if k in cam:
+            num(k, cam[k], positive=True)
+    for k in ("cx", "cy", "pitch_down_deg", "roll_deg"):
+        if k in cam:
+            num(k, cam[k])
+    if "xyz" in cam:
+        v = cam["xyz"]
+        if not isinstance(v, (list, tuple)) or len(v) != 3:
+            raise ConfigError(f"calibration file {path}: camera/xyz must be [x, y, z] in metres, got {v!r}")
+        [num("xyz", a) for a in v]
+    if "distortion" in cam:
+        v = cam["distortion"]
+        if not isinstance(v, (list, tuple)) or not 1 <= len(v) <= 5:
+            raise ConfigError(f"calibration file {path}: camera/distortion must be [k1, k2, p1, p2, k3], got {v!r}")
+        [num("distortion", a) for a in v]
+    for k in ("width", "height"):
+        if k in cam and (isinstance(cam[k], bool) or not isinstance(cam[k], int) or cam[k] <= 0):
+            raise ConfigError(f"calibration file {path}: camera/{k} must be a positive integer, got {cam[k]!r}")
+    fit = d.get("fit") or {}
+    if not isinstance(fit, dict):
+        raise ConfigError(f"calibration file {path}: 'fit:' must be a mapping")
+    return Calibration(str(path), dict(cam), dict(fit))
+
+
+def calibrated_robot(robot: RobotSpec, path: str | Path) -> RobotSpec:
+    """``robot`` with the camera of a calibration file."""
+    return replace(robot, camera=load_calibration(path).apply(robot.camera))
+
+
+def perturbed_robot(robot: RobotSpec, fx_pct: float = 3.0, fy_pct: float | None = None, cx_px: float = 4.0,
+                    cy_px: float = -3.0, pitch_deg: float = 1.0, roll_deg: float = 0.0, height_m: float = 0.0,
+                    forward_m: float = 0.0, distortion: Sequence[float] | None = None) -> RobotSpec:
+    """``robot`` with its camera changed: focal lengths by a percentage (``fy_pct`` defaults to ``fx_pct``),
+    principal point by pixels, pitch down and roll by degrees, mount height and forward offset by metres.
+    The issue's test case is the default (fx, fy +3 %, cx +4 px, cy -3 px, pitch +1 degree)."""
+    c = robot.camera
+    fy_pct = fx_pct if fy_pct is None else fy_pct
+    cam = replace(c, fx=c.fx * (1 + fx_pct / 100), fy=c.fy * (1 + fy_pct / 100), cx=c.cx + cx_px, cy=c.cy + cy_px,
+                  pitch_down_deg=c.pitch_down_deg + pitch_deg, roll_deg=c.roll_deg + roll_deg,
+                  xyz=(c.xyz[0] + forward_m, c.xyz[1], c.xyz[2] + height_m),
+                  distortion=tuple(distortion) if distortion is not None else c.distortion)
+    return replace(robot, camera=cam)
+
+
+def robot_dict(robot: RobotSpec) -> dict:
+    """A robot as the JSON document :func:`robotatfactory.robot.load_robot` reads."""
+    from dataclasses import asdict
+
+    d = asdict(robot)
+    d["camera"]["xyz"] = list(robot.camera.xyz)
+    d["camera"]["distortion"] = list(robot.camera.distortion)
+    d["lidar"]["xyz"] = list(robot.lidar.xyz)
+    return d
+
+
+def write_robot_json(robot: RobotSpec, path: str | Path) -> Path:
+    """Write ``robot`` as a JSON file that ``raf sim --robot FILE`` (``load_robot``) accepts."""
+    import json
+
+    p = Path(path)
+    if p.suffix != ".json":
+        raise ConfigError(f"robot file {p}: must end in .json (load_robot recognises files by that suffix)")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(robot_dict(robot), indent=1))
+    return p
+
+
+def compare(fitted: CameraSpec, truth: CameraSpec) -> dict:
+    """Errors of a fitted camera against the true one, flat keys with units."""
+    return {
+        "fx_error_pct": 100 * (fitted.fx - truth.fx) / truth.fx,
+        "fy_error_pct": 100 * (fitted.fy - truth.fy) / truth.fy,
+        "cx_error_px": fitted.cx - truth.cx,
+        "cy_error_px": fitted.cy - truth.cy,
+        "pitch_error_deg": fitted.pitch_down_deg - truth.pitch_down_deg,
+        "roll_error_deg": fitted.roll_deg - truth.roll_deg,
+        "height_error_mm": 1000 * (fitted.xyz[2] - truth.xyz[2]),
+        "forward_error_mm": 1000 * (fitted.xyz[0] - truth.xyz[0]),
+    }
+
+
+# ------------------------------------------------------------------------------------ synthetic data
+
+
+def synthetic_frames(fld: Field, camera: CameraSpec, poses: Sequence[tuple[float, float, float]],
+                     noise_px: float = 0.0, seed: int = 0, odom_noise: float = 0.0,
+                     outliers: int = 0) -> list[FrameData]:
+    """Exact projections (with the camera's distortion) of every marker fully inside the image, plus Gaussian
+    noise; odometry = the true poses (with ``odom_noise`` relative noise on each step); ``outliers`` random
+    detections get a corner moved by 5-20 px. For tests: no rendering."""
+    from .synth import camera_world_pose, visible_markers
+
+    rng = np.random.default_rng(seed)
+    pinhole = replace(camera, distortion=(0.0,) * 5)
+    v = camera_vector(camera)
+    out = []
+    odo = None
+    prev = None
+    for k, p in enumerate(poses):
+        T = camera_world_pose(camera, p)
+        vis = visible_markers(fld, pinhole, T, margin_px=3.0, min_side_px=6.0)
+        dets = []
+        for vm in vis:
+            m = fld.marker(vm.id)
+            uv, _ = project_corners(v, np.array([p], dtype=float), m.corners, np.zeros(4, dtype=int))
+            if np.any(uv < 0) or np.any(uv[:, 0] > camera.width - 1) or np.any(uv[:, 1] > camera.height - 1):
+                continue
+            uv = uv + rng.normal(0, noise_px, uv.shape) if noise_px > 0 else uv
+            dets.append(Detection(vm.id, uv))
+        if prev is None:
+            odo = tuple(p)
+        else:
+            d = np.array(between2(prev, p))
+            if odom_noise > 0:
+                d = d * (1 + rng.normal(0, odom_noise, 3))
+            from .geometry import compose2
+
+            odo = compose2(odo, tuple(d))
+        prev = tuple(p)
+        out.append(FrameData(float(k), dets, odo))
+    for _ in range(outliers):
+        cand = [f for f in out if f.detections]
+        f = cand[int(rng.integers(len(cand)))]
+        i = int(rng.integers(len(f.detections)))
+        d = f.detections[i]
+        c = d.corners.copy()
+        c[int(rng.integers(4))] += rng.uniform(5, 20, 2) * rng.choice([-1, 1], 2)
+        f.detections[i] = Detection(d.id, c)
+    return out
