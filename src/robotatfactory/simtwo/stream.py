@@ -202,9 +202,10 @@ class StreamTracker:
                 c.restarts += 1
                 return self._accept(Event(Verdict.RESTART, seq, time_ms, from_zero=self.restart_like(*start),
                                           run_length=n), arrival, totals)
-            # a jump ahead, confirmed by the frames after it (e.g. a long outage)
+            # a jump ahead, confirmed by the frames after it (e.g. a long outage); the chain's earlier frames
+            # were not applied: they count as lost (their ticks are in this frame's cumulative totals)
             c.jumps_confirmed += 1
-            lost = max(0, seq - last - 1 - (n - 1))
+            lost = seq - last - 1
             c.lost += lost
             c.gaps += 1
             return self._accept(Event(Verdict.GAP, seq, time_ms, lost=lost, run_length=n), arrival, totals)
@@ -295,7 +296,7 @@ class SourceGate:
         """A decoded frame from an unbound source that may bind: returns the chain's payloads (oldest first)
         when it confirms the source (which is then bound), else None."""
         key = (addr[0], addr[1])
-        if self.bound is None and self.configured:
+        if self.configured:
             return None
         chain = self._cand.get(key)
         if chain and chain_consistent(chain[-1][:2], (seq, time_ms), self.period_ms, self.window):
