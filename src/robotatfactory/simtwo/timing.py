@@ -74,10 +74,6 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from fractions import Fraction
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # annotations only: this module needs no numpy at run time
-    import numpy as np
 
 
 def _fraction(x: float | int) -> Fraction:
@@ -370,92 +366,11 @@ class SimClock:
         return (t1 - t0) / 1000 / span if span > 0 else 0.0
 
 
-@dataclass(frozen=True)
-class Sweep:
-    """One complete LIDAR sweep: ray ``i`` measured at ``t0 + i * time_increment`` (simulation seconds)."""
+def __getattr__(name: str):
+    """The LIDAR sweep assembly moved to :mod:`robotatfactory.simtwo.scan` (SimTwo's whole-sweep delivery is
+    its default there); the per-ray assembler keeps its former name here, imported on first use (numpy)."""
+    if name in ("SweepAssembler", "Sweep"):
+        from . import scan
 
-    index: int  # sweep number since t = 0
-    t0: float  # s, time of ray 0
-    time_increment: float  # s between consecutive rays
-    ranges: "np.ndarray"  # metres, -1 = no return, NaN = not received (datagrams lost)
-    missing: int  # rays not received
-
-
-class SweepAssembler:
-    """Rebuilds time-ordered LIDAR sweeps from the per-cycle range arrays of SimTwo's ``ranger2d``.
-
-    The ranger refreshes its N rays in turn over one ``period``: ray ``i`` of sweep ``s`` is measured at the
-    end of the first physics step after ``(s + i/N) * period`` (simulation time from 0). The array a
-    SensorFrame carries at the end of a cycle therefore mixes the newest rays of the current sweep with the
-    older rest of the previous one, which a ``sensor_msgs/LaserScan`` (one start time, a fixed increment)
-    cannot describe. From the schedule the assembler knows which sweep each ray of each array belongs to,
-    collects every sweep, and returns it once its last ray has been measured. Rays whose only copies were
-    in lost datagrams are NaN and counted.
-    """
-
-    def __init__(self, rays: int, period: float, physics_step: float):
-        import numpy as np
-
-        if rays < 1 or period <= 0 or physics_step <= 0:
-            raise ValueError(f"rays {rays}, period {period} and physics_step {physics_step} must be positive")
-        self.n = int(rays)
-        self._np = np
-        self._dt_ns = int(round(physics_step * 1e9))
-        self._period_ns = int(round(period * 1e9))
-        self._idx = np.arange(self.n)
-        self.sweeps_done = 0
-        self.missing_total = 0
-        self.reset()
-
-    def reset(self) -> None:
-        self._cur: int | None = None
-        self._buf = self._np.full(self.n, self._np.nan)
-        self._have = self._np.zeros(self.n, dtype=bool)
-
-    def count(self, time_ms: int) -> int:
-        """Rays measured since t = 0 by the end of the physics step ending at ``time_ms``."""
-        steps = (int(time_ms) * 1_000_000) // self._dt_ns
-        return (steps * self.n * self._dt_ns) // self._period_ns
-
-    def ray_time(self, counter: int) -> float:
-        """Simulation time (s) at which the ray with global counter ``counter`` is measured."""
-        step = -(-(counter + 1) * self._period_ns // (self.n * self._dt_ns))  # first step whose count > counter
-        return step * self._dt_ns / 1e9
-
-    def add(self, time_ms: int, ranges) -> list[Sweep]:
-        """Feed the array of the frame at ``time_ms``; returns the sweeps completed by it (usually 0 or 1)."""
-        np = self._np
-        ranges = np.asarray(ranges, dtype=float)
-        if len(ranges) != self.n:
-            raise ValueError(f"{len(ranges)} rays, expected {self.n}")
-        c = self.count(time_ms)
-        if c == 0:
-            return []
-        # sweep each ray's newest measurement belongs to: counter = largest s*N + i below c
-        sweep_of = (c - 1 - self._idx) // self.n  # -1 for rays not yet measured at all
-        newest = (c - 1) // self.n
-        if self._cur is None:
-            self._cur = newest  # join at the sweep in progress (its first rays are in this array)
-        elif self._cur < newest - 1:
-            self._cur = newest - 1  # a long gap: sweeps before it are gone
-            self._buf[:] = np.nan
-            self._have[:] = False
-        out = []
-        while True:
-            sel = sweep_of == self._cur
-            self._buf[sel] = ranges[sel]
-            self._have |= sel
-            if c >= (self._cur + 1) * self.n:  # its last ray has been measured
-                missing = int(self.n - self._have.sum())
-                t0 = self.ray_time(self._cur * self.n)
-                t_last = self.ray_time(self._cur * self.n + self.n - 1)
-                inc = (t_last - t0) / (self.n - 1) if self.n > 1 else 0.0
-                out.append(Sweep(self._cur, t0, inc, self._buf.copy(), missing))
-                self.sweeps_done += 1
-                self.missing_total += missing
-                self._cur += 1
-                self._buf[:] = np.nan
-                self._have[:] = False
-                continue
-            break
-        return out
+        return scan.PerRayAssembler if name == "SweepAssembler" else scan.Sweep
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
