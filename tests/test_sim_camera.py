@@ -1,5 +1,5 @@
-"""The stand-in simulator's camera: markers OpenCV finds where the field map says, SimTwo's frame clock and
-wire format, deterministic frames."""
+"""The stand-in simulator's camera: markers OpenCV finds where the field map says, SimTwo's render cadence
+(and the k/15 s grid idealisation), wire format, deterministic frames."""
 import math
 
 import cv2
@@ -99,12 +99,12 @@ def test_expected_markers_are_the_projected_ones(sim, field, robot, detector):
     assert expected <= found, (expected, found)
 
 
-def test_frames_follow_simtwos_render_clock_and_ordering_rule(field, robot):
-    """15 frames per simulation second, on ticks k/60 s with k = 4j; a frame is taken before the sensor
-    frame of the first cycle ending at or after its tick."""
+def test_grid_frames_follow_the_nominal_render_clock_and_ordering_rule(field, robot):
+    """The grid idealisation: 15 frames per simulation second, on ticks k/60 s with k = 4j; a frame is taken
+    before the sensor frame of the first cycle ending at or after its tick."""
     from robotatfactory.sim import Simulator
 
-    s = Simulator(field, robot, SimConfig(camera=True, competition=False, lidar=False))
+    s = Simulator(field, robot, SimConfig(camera=True, competition=False, lidar=False, camera_timing="grid"))
     period = robot.camera.decimation / robot.camera.render_fps
     seen = []
     prev_end = -1e-9
@@ -125,7 +125,7 @@ def test_frames_follow_simtwos_render_clock_and_ordering_rule(field, robot):
 def test_wire_frames_are_simtwos_raw_bgra_bottom_up(field, robot):
     from robotatfactory.sim import Simulator
 
-    s = Simulator(field, robot, SimConfig(camera=True, competition=True, lidar=False))
+    s = Simulator(field, robot, SimConfig(camera=True, competition=True, lidar=False, camera_timing="grid"))
     s.step_cycle(Command(0.0, 0.0, False))
     (fr,) = s.take_frames()
     wire = fr.wire(bottom_up=True)
@@ -152,5 +152,65 @@ def test_same_seed_same_frames(field, robot):
         return out
 
     a, b = run(), run()
-    assert len(a) == 8 and a == b
+    assert len(a) >= 5 and a == b  # SimTwo's cadence: a frame every 68 ms or more of the 480 ms
     assert len(set(a)) > 1  # the robot moved: the frames differ from each other
+
+
+def test_simtwo_frames_show_chunk_ends_on_a_cadence_that_is_no_grid(field, robot):
+    """The default cadence (SimTwo's GUI loop): every frame shows the state at the end of a 17 ms physics
+    chunk, frames are 4 renders apart (68 ms) or more after a catch-up (85, 102 ms: the renders of the
+    chunks run in a burst are skipped), their offset in the 40 ms control cycle wanders, and they obey the
+    ordering rule (taken before the SensorFrame of the first cycle ending at or after them)."""
+    from robotatfactory.sim import Simulator
+
+    s = Simulator(field, robot, SimConfig(camera=True, competition=False, lidar=False, seed=3))
+    frames, prev_end = [], 0.0
+    for _ in range(50):  # 2 s
+        f = s.step_cycle(Command(0.1, 0.5, False))
+        end = f.time_ms / 1000
+        for fr in s.take_frames():
+            assert prev_end < fr.time <= end + 1e-9
+            frames.append(fr)
+        prev_end = end
+    s.close()
+    steps = [round(fr.time * 1000) for fr in frames]
+    assert all(k % 17 == 0 for k in steps)
+    gaps = {b - a for a, b in zip(steps, steps[1:])}
+    assert 68 in gaps and gaps <= {68, 85, 102, 119, 136}
+    assert len({k % 40 for k in steps}) >= 8  # no fixed phase to the control cycle
+    assert [fr.index for fr in frames] == list(range(len(frames))) and 24 <= len(frames) <= 30
+    assert all(fr.tick % robot.camera.decimation == 0 for fr in frames)
+    assert all(b.wall > a.wall for a, b in zip(frames, frames[1:]))
+
+
+def test_render_cadence_is_seeded_and_catches_up_like_the_cadencer():
+    """Pure schedule checks (no rendering): same seed same schedule, another seed another one; the
+    simulation advances 17 ms per 1/60 s wall tick (1.02x real time, SimTwo's fixed chunk); the grid mode is
+    today's exact k/15 s."""
+    import itertools
+
+    from robotatfactory.errors import ConfigError
+    from robotatfactory.sim.camera import GuiLoopModel, RenderCadence
+
+    def take(mode, seed, n=600, gui=None):
+        return list(itertools.islice(RenderCadence(mode, 0.001, 60, 4, seed, gui).frames(), n))
+
+    a, b, c = take("simtwo", 1), take("simtwo", 1), take("simtwo", 2)
+    assert a == b and a != c
+    assert a[0].step == 68 and a[0].tick == 4
+    assert a[-1].step / 1000 / a[-1].wall == pytest.approx(1.02, abs=0.01)  # chunks of 17 ms per 16.67 ms
+    skipped = sum((y.step - x.step) // 17 - 4 for x, y in zip(a, a[1:]))
+    assert 0 < skipped < 0.2 * len(a)  # catch-up bursts happen, the GUI mostly keeps up
+    # a GUI that never stalls renders every chunk: a 68 ms grid of simulation time
+    calm = take("simtwo", 1, 100, GuiLoopModel(hiccup_prob=0.0, render_sigma=0.0))
+    assert {y.step - x.step for x, y in zip(calm, calm[1:])} == {68}
+    # a GUI slower than 60 FPS (about 28 ms per iteration) runs one or two chunks per render: frames 6-8
+    # chunks apart, and simulation time still keeps 1.02x the wall clock
+    slow = take("simtwo", 1, 100, GuiLoopModel(render=0.025, render_sigma=0.0, hiccup_prob=0.0))
+    assert {y.step - x.step for x, y in zip(slow, slow[1:])} <= {102, 119, 136}
+    assert slow[-1].step / 1000 / slow[-1].wall == pytest.approx(1.02, abs=0.03)
+    g = take("grid", 5, 31)
+    assert [f.step for f in g] == [math.ceil(j * 1000 / 15 - 1e-6) for j in range(31)]
+    assert all(f.tick == 4 * f.index and f.tick_time == pytest.approx(f.index / 15) for f in g)
+    with pytest.raises(ConfigError):
+        RenderCadence("wall", 0.001)

@@ -31,8 +31,9 @@ class SimConfig:
     Same config (seed included) and same commands: same sensor frames and camera images, bit for bit.
 
     * ``start_pose``: (x, y, theta) in the field frame (m, rad); None = the field's start pose.
-    * ``camera``: render the robot camera during :meth:`Simulator.step_cycle` on SimTwo's 60 FPS render
-      clock decimated by 4 (frames at k/15 s of simulation time), collected with ``take_frames()``.
+    * ``camera``: render the robot camera during :meth:`Simulator.step_cycle`, collected with
+      ``take_frames()``; ``camera_timing`` says when: ``"simtwo"`` (default) as SimTwo's GUI loop does,
+      ``"grid"`` on SimTwo's nominal 60 FPS clock decimated by 4 (k/15 s of simulation time).
     * ``lidar`` / ``lidar_noise``: cast the 2D LIDAR; add SimTwo's range noise a*exp(b*d) (seeded).
     * ``competition``: place the round's parts and run the machines and the referee
       (:mod:`robotatfactory.competition`); ``round_no``, ``parts`` (e.g. "RGBX"), ``processing_delay``
@@ -54,6 +55,9 @@ class SimConfig:
     start_after: float = 0.0
     round_duration: float = 600.0
     extra_parts: tuple[PartPlacement, ...] = field(default_factory=tuple)
+    # -- camera timing (sim/camera.py RenderCadence): "simtwo" = when SimTwo's GUI loop renders (ends of 17 ms
+    # physics chunks on a seeded wall clock, every 4th render published); "grid" = the idealisation k/15 s
+    camera_timing: str = "simtwo"
 
     def __post_init__(self):
         if self.start_pose is not None:

@@ -2,10 +2,12 @@
 
 Deterministic and free of I/O: :meth:`Simulator.step_cycle` takes the :class:`~robotatfactory.simtwo.Command`
 to apply and returns the :class:`~robotatfactory.simtwo.SensorFrame` measured at the end of the control
-period (40 ms of 1 ms physics steps). Camera frames due in that period (SimTwo's 60 FPS render clock,
-every 4th tick) are rendered at the physics step they fall on and collected with :meth:`take_frames`; a
-caller that publishes them before sending the returned frame honours the frame ordering rule of
-``docs/dev/interfaces.md``.
+period (40 ms of 1 ms physics steps). Camera frames due in that period are rendered at the physics step
+they fall on and collected with :meth:`take_frames`: by default when SimTwo's GUI loop would render them
+(``camera_timing="simtwo"``, :class:`~robotatfactory.sim.camera.RenderCadence`: ends of 17 ms physics
+chunks picked by a seeded wall clock, every 4th render), or on the idealised grid k/15 s
+(``"grid"``); a caller that publishes them before sending the returned frame honours the frame ordering rule
+of ``docs/dev/interfaces.md``.
 
 Units: metres, radians, seconds, volts, amperes, newton-metres. Poses are in the field frame.
 """
@@ -25,7 +27,7 @@ from ..field import Field  # noqa: E402
 from ..robot import RobotSpec  # noqa: E402
 from ..simtwo import Command, SensorFrame  # noqa: E402
 from . import scene as sc  # noqa: E402
-from .camera import CameraFrame, Renderer  # noqa: E402
+from .camera import CameraFrame, RenderCadence, Renderer, ScheduledFrame  # noqa: E402
 from .config import SimConfig  # noqa: E402
 from .motor import DCMotor, MotorParams, SpeedControllerParams, SpeedPI  # noqa: E402
 from .parts import PartBodies  # noqa: E402
@@ -112,9 +114,10 @@ class Simulator:
         self._contact_groups = np.asarray(sc.CONTACT_GROUPS, dtype=np.uint8)
         self.contact = False
 
-        # camera clock: frames at index * decimation / render_fps seconds of simulation time
-        self._frame_period = cam.decimation / cam.render_fps
-        self._frame_index = 0
+        # camera clock: when frames are rendered (SimTwo's GUI cadence or the k/15 s grid), see sim/camera.py
+        self._cadence = RenderCadence(config.camera_timing, self.dt, cam.render_fps, cam.decimation, config.seed)
+        self._schedule = self._cadence.frames()
+        self._next_frame: ScheduledFrame = next(self._schedule)
         self._frames: list[CameraFrame] = []
         self._renderer: Renderer | None = None
         self.render_seconds = 0.0  # wall time spent rendering (for benchmarks)
@@ -267,15 +270,12 @@ class Simulator:
                 lidar_slot[j] = slot
         events: dict[int, list] = {}
         if self.config.camera:
-            while True:
-                fs = self._frame_step(self._frame_index)
-                if fs > s0 + n:
-                    break
-                if fs <= s0:  # due at the start of this cycle: render the state as it is now
-                    self._render_frame(self._frame_index)
+            while self._next_frame.step <= s0 + n:
+                sf, self._next_frame = self._next_frame, next(self._schedule)
+                if sf.step <= s0:  # due at the start of this cycle: render the state as it is now
+                    self._render_frame(sf)
                 else:
-                    events.setdefault(fs - s0 - 1, []).append(("camera", self._frame_index))
-                self._frame_index += 1
+                    events.setdefault(sf.step - s0 - 1, []).append(("camera", sf))
         if self.magnet_on and self.held is None:
             self._magnet_check()
             for j in range(MAGNET_CHECK_STEPS - 1, n, MAGNET_CHECK_STEPS):
@@ -425,10 +425,6 @@ class Simulator:
         pl.integral, pr.integral = intl, intr
         pl.ref, pr.ref = refl, refr
 
-    def _frame_step(self, index: int) -> int:
-        """The physics step (count since t = 0) at or after camera frame ``index``'s render tick."""
-        return math.ceil(index * self._frame_period / self.dt - 1e-6)
-
     def _end_of_cycle(self) -> SensorFrame:
         m, d = self.model, self.data
         el, er = self.encoders
@@ -528,7 +524,7 @@ class Simulator:
             self._renderer = Renderer(self.model, self.info.robot_camera, c.width, c.height)
         return self._renderer
 
-    def _render_frame(self, index: int) -> None:
+    def _render_frame(self, sf: ScheduledFrame) -> None:
         import time as _time
 
         t0 = _time.perf_counter()
@@ -537,9 +533,8 @@ class Simulator:
         self.render_seconds += dt
         self.render_times.append(dt)
         self.frames_rendered += 1
-        dec = self.robot.camera.decimation
-        self._frames.append(CameraFrame(index=index, tick=index * dec, tick_time=index * self._frame_period,
-                                        time=self.time, rgb_bottom_up=rgb))
+        self._frames.append(CameraFrame(index=sf.index, tick=sf.tick, tick_time=sf.tick_time, time=self.time,
+                                        rgb_bottom_up=rgb, wall=sf.wall))
 
     def take_frames(self) -> list[CameraFrame]:
         """Camera frames rendered since the last call, oldest first (publish them before the next frame)."""
