@@ -33,6 +33,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     cam.add_argument("--camera-bind", default=f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}", metavar="ENDPOINT",
                      help=f"ZMQ PUB endpoint of the camera (default tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT})")
     cam.add_argument("--no-camera", action="store_true", help="do not render or publish camera frames")
+    g.add_argument("--camera-timing", choices=("simtwo", "grid"), default="simtwo",
+                   help="when camera frames are rendered: simtwo (default: as SimTwo's GUI loop, at the ends of "
+                        "17 ms physics chunks chosen by a wall clock, not a grid of simulation time) or grid "
+                        "(the idealisation: every 1/15 s of simulation time); docs/simulator.md")
     srv = g.add_mutually_exclusive_group()
     srv.add_argument("--server-port", type=int, default=SERVER_UDP_PORT,
                      help=f"UDP port of the factory-state server (default {SERVER_UDP_PORT}, on --host)")
@@ -107,7 +111,8 @@ def run(args) -> int:
     snapshot = args.snapshot is not None
     config = SimConfig(seed=args.seed, start_pose=start_pose, beacons=args.beacons,
                        camera=not args.no_camera and not snapshot, round_no=args.round_no, parts=args.parts,
-                       processing_delay=args.processing_delay, start_after=args.start_after)
+                       processing_delay=args.processing_delay, start_after=args.start_after,
+                       camera_timing=args.camera_timing)
     if args.status_every < 0:
         raise ConfigError(f"--status-every {args.status_every}: must be >= 0")
 
