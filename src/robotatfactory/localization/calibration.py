@@ -83,6 +83,9 @@ class CalibrationConfig:
     odom_sigma_theta_deg: float = 0.3
     odom_sigma_theta_per_rad: float = 0.02
     odom_max_gap_s: float = 2.0  # consecutive frames further apart than this are not tied by odometry
+    # uncertainty of a frame's stamp (s, 1 sigma): SimTwo's frames are known only to the control cycle they
+    # fell in (40 ms, uniform: 12 ms); the motion in that time adds to the odometry link's sigma
+    stamp_sigma_s: float = 0.012
     # weak prior on the camera towards its initial values (decides only what the data leave free)
     prior_sigma: dict = field(default_factory=lambda: {
         "fx": 0.2, "fy": 0.2, "cx": 0.1, "cy": 0.1,  # relative to fx (cx, cy: fraction of the width)
@@ -279,8 +282,10 @@ def _odometry_links(odom: list, stamps: np.ndarray, cfg: CalibrationConfig) -> l
             continue
         d = between2(a, b)
         dist = math.hypot(d[0], d[1])
-        sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_xy_per_m * dist
-        sth = math.radians(cfg.odom_sigma_theta_deg) + cfg.odom_sigma_theta_per_rad * abs(d[2])
+        dt = max(float(stamps[i + 1] - stamps[i]), 1e-3)
+        k = math.sqrt(2) * cfg.stamp_sigma_s / dt  # both stamps uncertain, motion at the link's mean speed
+        sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_xy_per_m * dist + k * dist
+        sth = math.radians(cfg.odom_sigma_theta_deg) + cfg.odom_sigma_theta_per_rad * abs(d[2]) + k * abs(d[2])
         links.append((i, i + 1, d, np.array([sxy, sxy, sth])))
     return links
 

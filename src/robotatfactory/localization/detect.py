@@ -120,3 +120,18 @@ class MarkerDetector:
         out = [Detection(int(i), np.asarray(c, dtype=np.float64).reshape(4, 2))
                for i, c in zip(ids.ravel(), corners)]
         return sorted(out, key=lambda d: d.id)
+
+
+def undistort_detections(dets: list[Detection], K: np.ndarray, D: np.ndarray | None) -> list[Detection]:
+    """The detections with their corners moved to where an ideal pinhole camera with matrix ``K`` would see
+    them (OpenCV's ``undistortPoints`` with ``P = K``), for a camera with distortion ``D`` (k1, k2, p1, p2,
+    k3). With no distortion (``D`` None or all zeros) the same list is returned."""
+    if D is None or not np.any(np.asarray(D, dtype=np.float64)) or not dets:
+        return dets
+    K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    D = np.asarray(D, dtype=np.float64).ravel()
+    pts = np.concatenate([np.asarray(d.corners, dtype=np.float64).reshape(4, 2) for d in dets]).reshape(-1, 1, 2)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+    und = cv2.undistortPointsIter(pts, K, D, None, K, crit).reshape(-1, 4, 2)
+    return [Detection(d.id, c.astype(np.float64)) for d, c in zip(dets, und)]
+

@@ -13,7 +13,7 @@ import numpy as np
 from ..field.model import Field
 from ..robot import RobotSpec
 from . import reasons
-from .detect import Detection, DetectorConfig, MarkerDetector
+from .detect import Detection, DetectorConfig, MarkerDetector, undistort_detections
 from .estimators import PlanarModel, PoseEstimate, all_markers_pnp, closest_marker, consensus, planar_fit
 from .geometry import inv
 from .markerpose import MarkerObservation, PoseConfig, observe
@@ -40,7 +40,8 @@ class FrameLocalizer:
     """Holds the detector, the camera model and the rejection counters (``counts``: reason -> number)."""
 
     def __init__(self, field: Field, robot: RobotSpec, detector: DetectorConfig | None = None,
-                 pose: PoseConfig | None = None, methods: tuple[str, ...] = METHODS, K: np.ndarray | None = None):
+                 pose: PoseConfig | None = None, methods: tuple[str, ...] = METHODS, K: np.ndarray | None = None,
+                 D: np.ndarray | None = None):
         bad = sorted(set(methods) - set(METHODS))
         if bad:
             from ..errors import ConfigError
@@ -55,17 +56,27 @@ class FrameLocalizer:
         self.methods = tuple(methods)
         self.T_base_cam = robot.camera.base_to_optical()
         self.T_cam_base = inv(self.T_base_cam)
-        self.set_intrinsics(robot.camera.K if K is None else K)
+        self.set_intrinsics(robot.camera.K if K is None else K, robot.camera.D if D is None else D)
         self.counts: Counter = Counter()
         self.frames = 0
 
-    def set_intrinsics(self, K: np.ndarray) -> None:
-        """Use another camera matrix (e.g. from camera_info)."""
+    def set_intrinsics(self, K: np.ndarray, D: np.ndarray | None = None) -> None:
+        """Use another camera matrix and distortion (k1, k2, p1, p2, k3; e.g. from camera_info). Detected
+        corners are undistorted to the pinhole camera ``K`` before any pose estimate; ``D`` None keeps the
+        present distortion, zeros mean none."""
+        from ..errors import ConfigError
+
         K = np.asarray(K, dtype=np.float64).reshape(3, 3)
         if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            from ..errors import ConfigError
-
             raise ConfigError(f"camera matrix must be finite with positive focal lengths, got {K.tolist()}")
+        if D is not None:
+            D = np.asarray(D, dtype=np.float64).ravel()
+            if D.size > 8 or not np.all(np.isfinite(D)):
+                raise ConfigError(f"distortion must be up to 8 finite OpenCV coefficients, got {D.tolist()}")
+            D = np.concatenate([D, np.zeros(max(0, 5 - D.size))])
+            self.D = D if np.any(D) else None
+        elif not hasattr(self, "D"):
+            self.D = None
         self.K = K
         self.model = PlanarModel(K, self.T_base_cam)
 
@@ -83,7 +94,8 @@ class FrameLocalizer:
         t0 = time.perf_counter()
         self.frames += 1
         rejected: list[tuple[int, str]] = []
-        obs = observe(dets, self.field, self.K, self.T_cam_base, self.cfg, rejected)
+        pin = undistort_detections(dets, self.K, self.D)  # pinhole pixels from here on
+        obs = observe(pin, self.field, self.K, self.T_cam_base, self.cfg, rejected)
         for _, r in rejected:
             self.counts[r] += 1
         est: dict[str, PoseEstimate] = {}
