@@ -133,7 +133,7 @@ def test_camera_frames_are_published_raw(field, robot, bridge):
     probe.close(0)
     endpoint = f"tcp://127.0.0.1:{port}"
     runner = make_runner(field, robot, bridge, mode="realtime", duration=2.0, camera_bind=endpoint,
-                         sim={"camera": True})
+                         sim={"camera": True, "camera_timing": "grid"})
     sub = ctx.socket(zmq.SUB)
     sub.setsockopt(zmq.SUBSCRIBE, b"")
     sub.setsockopt(zmq.RCVTIMEO, 200)

@@ -11,13 +11,17 @@ Each control cycle (40 ms of simulation time):
    ``control.pas`` does (``COMMAND_TIMEOUT_MS``);
 2. ``Simulator.step_cycle`` with that command;
 3. publish the camera frames rendered during the cycle (ZMQ PUB, raw B G R A bottom-up, SNDHWM 2) --
-   before step 4, which is the frame ordering rule of docs/dev/interfaces.md;
+   before step 4, which is the frame ordering rule of docs/dev/interfaces.md; ``realtime`` publishes each
+   one when its simulation time has come on the wall clock, as SimTwo's GUI loop sends a frame as soon as
+   it is rendered (``fast`` publishes them at once);
 4. send the cycle's :class:`SensorFrame` to the bridge, from the command socket (so the bridge replies to
-   the frame's source address);
+   the frame's source address) -- ``realtime``: when its simulation time has come, as SimTwo's script
+   sends it, so a reply is read in the next cycle, as in SimTwo;
 5. with ``lockstep``, wait for the reply (the Command whose Seq is the frame's) up to ``lockstep_timeout``
    wall seconds; on timeout apply the policy: ``stop`` (V = W = 0, magnet kept), ``hold`` (keep the last
    command) or ``exit`` (end the run) -- always with a (rate-limited) warning, never a silent hang;
-6. pace: ``realtime`` sleeps so simulation time follows the wall clock, ``fast`` does not.
+6. pace: ``realtime`` sleeps (in steps 3 and 4) so simulation time follows the wall clock, ``fast`` does
+   not.
 
 SIGINT/SIGTERM (through :meth:`request_stop`) end the run after the current cycle; ``run`` returns a
 :class:`RunResult` with the counters and the referee's report.
@@ -218,6 +222,7 @@ class SimRunner:
         self.server = None
         self.command = Command.stop()
         self._encoder = CachedFrameEncoder()
+        self._pace0 = (time.monotonic(), 0.0)  # (wall, simulation) times pacing counts from; set by run()
         self._opened = False
         self.controller: tuple[str, int] | None = self.config.controller
         self._controller_seen: float | None = None  # wall (monotonic) time of its last valid command
@@ -403,6 +408,19 @@ class SimRunner:
         return True
 
     # ------------------------------------------------------------------------------------------ outputs
+    def _pace(self, t: float) -> None:
+        """``realtime``: wait until simulation time ``t`` (s) is due on the wall clock; re-anchor the pacing
+        when more than ``MAX_BEHIND`` late (lockstep waits, a slow machine). ``fast``: return at once."""
+        if self.config.mode != "realtime":
+            return
+        w0, s0 = self._pace0
+        now = time.monotonic()
+        ahead = (t - s0) - (now - w0)
+        if ahead > 0:
+            self._stop.wait(ahead)
+        elif -ahead > MAX_BEHIND:
+            self._pace0 = (now, t)
+
     def _publish(self, frames) -> None:
         if not frames:
             return
@@ -410,6 +428,7 @@ class SimRunner:
         for f in frames:
             if self._pub is None:
                 continue
+            self._pace(f.time)  # realtime: sent when rendered, as SimTwo's GUI does
             try:
                 import zmq
 
@@ -451,7 +470,7 @@ class SimRunner:
         reason, code = "stopped", 0
         wall0 = time.monotonic()
         sim0 = sim.time
-        pace_wall0, pace_sim0 = wall0, sim0
+        self._pace0 = (wall0, sim0)  # wall and simulation time that pacing counts from
         next_status = wall0 + c.status_every
         try:
             while not self._stop.is_set():
@@ -464,6 +483,7 @@ class SimRunner:
                 frame = sim.step_cycle(self.command)
                 self.counters.cycles += 1
                 self._publish(sim.take_frames())
+                self._pace(sim.time)  # realtime: the SensorFrame at its own time, after the cycle's frames
                 self._send(frame)
                 if c.lockstep and not self._wait_reply(frame.seq):
                     if self._stop.is_set():
@@ -472,12 +492,6 @@ class SimRunner:
                         reason, code = "timeout-exit", 3
                         break
                 now = time.monotonic()
-                if c.mode == "realtime":
-                    ahead = (sim.time - pace_sim0) - (now - pace_wall0)
-                    if ahead > 0:
-                        self._stop.wait(ahead)
-                    elif -ahead > MAX_BEHIND:  # cannot keep up (lockstep waits, slow machine): re-anchor
-                        pace_wall0, pace_sim0 = now, sim.time
                 if not c.quiet and c.status_every > 0 and now >= next_status:
                     print(self.status_line(now - wall0), file=self.out, flush=True)
                     next_status = now + c.status_every
