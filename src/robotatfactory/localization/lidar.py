@@ -1,7 +1,9 @@
 """LIDAR beacons: find the 0.09 m cylinders (the field's ``beacons``) in a 2D scan and measure their centres.
 
-A scan is N ranges at known angles in the ``laser`` frame (SimTwo's ranger2d: -1 or anything outside
-[range_min, range_max] means no return). Consecutive returns closer to each other than a jump threshold form
+A scan is N ranges at known angles in the ``laser`` frame (SimTwo's ranger2d: -1 or anything above
+range_max means no return; REP 117 as the bridge publishes it: +Inf no return, NaN invalid, e.g. a ray that
+ended on the robot's own wheel, -Inf or below range_min too close). A cluster next to a NaN or too-close
+ray is not trusted: its edge may be hidden. Consecutive returns closer to each other than a jump threshold form
 a cluster; a cluster no wider than a beacon, standing in front of what is around it, is fitted with a circle
 of the known radius (Gauss-Newton); its centre's range and bearing, with a covariance from the fit (the
 range noise of the LIDAR model), are the measurement. Association with a known beacon is the EKF's job
@@ -155,6 +157,10 @@ def extract_beacons(ranges: np.ndarray, angles: np.ndarray, cfg: BeaconConfig | 
                 continue
             k %= n
             if valid[k] and rng[k] < near + cfg.foreground_m:
+                fg = False
+            elif not valid[k] and (np.isnan(rng[k]) or 0 <= rng[k] < range_min or rng[k] == -np.inf):
+                # unknown (NaN: a ray the bridge filtered as a hit on the robot itself, or not received) or
+                # too close (below range_min, -Inf): it may hide the cluster's edge
                 fg = False
         if not fg:
             continue

@@ -210,13 +210,16 @@ class WholeSweepAssembler:
         return False
 
     # ---- sweeps ------------------------------------------------------------------------------------------
-    def _sweep(self, index: int, t_u_ms: float, bound_ms: float, ranges: np.ndarray, method: str) -> Sweep:
+    def _sweep(self, index: int, t_u_ms: float, bound_ms: float, ranges: np.ndarray, method: str) -> Sweep | None:
         c = self.counters
         p = self.period_ms / 1000
         if self.ray_timing == "rolling":
             t0, inc = (t_u_ms / 1000) - p, p / self.n
         else:
             t0, inc = t_u_ms / 1000, 0.0
+        if t0 < 0:  # measured (partly) before Tms 0 (the script started after the simulation): no valid stamp
+            c.unstamped += 1
+            return None
         if self._last_pub is not None and np.array_equal(ranges, self._last_pub, equal_nan=True):
             c.repeated += 1
         self._last_pub = ranges.copy()
