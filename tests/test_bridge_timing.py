@@ -400,3 +400,166 @@ def test_a_simulator_catching_up_in_bursts_is_stamped_by_the_grid():
     st = CameraStamper(P, 60, 4)
     res = run(st, out)
     assert all(e.stamp == pytest.approx(t) for t, e in res[10:])
+
+
+# ---- SimTwo's timing: renders in the GUI loop, no grid of simulation time (the bridge's defaults) -----------
+
+def simtwo_events(seed, seconds=20.0, frame_latency=(0.001, 0.004), load=None, gui=None):
+    """Events of a SimTwo-like stream from the stand-in's model of SimTwo's GUI loop (sim/camera.py
+    RenderCadence): each GUI turn runs its 17 ms physics chunks at once -- the script's SensorFrame leaves when
+    the chunk reaches its 40 ms step -- then renders; every 4th render leaves over ZMQ right after. Camera
+    frames take ``frame_latency`` (plus, with ``load = (p, d)``, an extra delay up to ``d`` with probability
+    ``p``: a loaded receiver); SensorFrames 0.05-0.3 ms. Payload of a frame: (true render time ms, extra ms)."""
+    from robotatfactory.sim.camera import RenderCadence
+
+    c = RenderCadence("simtwo", 0.001, 60, 4, seed, gui)
+    rng = random.Random(seed + 100)
+    events = []
+    for it in c.iterations():
+        if it.first_step > seconds * 1000:
+            break
+        for k in range(-(-it.first_step // P), (it.first_step + it.steps - 1) // P + 1):
+            if k > 0:  # the script at Tms = 40 k runs before the physics step after it
+                sent = it.start + (P * k - it.first_step) * c.gui.physics_per_step
+                events.append(("udp", sent + rng.uniform(5e-5, 3e-4), P * k))
+        if it.frame is not None:
+            extra = rng.uniform(0, load[1]) if load and rng.random() < load[0] else 0.0
+            events.append(("cam", it.sent + rng.uniform(*frame_latency) + extra, (it.frame.step, extra * 1000)))
+    events.sort(key=lambda e: e[1])
+    return events
+
+
+def rafsim_events(seed, seconds=20.0, paced=True, compute=(0.004, 0.015), frame_latency=(0.0005, 0.003)):
+    """Events of ``raf sim`` with its default (SimTwo-like) camera timing. ``paced`` (realtime): the cycle is
+    computed from the previous SensorFrame's time on, then each frame and the SensorFrame leave when their
+    simulation time has come (sim/runner.py); else (fast) all of the cycle's frames leave in a burst just
+    before its SensorFrame, at 10x real time (frames may be overtaken by it)."""
+    from robotatfactory.sim.camera import RenderCadence
+
+    frames = RenderCadence("simtwo", 0.001, 60, 4, seed).frames()
+    f = next(frames)
+    rng = random.Random(seed + 200)
+    events = []
+    scale = 1.0 if paced else 0.1
+    for k in range(1, int(seconds * 1000 / P)):
+        T = P * k
+        done = ((T - P) / 1000 + rng.uniform(*compute)) * scale
+        while f.step <= T:
+            sent = max(done, f.step / 1000 * scale) if paced else done
+            events.append(("cam", sent + rng.uniform(*frame_latency), (f.step, 0.0)))
+            f = next(frames)
+            done += 2e-5
+        sent = max(done, T / 1000 * scale) if paced else done + 1e-4
+        events.append(("udp", sent + rng.uniform(5e-5, 3e-4), T))
+    events.sort(key=lambda e: e[1])
+    return events
+
+
+def bridge_stamper(**overrides):
+    """A stamper built as ``raf bridge``'s camera node builds it, from its default parameters (+ overrides)."""
+    from robotatfactory.ros.config import load_config
+
+    cfg = load_config({"camera": overrides} if overrides else None)
+    return CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
+                         use_grid=cfg.use_grid, rule=cfg.camera_bracket, latency=cfg.camera_latency)
+
+
+OLD_DEFAULTS = {"bracket": "nearest", "use_grid": True}  # raf bridge's camera stamping before issue 9
+
+
+def errors_ms(stamper, events):
+    """(stamp - true render time) in ms for every stamped frame, and each frame's extra delay (ms)."""
+    res = run(stamper, [(k, a, p[0] if k == "cam" else p) for k, a, p in events])
+    extra = {p[0]: p[1] for k, _, p in events if k == "cam"}
+    return [(est.stamp * 1000 - truth, extra[truth]) for truth, est in res]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_default_stamps_are_within_a_cycle_on_simtwos_gui_timing(seed):
+    """SimTwo-like timing: every default stamp within one control cycle (40 ms) of the true render time,
+    most much closer; raf bridge's old defaults (nearest SensorFrame, render grid) put frames a cycle or
+    more off: they take the SensorFrame that left just before the frame for the end of its cycle."""
+    ev = simtwo_events(seed)
+    new = errors_ms(bridge_stamper(), ev)
+    assert len(new) > 250
+    assert max(abs(e) for e, _ in new) <= P
+    assert sorted(abs(e) for e, _ in new)[int(0.9 * len(new))] <= 20
+    old = errors_ms(bridge_stamper(**OLD_DEFAULTS), ev)
+    assert sum(abs(e) > P for e, _ in old) > 0.1 * len(old)
+
+
+@pytest.mark.parametrize("paced", [True, False])
+def test_default_stamps_are_within_a_cycle_on_raf_sims_timing(paced):
+    """raf sim's default: realtime (frames leave when their time has come) and fast (a burst before the
+    SensorFrame, sometimes overtaken by it): within a cycle either way; the old defaults are not."""
+    ev = rafsim_events(4, paced=paced)
+    new = errors_ms(bridge_stamper(), ev)
+    st = bridge_stamper()
+    run(st, [(k, a, p[0] if k == "cam" else p) for k, a, p in ev])
+    assert len(new) > 250 and max(abs(e) for e, _ in new) <= P
+    if paced:  # the wall clock tells where in the cycle the frame was rendered
+        assert sorted(abs(e) for e, _ in new)[int(0.9 * len(new))] <= 5
+    else:
+        assert st.rate() == pytest.approx(10, rel=0.1)
+    old = errors_ms(bridge_stamper(**OLD_DEFAULTS), ev)
+    assert max(abs(e) for e, _ in old) > P
+
+
+def test_default_stamps_under_load_are_late_by_no_more_than_the_delay():
+    """A loaded receiver (one frame in five read up to 60 ms late): a stamp is never early by more than a
+    cycle and never late by more than a cycle plus that frame's own delay; frames not delayed stay within a
+    cycle."""
+    ev = simtwo_events(5, load=(0.2, 0.06))
+    res = errors_ms(bridge_stamper(), ev)
+    assert sum(d > 20 for _, d in res) > 20
+    for e, d in res:
+        assert -P <= e <= P + d, (e, d)
+    assert all(abs(e) <= P for e, d in res if d == 0.0)
+
+
+def test_elapsed_rule_follows_the_stream_rate_and_clamps_to_the_cycle():
+    st = CameraStamper(P, 60, 4, use_grid=False, rule="elapsed", latency=0.0)
+    assert st.stamp(1.0, now=1.0) is None and st.counters.no_clock == 1
+    for j in range(30):  # half real time: 40 ms of simulation every 80 ms of wall time
+        st.on_sensor_frame(P * (j + 1), 1.0 + 0.08 * j)
+    assert st.rate() == pytest.approx(0.5)
+    a_last = 1.0 + 0.08 * 29
+    est = st.stamp(a_last + 0.04, now=a_last + 0.04)
+    assert est.method == "elapsed" and est.stamp == pytest.approx((P * 30 + 20) / 1000)
+    assert (est.lo, est.hi) == pytest.approx((P * 30 / 1000, P * 31 / 1000))
+    late = st.stamp(a_last + 0.5, now=a_last + 0.5)  # long after: clamped to the cycle's end
+    assert late.stamp == pytest.approx(P * 31 / 1000) and st.counters.clamped == 1
+    again = st.stamp(a_last + 0.6, now=a_last + 0.6)  # the same bound again: nudged to stay increasing
+    assert again.stamp == pytest.approx(P * 31 / 1000 + 0.001) and st.counters.conflicts == 1
+    with pytest.raises(ValueError):
+        CameraStamper(P, 60, 4, rule="grid")
+
+
+@pytest.mark.render
+def test_default_stamps_against_the_stand_in_simulator(field, robot):
+    """The stand-in's frames (SimConfig default camera_timing "simtwo", their true render times) sent as
+    SimTwo's GUI would send them (the same seeded GUI model gives the SensorFrames' send times): the
+    bridge's default stamps are within a cycle of every frame's simulation time, the old defaults are not."""
+    from robotatfactory.sim import SimConfig, Simulator
+    from robotatfactory.sim.camera import RenderCadence
+    from robotatfactory.simtwo import Command
+
+    s = Simulator(field, robot, SimConfig(seed=9, competition=False, lidar=False))
+    frames = []
+    for _ in range(75):  # 3 s
+        s.step_cycle(Command(0.2, 0.4, False))
+        frames.extend(s.take_frames())
+    s.close()
+    c = RenderCadence("simtwo", s.dt, 60, 4, 9)
+    events = [("cam", fr.wall + 0.002, (round(fr.time * 1000), 0.0)) for fr in frames]
+    for it in c.iterations():
+        if it.first_step > 3000:
+            break
+        for k in range(max(1, -(-it.first_step // P)), (it.first_step + it.steps - 1) // P + 1):
+            events.append(("udp", it.start + (P * k - it.first_step) * c.gui.physics_per_step + 1e-4, P * k))
+    events.sort(key=lambda e: e[1])
+    assert 38 <= len(frames) <= 44 and all(round(fr.time * 1000) % 17 == 0 for fr in frames)
+    new = errors_ms(bridge_stamper(), events)
+    assert len(new) == len(frames) and max(abs(e) for e, _ in new) <= P
+    old = errors_ms(bridge_stamper(**OLD_DEFAULTS), events)
+    assert max(abs(e) for e, _ in old) > P

@@ -9,9 +9,10 @@ camera stamping (``simtwo.timing.CameraStamper``) needs both streams' arrival ti
 (``time.monotonic()`` is system-wide). The bridge's writes are non-blocking: if this process stalls, timing
 messages are dropped, never the control path. This process exits when the bridge does (the socket closes).
 
-Threads: ZMQ receive (keeps only the newest frame, counts the skipped ones and hands the count on: the
-stamper counts render ticks), publish (size check, stamp -- which first applies any timing message still
-waiting in the socket and may wait up to ``~camera/max_wait`` for the SensorFrame that follows the frame --,
+Threads: ZMQ receive (keeps only the newest frame, counts the skipped ones and hands the count on: the grid
+rule counts render ticks), publish (size check, stamp -- which first applies any timing message still
+waiting in the socket; by default (``~camera/bracket: elapsed``) the stamp follows from the SensorFrames
+already received, the ``nearest`` rule may wait up to ``~camera/max_wait`` for the one after the frame --,
 flip, bgr8), timing reader, diagnostics (its own ``<node>: camera`` status on ``/diagnostics``).
 """
 from __future__ import annotations
@@ -37,7 +38,7 @@ class CameraBridge:
 
         self.cfg = cfg
         self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
-                                     use_grid=cfg.use_grid, rule=cfg.camera_bracket)
+                                     use_grid=cfg.use_grid, rule=cfg.camera_bracket, latency=cfg.camera_latency)
         self.timing_sock = timing_sock
         if timing_sock is not None:
             # non-blocking (not merely MSG_DONTWAIT: a socket in timeout mode, as rospy's default timeout

@@ -85,7 +85,7 @@ def default_params(robot: RobotSpec | None = None) -> dict:
             "xyz": list(cam.xyz), "pitch_down_deg": cam.pitch_down_deg,
             "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
             "bottom_up": cam.bottom_up, "render_fps": cam.render_fps, "decimation": cam.decimation,
-            "use_grid": True, "bracket": "nearest", "max_wait": 0.02,
+            "use_grid": False, "bracket": "elapsed", "max_wait": 0.02, "latency": 0.004,
         },
         "tf": {"publish_odom": True, "publish_field": True, "map_to_odom": "none"},
         "diagnostics": {"period": 1.0, "stale_warn": 0.5, "stale_error": 2.0},
@@ -256,6 +256,7 @@ class BridgeConfig:
     use_grid: bool
     max_wait: float
     camera_bracket: str
+    camera_latency: float  # s (wall): a camera frame's transport time, subtracted by the elapsed rule
     publish_odom_tf: bool
     publish_field: bool
     map_to_odom: str
@@ -376,7 +377,8 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
         decimation=_int(p, ("camera", "decimation"), 1, 10 ** 6),
         use_grid=_bool(p, ("camera", "use_grid")),
         max_wait=_real(p, ("camera", "max_wait"), 0.0, 1.0),
-        camera_bracket=_str(p, ("camera", "bracket"), allowed=("nearest", "following")),
+        camera_bracket=_str(p, ("camera", "bracket"), allowed=("elapsed", "following", "nearest")),
+        camera_latency=_real(p, ("camera", "latency"), 0.0, 0.1),
         publish_odom_tf=_bool(p, ("tf", "publish_odom")),
         publish_field=_bool(p, ("tf", "publish_field")),
         map_to_odom=_str(p, ("tf", "map_to_odom"), allowed=("none", "identity", "first_ground_truth")),

@@ -62,6 +62,21 @@ Method (``CameraStamper``), for a camera frame arriving at wall time ``a``:
   simulation time; a free-running render clock can pass the consistency test by chance for a while, so
   set ``use_grid=False`` for such a simulator.
 
+**Elapsed time (``rule="elapsed"``, the bridge's default: right for SimTwo and for ``raf sim``).** SimTwo
+renders in its GUI loop (``sim/camera.py`` has the source references): the frame shows the end of a 17 ms
+physics chunk, and leaves SimTwo right after the SensorFrames of the script calls in that chunk and before
+the next one. Its render instant is no grid of simulation time, but the GUI runs simulation time in step
+with the wall clock. So a frame arriving at ``a`` is placed after the last SensorFrame that arrived before it
+(``T_i``, arrived ``a_i``) by the wall time between them, converted with the stream's real-time factor ``r``
+(simulation seconds per wall second over the last ``rate_window`` seconds) and less the frame's transport
+``latency``, and clamped to that SensorFrame's cycle: ``stamp = T_i + clamp((a - a_i - latency) * r, 0,
+P)``. No waiting, no grid, no phase to learn. A frame that leaves just before its cycle's SensorFrame
+(``raf sim``) and is overtaken by it lands on ``T_i`` itself (it was rendered in the cycle ending there);
+one that is not lands at most a cycle after ``T_i``; either way within one cycle of its render time.
+Frames delayed on their way by more than the time to the next SensorFrame are stamped later by about their
+delay. Stamps count as ``elapsed``; clamped ones (the frame came later than a cycle after ``T_i``, by load
+or a slow simulator) also as ``clamped``.
+
 Stamps are kept strictly increasing; a frame that would break that is nudged 1 ms after the previous one
 and counted (``conflicts``).
 """
@@ -76,6 +91,9 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 
 
+RULES = ("elapsed", "following", "nearest")
+
+
 def _fraction(x: float | int) -> Fraction:
     return Fraction(x).limit_denominator(100000) if isinstance(x, float) else Fraction(x)
 
@@ -88,7 +106,7 @@ class StampEstimate:
     lo: float  # s: the bracket, lo < t_render <= hi
     hi: float
     error_bound: float  # s: |stamp - t_render| <= error_bound when the bracket is right
-    method: str  # "grid" | "grid-partial" | "interval"
+    method: str  # "grid" | "grid-partial" | "interval" | "elapsed"
     phase: int | None = None  # the render-clock phase used (grid), else None
 
 
@@ -112,6 +130,8 @@ class StampCounters:
     sequenced: int = 0  # exact stamps that came from counting frames after the previous tick
     resyncs: int = 0  # the frame count contradicted the arrival times: the tick was looked for again
     no_clock: int = 0  # frames before any SensorFrame: not stamped
+    elapsed: int = 0  # stamped by the elapsed-time rule
+    clamped: int = 0  # elapsed rule: the frame came more than a cycle after its SensorFrame (clamped to it)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -128,13 +148,17 @@ class CameraStamper:
     def __init__(self, period_ms: int = 40, render_fps: float = 60.0, decimation: int = 4,
                  max_wait: float = 0.02, window: int = 16, min_frames: int = 8, history: int = 512,
                  use_grid: bool = True, rule: str = "nearest", max_disagree: int = 5,
-                 max_delay: float = 0.15):
+                 max_delay: float = 0.15, latency: float = 0.004, rate_window: float = 1.0):
         if period_ms <= 0 or render_fps <= 0 or decimation < 1:
             raise ValueError(f"period_ms {period_ms}, render_fps {render_fps} must be > 0, decimation >= 1")
         if max_wait < 0:
             raise ValueError("max_wait must be >= 0")
-        if rule not in ("nearest", "following"):
-            raise ValueError(f"rule {rule!r}: 'nearest' or 'following'")
+        if rule not in RULES:
+            raise ValueError(f"rule {rule!r}: one of {', '.join(RULES)}")
+        if latency < 0 or rate_window <= 0:
+            raise ValueError(f"latency {latency} must be >= 0, rate_window {rate_window} > 0")
+        self.latency = float(latency)
+        self.rate_window = float(rate_window)
         if max_disagree < 1 or max_delay <= 0:
             raise ValueError(f"max_disagree {max_disagree} must be >= 1, max_delay {max_delay} > 0")
         self.rule = rule
@@ -246,6 +270,12 @@ class CameraStamper:
         now = time.monotonic() if now is None else now
         arrival = now if arrival is None else arrival
         with self._lock:
+            if self.rule == "elapsed":
+                est = self._from_elapsed(arrival)
+                if est is None:
+                    self.counters.no_clock += 1
+                    return None
+                return self._monotonic(est)
             br = self.bracket(arrival, now)
             c = self.counters
             if br is None:
@@ -267,14 +297,47 @@ class CameraStamper:
                 c.grid_partial += 1
             else:
                 c.interval += 1
-            if self._prev is not None and est.stamp <= self._prev:
-                c.conflicts += 1
-                nudged = self._prev + 1e-3
-                est = StampEstimate(nudged, est.lo, est.hi, est.error_bound + (nudged - est.stamp), est.method,
-                                    est.phase)
-                self._tick = None  # a nudged stamp is no tick to count from
-            self._prev = est.stamp
-            return est
+            return self._monotonic(est)
+
+    def _monotonic(self, est: StampEstimate) -> StampEstimate:
+        """Keep stamps strictly increasing: nudge one that is not 1 ms after the previous (counted)."""
+        if self._prev is not None and est.stamp <= self._prev:
+            self.counters.conflicts += 1
+            nudged = self._prev + 1e-3
+            est = StampEstimate(nudged, est.lo, est.hi, est.error_bound + (nudged - est.stamp), est.method,
+                                est.phase)
+            self._tick = None  # a nudged stamp is no tick to count from
+        self._prev = est.stamp
+        return est
+
+    def rate(self, i: int | None = None) -> float:
+        """Simulation seconds per wall second of the stream over ``rate_window`` wall seconds up to SensorFrame
+        ``i`` of the history (default the newest); 1.0 while fewer than two SensorFrames span it."""
+        a, T = self._arrivals, self._tms
+        if i is None:
+            i = len(a) - 1
+        if i < 1:
+            return 1.0
+        j = bisect.bisect_left(a, a[i] - self.rate_window, 0, i)
+        if j >= i or a[i] <= a[j]:
+            j = max(0, i - 1)
+        span = a[i] - a[j]
+        return (T[i] - T[j]) / 1000 / span if span > 0 else 1.0
+
+    def _from_elapsed(self, arrival: float) -> StampEstimate | None:
+        """The elapsed-time rule (module docstring): after the last SensorFrame received before the frame."""
+        a, T, P = self._arrivals, self._tms, self.period_ms
+        if not a:
+            return None
+        i = bisect.bisect_right(a, arrival) - 1
+        self.counters.elapsed += 1
+        if i < 0:  # before the oldest SensorFrame kept: it belongs to that one's cycle
+            return StampEstimate(T[0] / 1000, (T[0] - P) / 1000, T[0] / 1000, P / 1000, "elapsed")
+        gone = (arrival - a[i] - self.latency) * self.rate(i) * 1000  # ms of simulation since T_i
+        if gone > P:
+            self.counters.clamped += 1
+        gone = min(max(gone, 0.0), float(P))
+        return StampEstimate((T[i] + gone) / 1000, T[i] / 1000, (T[i] + P) / 1000, P / 1000, "elapsed")
 
     def _from_sequence(self, arrival: float, lo: int, hi: int, skipped: int) -> StampEstimate | None:
         """The tick after the previous frame's (plus the skipped frames), if the arrival times allow it."""
