@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 import time
 from typing import Callable
 
@@ -33,6 +34,51 @@ def read_private_params() -> dict:
     return p if isinstance(p, dict) else {}
 
 
+MASTER_RESTARTED = 4  # exit code of a node whose ROS master restarted under it
+
+
+def watch_master(who: str, period: float = 1.0) -> dict:
+    """Watch the ROS master from a daemon thread: when it restarts (a new process answers at the same URI),
+    rospy cannot re-register this node's publishers and subscribers with it, so the node would go on deaf
+    and mute. Log a clear message and shut the node down instead (roslaunch ``respawn="true"`` or the user
+    starts it again). Returns a dict whose ``"restarted"`` is set True when that happened."""
+    import rosgraph
+    import rospy
+
+    state = {"restarted": False}
+    m = rosgraph.Master(rospy.get_name() or f"/raf_{who}")
+    try:
+        pid0 = m.getPid()
+    except Exception:  # noqa: BLE001 - no master to watch (it will be reported elsewhere)
+        return state
+
+    def loop():
+        lost = False
+        while not rospy.is_shutdown():
+            time.sleep(period)
+            try:
+                pid = m.getPid()
+            except Exception:  # noqa: BLE001 - master down: wait for it to come back
+                if not lost:
+                    rospy.logwarn(f"{who}: the ROS master at {rosgraph.get_master_uri()} does not answer; "
+                                  "waiting for it (topics already connected keep flowing)")
+                lost = True
+                continue
+            if pid != pid0:
+                state["restarted"] = True
+                rospy.logfatal(f"{who}: the ROS master restarted (pid {pid0} -> {pid}); rospy cannot register this "
+                               "node's topics with the new master, so the node exits (exit code "
+                               f"{MASTER_RESTARTED}): start it again, or use respawn=\"true\" under roslaunch")
+                rospy.signal_shutdown("the ROS master restarted")
+                return
+            if lost:
+                rospy.loginfo(f"{who}: the ROS master answers again (same process)")
+                lost = False
+
+    threading.Thread(target=loop, name=f"raf-{who}-master-watch", daemon=True).start()
+    return state
+
+
 def run_node(args, who: str, params: dict, make_node: Callable[[], object], started: Callable[[object], str]) -> int:
     """Run one node from the command line until Ctrl-C.
 
@@ -57,13 +103,14 @@ def run_node(args, who: str, params: dict, make_node: Callable[[], object], star
     rospy.init_node(args.name, argv=[sys.argv[0]] + ([f"__ns:=/{ns}"] if ns else []))
     node = make_node()
     print(f"raf {who}: {started(node)}", flush=True)
+    watch = watch_master(f"raf {who}")
     try:
         rospy.spin()
     finally:
         node.stop()
         if master is not None:
             master.stop()
-    return 0
+    return MASTER_RESTARTED if watch["restarted"] else 0
 
 
 def spin_node(name: str, make_node: Callable[[], object], argv: list[str] | None = None) -> int:
@@ -81,9 +128,10 @@ def spin_node(name: str, make_node: Callable[[], object], argv: list[str] | None
     except ConfigError as e:
         rospy.logfatal(f"{name}: {e}")
         return 2
+    watch = watch_master(name)
     rospy.spin()
     node.stop()
-    return 0
+    return MASTER_RESTARTED if watch["restarted"] else 0
 
 
 def publish_every(period: float, running: Callable[[], bool], pub, make: Callable[[], object],

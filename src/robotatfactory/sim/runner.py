@@ -348,7 +348,7 @@ class SimRunner:
     def _check_command_age(self) -> None:
         """No valid command for ``command_timeout`` simulation seconds: stop the wheels (magnet kept)."""
         t = self.config.command_timeout
-        if t is None or self._command_sim_time is None or self.sim.time - self._command_sim_time <= t + 1e-9:
+        if t is None or self._command_sim_time is None or self.sim.time - self._command_sim_time < t - 1e-9:
             return
         if self.command.v or self.command.w:
             self.counters.command_timeouts += 1

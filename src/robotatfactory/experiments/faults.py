@@ -1,0 +1,1002 @@
+"""``raf experiment faults``: the fault campaign of issue 10, on the real ``raf sim``, bridge and localization.
+
+Everything runs on loopback (127.0.0.1) with a private roscore. Between the simulator and the bridge sits a
+UDP proxy in this process (:class:`Proxy`): it records every SensorFrame the simulator sent (the loss-free,
+fuzz-free truth) and, per part, drops, duplicates, reorders or injects datagrams. The bridge's stream is bound
+to the proxy's address (its only legitimate sender).
+
+Parts (``--parts``, all by default):
+
+* **fuzz**: while the robot drives, ``--fuzz-datagrams`` datagrams (default 1,000,000) go to the bridge's port:
+  from other source addresses (a fuzzer process: random bytes, mutated copies of a real SensorFrame, frames
+  with forged far-future Seq/Tms, oversized, non-ASCII, and a second sender streaming valid frames), and a
+  share (``--fuzz-inband``) from the simulator's own source address through the proxy (far-future Seq, far-
+  future Tms, clock going back, lone restart-like frames, impossible encoder totals, undecodable mutations,
+  oversized and non-ASCII datagrams). Figures: the bridge still runs (0 crashes); odom and /clock messages
+  whose stamp is not the Tms of a frame the simulator sent (0: forged and foreign frames never reach them);
+  the bridge's final odometry against the same odometry integrated over every frame the simulator sent
+  (the fuzz-free result), target 1 cm.
+* **loss**: the proxy drops ``--drop`` (20 %), duplicates ``--dup`` (5 %) and reorders ``--reorder`` (5 %) of
+  the SensorFrames and of the Commands. Figures: encoder ticks the bridge lost (its wheel angles at the end
+  against the simulator's cumulative totals, which are what a loss-free run counts), target 0; the robot
+  still follows cmd_vel (mean speed over a straight segment against the command, target 1 cm/s).
+* **restarts**: the simulator (with its camera publisher) killed and restarted (odom, /clock and images back
+  within 1 s of its first frame; odometry reset once); the bridge killed and restarted (the simulator's
+  command timeout stops the robot within 0.5 s of its last command; the new bridge's odom within 1 s of its
+  first reply); roscore killed and restarted on the same port (every node exits with a clear message, or
+  keeps going: reported).
+* **soak**: ``--soak-sim-seconds`` (default one hour) of simulated time, ``raf sim --fast --lockstep`` with the
+  camera, the bridge and the localization node while the robot drives in circles: resident memory of each
+  process sampled; growth after the warm-up (the first 20 %), target under 5 %; the counters at the end.
+
+Each figure comes with its target; ``raf experiment`` reports the ``*_target_met`` keys (it exits non-zero
+when one is missed, see commands/experiment.py).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import random
+import select
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+NAME = "faults"
+HELP = "fault campaign (issue 10): fuzz, loss, restarts and soak on the real raf sim, bridge and localization"
+TARGETS = {
+    "fuzz_crashes": "0",
+    "fuzz_odom_from_forged_or_foreign": "0",
+    "fuzz_clock_from_forged_or_foreign": "0",
+    "fuzz_odometry_error_m": "<= 0.01 m against the fuzz-free odometry",
+    "loss_ticks_lost": "0 against the simulator's totals (the loss-free count)",
+    "loss_speed_error_mps": "<= 0.01 m/s (the robot follows cmd_vel)",
+    "restart_sim_odom_back_s": "<= 1 s",
+    "restart_sim_clock_back_s": "<= 1 s",
+    "restart_sim_image_back_s": "<= 1 s",
+    "restart_sim_odometry_resets": "1",
+    "restart_bridge_stop_s": "<= 0.5 s (simulation) from the last command",
+    "restart_bridge_resume_s": "<= 1 s",
+    "restart_roscore_nodes_clear": "every node exits with a clear message (or reconnects)",
+    "soak_rss_growth_max_pct": "< 5 % after warm-up",
+}
+EXIT_STATUS_FROM_TARGETS = True  # raf experiment faults exits 1 when a target is missed
+LOCAL = "127.0.0.1"
+PERIOD = 0.04
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--parts", default="fuzz,loss,restarts,soak",
+                        help="comma-separated parts to run (default fuzz,loss,restarts,soak)")
+    parser.add_argument("--fuzz-datagrams", type=int, default=1_000_000, help="datagrams of fuzz (default 1e6)")
+    parser.add_argument("--fuzz-seconds", type=float, default=60.0,
+                        help="wall seconds the fuzz is spread over (default 60)")
+    parser.add_argument("--fuzz-inband", type=float, default=0.05,
+                        help="share of the fuzz sent from the simulator's own address (default 0.05)")
+    parser.add_argument("--loss-seconds", type=float, default=20.0, help="driving time of the loss part (default 20)")
+    parser.add_argument("--drop", type=float, default=0.20, help="share of datagrams dropped (default 0.20)")
+    parser.add_argument("--dup", type=float, default=0.05, help="share duplicated (default 0.05)")
+    parser.add_argument("--reorder", type=float, default=0.05, help="share delayed behind the next (default 0.05)")
+    parser.add_argument("--no-camera-restart", action="store_true",
+                        help="restart part without the camera (faster; no image figure)")
+    parser.add_argument("--soak-minutes", type=float, default=60.0,
+                        help="simulated minutes of the soak (default 60)")
+    parser.add_argument("--soak-sim-seconds", type=float, default=None,
+                        help="simulated seconds of the soak (overrides --soak-minutes)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the fuzz and of the proxy's choices")
+
+
+# ------------------------------------------------------------------------------------------------ plumbing
+
+def _raf(*args: str) -> list[str]:
+    return [sys.executable, "-m", "robotatfactory", *args]
+
+
+def _free_udp() -> int:
+    from ..ros.master import free_port
+
+    return free_port(socket.SOCK_DGRAM)
+
+
+class Procs:
+    """Child processes in their own sessions, logs in a directory."""
+
+    def __init__(self, log_dir: Path, env: dict):
+        self.log_dir, self.env = log_dir, env
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.n: dict[str, int] = {}
+
+    def start(self, name: str, cmd: list[str]) -> subprocess.Popen:
+        self.n[name] = self.n.get(name, 0) + 1
+        log = open(self.log_dir / f"{name}.{self.n[name]}.log", "wb")
+        p = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.procs[name] = p
+        return p
+
+    def log(self, name: str) -> str:
+        try:
+            return (self.log_dir / f"{name}.{self.n.get(name, 1)}.log").read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def kill(self, name: str, sig=signal.SIGKILL) -> None:
+        p = self.procs.get(name)
+        if p is not None and p.poll() is None:
+            os.killpg(p.pid, sig)
+            p.wait(10)
+
+    def stop_all(self) -> None:
+        from ..ros.master import stop_process
+
+        for p in reversed(list(self.procs.values())):
+            stop_process(p)
+
+
+def rss_kib(pid: int) -> int | None:
+    """Resident memory of a process (KiB), None when it is gone."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def children(pid: int) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if int((d / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.append(int(d.name))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out
+
+
+def _wait(pred, timeout: float, what: str, check=None) -> float:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if pred():
+            return time.monotonic() - t0
+        if check is not None:
+            check()
+        time.sleep(0.02)
+    raise RuntimeError(f"timed out after {timeout:.0f} s waiting for {what}")
+
+
+# ------------------------------------------------------------------------------------------------ the proxy
+
+class Proxy:
+    """UDP proxy simulator <-> bridge on loopback, with loss, duplication, reordering and in-band injection.
+
+    The simulator sends its frames to :attr:`port`; they go on to the bridge from the same socket, so the
+    bridge sees one source. Replies from the bridge go back to the simulator's address (learned from its
+    frames). Every frame the simulator sent is recorded (``frames``: wall time, Seq, Tms, totals, x, y, theta).
+    """
+
+    def __init__(self, bridge: tuple[str, int], seed: int = 0):
+        from ..simtwo.messages import SensorFrame
+
+        self._decode = SensorFrame.decode
+        self.bridge = bridge
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+        self.sock.bind((LOCAL, 0))
+        self.sock.setblocking(False)
+        self.port = self.sock.getsockname()[1]
+        self.rng = random.Random(seed)
+        self.drop = self.dup = self.reorder = 0.0
+        self.sim_addr = None
+        self.lock = threading.Lock()
+        self.frames: list[tuple] = []  # (wall, seq, tms, left, right, x, y, theta)
+        self.replies: list[tuple] = []  # (wall, seq, v, w)
+        self.template: bytes | None = None
+        self.counts = {"frames": 0, "replies": 0, "dropped": 0, "duplicated": 0, "reordered": 0, "injected": 0,
+                       "reply_errors": 0}
+        self._held = {0: None, 1: None}  # a datagram held back per direction (reordering)
+        self.inject_queue: deque = deque()
+        self._running = True
+        self.thread = threading.Thread(target=self._loop, name="raf-faults-proxy", daemon=True)
+        self.thread.start()
+
+    def set_faults(self, drop=0.0, dup=0.0, reorder=0.0) -> None:
+        self.drop, self.dup, self.reorder = drop, dup, reorder
+
+    def _out(self, direction: int, data: bytes, addr) -> None:
+        r = self.rng.random()
+        if r < self.drop:
+            self.counts["dropped"] += 1
+            return
+        sends = [data]
+        if r < self.drop + self.dup:
+            self.counts["duplicated"] += 1
+            sends.append(data)
+        elif r < self.drop + self.dup + self.reorder and self._held[direction] is None:
+            self.counts["reordered"] += 1
+            self._held[direction] = data  # goes out after the next datagram of this direction
+            return
+        held, self._held[direction] = self._held[direction], None
+        if held is not None:
+            sends.append(held)
+        for d in sends:
+            try:
+                self.sock.sendto(d, addr)
+            except OSError:
+                self.counts["reply_errors"] += 1
+
+    def _loop(self) -> None:
+        sock = self.sock
+        while self._running:
+            r, _, _ = select.select([sock], [], [], 0.05)
+            while self.inject_queue:
+                try:
+                    sock.sendto(self.inject_queue.popleft(), self.bridge)
+                    self.counts["injected"] += 1
+                except (IndexError, OSError):
+                    break
+            if not r:
+                continue
+            while True:
+                try:
+                    data, addr = sock.recvfrom(65535)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:
+                    break
+                now = time.monotonic()
+                if addr == self.bridge:
+                    self.counts["replies"] += 1
+                    try:
+                        text = data.decode("ascii")
+                        seq = int(text.split("Seq\r\n", 1)[1].split("\r\n", 1)[0])
+                        v = float(text.split("\r\nV\r\n", 1)[1].split("\r\n", 1)[0])
+                        w = float(text.split("\r\nW\r\n", 1)[1].split("\r\n", 1)[0])
+                        with self.lock:
+                            self.replies.append((now, seq, v, w))
+                    except (IndexError, ValueError, UnicodeDecodeError):
+                        pass
+                    if self.sim_addr is not None:
+                        self._out(1, data, self.sim_addr)
+                    continue
+                self.sim_addr = addr
+                try:
+                    f = self._decode(data)
+                except Exception:  # noqa: BLE001 - the simulator never sends garbage, but do not die on it
+                    continue
+                self.counts["frames"] += 1
+                with self.lock:
+                    self.frames.append((now, f.seq, f.time_ms, f.enc_total[0], f.enc_total[1], f.x, f.y, f.theta))
+                    self.template = data
+                self._out(0, data, self.bridge)
+
+    def truth(self) -> np.ndarray:
+        with self.lock:
+            return np.array(self.frames, dtype=float).reshape(-1, 8)
+
+    def close(self) -> None:
+        self._running = False
+        self.thread.join(2)
+        self.sock.close()
+
+
+# ------------------------------------------------------------------------------------------------ the fuzz
+
+def fuzz_pool(template: bytes, rng: random.Random, n: int = 4000) -> dict[str, list[bytes]]:
+    """Datagrams of each kind, built once and sent round-robin (generation would be slower than sending)."""
+    from ..simtwo.messages import SensorFrame
+
+    base = SensorFrame.decode(template)
+
+    def forged(seq, tms, totals=None):
+        return SensorFrame(seq=seq, time_ms=tms, enc_delta=base.enc_delta, enc_total=totals or base.enc_total,
+                           x=base.x, y=base.y, theta=base.theta, contact=base.contact, magnet=base.magnet,
+                           ranges=base.ranges).encode()
+
+    def mutate(b: bytes) -> bytes:
+        a = bytearray(b)
+        for _ in range(rng.randint(1, 8)):
+            op = rng.random()
+            i = rng.randrange(len(a)) if a else 0
+            if op < 0.5 and a:
+                a[i] = rng.randrange(256)
+            elif op < 0.75:
+                a[i:i] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 6)))
+            elif a:
+                del a[i:i + rng.randint(1, 20)]
+        return bytes(a)
+
+    def undecodable_mutation() -> bytes:
+        while True:
+            m = mutate(template)
+            try:
+                SensorFrame.decode(m)
+            except Exception:  # noqa: BLE001
+                return m
+
+    big = 10 ** 9
+    pool = {
+        "random": [bytes(rng.randrange(256) for _ in range(rng.randint(0, 1500))) for _ in range(n // 8)],
+        "mutated": [mutate(template) for _ in range(n // 4)],
+        "forged_seq_tms": [forged(rng.randint(base.seq + 300, 2 ** 31 - 1), rng.randint(base.time_ms + 12001, big))
+                           for _ in range(n // 8)],
+        "oversized": [template * rng.randint(6, 20) for _ in range(16)],
+        "non_ascii": [template[:200] + bytes(rng.randrange(128, 256) for _ in range(40)) + template[240:]
+                      for _ in range(n // 8)],
+    }
+    # from the simulator's own address: only kinds the stream rules must catch on their own
+    last = base.seq
+    inband = []
+    for i in range(n // 4):
+        k = i % 7
+        if k == 0:
+            inband.append(forged(last + rng.randint(300, 10 ** 6), base.time_ms + 40 * rng.randint(1, 5)))
+        elif k == 1:
+            inband.append(forged(last + 1, base.time_ms + rng.randint(10_001, big)))
+        elif k == 2:
+            inband.append(forged(rng.randint(0, 3), 40 * rng.randint(1, 4)))  # a lone restart-like frame
+        elif k == 3:
+            inband.append(forged(last + rng.randint(1, 5), 40 * rng.randint(1, 20)))  # Seq ahead, clock back
+        elif k == 4:
+            inband.append(undecodable_mutation())
+        elif k == 5:
+            inband.append(template[:100] + bytes(rng.randrange(128, 256) for _ in range(30)) + template[130:])
+        else:
+            inband.append(template * 8)
+    pool["inband"] = inband
+    return pool
+
+
+def _fuzzer(port: int, pool: dict, total: int, seconds: float, report) -> None:
+    """A separate process: ``total`` datagrams to 127.0.0.1:port over ``seconds`` wall seconds, from several
+    source ports, plus a second sender streaming valid frames (its Tms 20 ms off the simulator's grid)."""
+    from ..simtwo.messages import SensorFrame
+
+    socks = []
+    for _ in range(4):
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind((LOCAL, 0))
+        s.setblocking(False)
+        socks.append(s)
+    second = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    second.bind((LOCAL, 0))
+    second.setblocking(False)
+    kinds = [k for k in pool if k != "inband"]
+    weights = {"random": 3, "mutated": 4, "forged_seq_tms": 3, "oversized": 1, "non_ascii": 2}
+    seq_kinds = [k for k in kinds for _ in range(weights.get(k, 1))]
+    sent = {k: 0 for k in kinds}
+    sent["second_sender"] = sent["errors"] = 0
+    dest = (LOCAL, port)
+    t0 = time.monotonic()
+    n = 0
+    seq2 = 0
+    batch = 200
+    ranges = np.full(360, 2.0)
+    while n < total:
+        for i in range(batch):
+            if n >= total:
+                break
+            if i == 0:
+                data = SensorFrame(seq=seq2, time_ms=(seq2 + 1) * 40 + 20, enc_delta=(5, 5),
+                                   enc_total=(5 * seq2, 5 * seq2), x=1.0, y=1.0, theta=0.0, contact=False,
+                                   magnet=False, ranges=ranges).encode()
+                seq2 += 1
+                kind, sock = "second_sender", second
+            else:
+                kind = seq_kinds[(n * 7 + i) % len(seq_kinds)]
+                lst = pool[kind]
+                data = lst[(n // len(seq_kinds)) % len(lst)]
+                sock = socks[i % len(socks)]
+            try:
+                sock.sendto(data, dest)
+                sent[kind] += 1
+            except OSError:
+                sent["errors"] += 1  # the kernel's buffer full: counted, not retried
+            n += 1
+        ahead = t0 + seconds * n / total - time.monotonic()
+        if ahead > 0:
+            time.sleep(ahead)
+    sent["wall_s"] = time.monotonic() - t0
+    sent["total"] = n
+    sent["source_ports"] = [s.getsockname()[1] for s in socks] + [second.getsockname()[1]]
+    report.put(sent)
+
+
+# ------------------------------------------------------------------------------------------------ ROS side
+
+class Watch:
+    """This process's rospy node: odom, /clock, joint_states, ground truth, camera images, diagnostics."""
+
+    def __init__(self):
+        import rospy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import Twist
+        from nav_msgs.msg import Odometry
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import Image, JointState
+
+        self.rospy, self.Twist = rospy, Twist
+        self.lock = threading.Lock()
+        self.odom: list[tuple] = []  # (wall, stamp_ms, x, y, theta)
+        self.clock: list[tuple] = []  # (wall, stamp_ms)
+        self.joints: list[tuple] = []  # (wall, stamp_ms, left rad, right rad)
+        self.images: list[tuple] = []  # (wall, stamp_ms)
+        self.diag: dict[str, dict] = {}
+        self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=1, tcp_nodelay=True)
+        self.subs = [rospy.Subscriber("odom", Odometry, self._odom, queue_size=50, tcp_nodelay=True),
+                     rospy.Subscriber("/clock", Clock, self._clock, queue_size=50, tcp_nodelay=True),
+                     rospy.Subscriber("joint_states", JointState, self._joints, queue_size=50, tcp_nodelay=True),
+                     rospy.Subscriber("camera/image_raw", Image, self._image, queue_size=2, buff_size=1 << 22),
+                     rospy.Subscriber("/diagnostics", DiagnosticArray, self._diag, queue_size=20)]
+        self._drive = None
+        self._drive_stop = threading.Event()
+
+    @staticmethod
+    def _ms(stamp) -> int:
+        return int(round(stamp.to_nsec() / 1e6))
+
+    def _odom(self, m):
+        from ..ros.messages import quaternion_yaw
+
+        with self.lock:
+            self.odom.append((time.monotonic(), self._ms(m.header.stamp), m.pose.pose.position.x,
+                              m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation)))
+
+    def _clock(self, m):
+        with self.lock:
+            self.clock.append((time.monotonic(), self._ms(m.clock)))
+
+    def _joints(self, m):
+        if len(m.position) >= 2:
+            with self.lock:
+                self.joints.append((time.monotonic(), self._ms(m.header.stamp), m.position[0], m.position[1]))
+
+    def _image(self, m):
+        with self.lock:
+            self.images.append((time.monotonic(), self._ms(m.header.stamp)))
+
+    def _diag(self, m):
+        with self.lock:
+            for st in m.status:
+                self.diag[st.name] = {kv.key: kv.value for kv in st.values} | {"_level": st.level,
+                                                                               "_message": st.message}
+
+    def stream_diag(self) -> dict:
+        with self.lock:
+            for name, d in self.diag.items():
+                if name.endswith("sensor stream"):
+                    return dict(d)
+        return {}
+
+    def drive(self, profile) -> None:
+        """Publish cmd_vel = profile(wall seconds since start) at 20 Hz from a thread until stop_drive()."""
+        self.stop_drive()
+        self._drive_stop.clear()
+
+        def loop():
+            t0 = time.monotonic()
+            while not self._drive_stop.is_set():
+                v, w = profile(time.monotonic() - t0)
+                tw = self.Twist()
+                tw.linear.x, tw.angular.z = v, w
+                self.cmd.publish(tw)
+                time.sleep(0.05)
+
+        self._drive = threading.Thread(target=loop, daemon=True)
+        self._drive.start()
+
+    def stop_drive(self) -> None:
+        if self._drive is not None:
+            self._drive_stop.set()
+            self._drive.join(2)
+            self._drive = None
+        for _ in range(3):
+            self.cmd.publish(self.Twist())
+            time.sleep(0.05)
+
+    def close(self):
+        self.stop_drive()
+        for s in self.subs:
+            s.unregister()
+
+
+def reference_odometry(truth: np.ndarray, robot, start_index: int = 0) -> tuple[float, float, float]:
+    """The bridge's odometry over every frame the simulator sent (in Seq order, from zero): the fuzz-free and
+    loss-free result."""
+    from ..localization.odometry import DiffDriveOdometry
+
+    odo = DiffDriveOdometry(wheel_radius=robot.wheel_radius, track=robot.track, ticks_per_rev=robot.ticks_per_rev)
+    odo.reset(baseline=(0, 0), t=0.0)
+    rows = truth[start_index:]
+    rows = rows[np.argsort(rows[:, 1], kind="stable")]
+    s = None
+    for r in rows:
+        s = odo.update(int(r[3]), int(r[4]), r[2] / 1000.0)
+    return (s.x, s.y, s.theta) if s is not None else (0.0, 0.0, 0.0)
+
+
+# ------------------------------------------------------------------------------------------------ the rig
+
+class Rig:
+    """roscore + bridge (+ localization) + proxy + raf sim, started and restarted on demand."""
+
+    def __init__(self, args, log_dir: Path, camera: bool = False, localize: bool = False, fast: bool = False,
+                 lockstep: bool = False, start_pose: str = "0.0,0.0,1.5708"):
+        from ..ros.master import PrivateMaster, free_port
+
+        self.args, self.camera, self.localize, self.fast, self.lockstep = args, camera, localize, fast, lockstep
+        self.start_pose = start_pose  # the open middle of the field (rules2026); the loss part drives a corridor
+        self.master = PrivateMaster().start()
+        self.env = self.master.env(MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+        self.procs = Procs(log_dir, self.env)
+        self.bport, self.sport = _free_udp(), _free_udp()
+        self.cam = f"tcp://{LOCAL}:{free_port()}"
+        self.proxy = Proxy((LOCAL, self.bport), seed=args.seed)
+        self.watch = None
+
+    def start_bridge(self):
+        cmd = ["--field", self.args.field, "bridge", "--port", str(self.bport), "--sim-host", LOCAL,
+               "--set", "lidar/enabled=false"]
+        cmd += ["--camera", self.cam] if self.camera else ["--no-camera"]
+        return self.procs.start("bridge", _raf(*cmd))
+
+    def start_localize(self):
+        return self.procs.start("localize", _raf("--field", self.args.field, "localize"))
+
+    def start_sim(self, extra=()):
+        cmd = ["--field", self.args.field, "sim", "--port", str(self.sport), "--bridge", f"{LOCAL}:{self.proxy.port}",
+               "--no-server", "--status-every", "5", "--seed", str(self.args.seed), f"--start-pose={self.start_pose}"]
+        cmd += ["--camera-bind", self.cam] if self.camera else ["--no-camera"]
+        cmd += ["--fast"] if self.fast else ["--realtime"]
+        if self.lockstep:
+            cmd += ["--lockstep", "--lockstep-timeout", "2.0"]
+        return self.procs.start("sim", _raf(*cmd, *extra))
+
+    def up(self) -> "Rig":
+        self.start_bridge()
+        if self.localize:
+            self.start_localize()
+        self.master.use_in_this_process()
+        import rospy
+
+        if not rospy.core.is_initialized():
+            rospy.init_node("raf_experiment_faults", anonymous=True, disable_signals=True)
+        self.watch = Watch()
+        _wait(lambda: self.watch.cmd.get_num_connections() > 0, 60, "the bridge subscribing to cmd_vel",
+              self.check)
+        self.start_sim()
+        _wait(lambda: len(self.watch.odom) > 5, 90, "odom from the bridge", self.check)
+        return self
+
+    def check(self) -> None:
+        for name in ("bridge", "sim", "localize"):
+            p = self.procs.procs.get(name)
+            if p is not None and p.poll() is not None:
+                raise RuntimeError(f"{name} exited with code {p.returncode}:\n{self.procs.log(name)[-2000:]}")
+
+    def down(self) -> None:
+        try:
+            if self.watch is not None:
+                self.watch.close()
+        finally:
+            self.procs.stop_all()
+            self.proxy.close()
+            self.master.cleanup()
+
+
+def circles(v=0.06, w=0.5):
+    """Small loops (radius at most v / w) that stay in the open middle of the field."""
+    return lambda t: (v * math.sin(0.4 * t), w)
+
+
+# ------------------------------------------------------------------------------------------------ the parts
+
+def part_fuzz(args, log_dir: Path, robot) -> dict:
+    import multiprocessing as mp
+
+    (log_dir / "fuzz").mkdir(parents=True, exist_ok=True)
+    rig = Rig(args, log_dir / "fuzz").up()
+    w, px = rig.watch, rig.proxy
+    out = {}
+    try:
+        w.drive(circles())
+        time.sleep(2.0)
+        rng = random.Random(args.seed)
+        with px.lock:
+            template = px.template
+        pool = fuzz_pool(template, rng)
+        n_inband = int(args.fuzz_datagrams * args.fuzz_inband)
+        n_out = args.fuzz_datagrams - n_inband
+        ctx = mp.get_context("spawn")
+        q = ctx.Queue()
+        fz = ctx.Process(target=_fuzzer, args=(rig.bport, {k: v for k, v in pool.items() if k != "inband"}, n_out,
+                                               args.fuzz_seconds, q), daemon=True)
+        t_fuzz0 = time.monotonic()
+        fz.start()
+        inband = pool["inband"]
+        i = 0
+        while i < n_inband:  # paced like the fuzzer, through the proxy's socket (the bound source)
+            due = int(n_inband * min(1.0, (time.monotonic() - t_fuzz0) / args.fuzz_seconds))
+            while i < due:
+                px.inject_queue.append(inband[i % len(inband)])
+                i += 1
+            rig.check()
+            time.sleep(0.02)
+        sent = q.get(timeout=args.fuzz_seconds * 4 + 120)
+        fz.join(10)
+        _wait(lambda: not px.inject_queue, 30, "the in-band fuzz to be sent")
+        fuzz_wall = time.monotonic() - t_fuzz0
+        time.sleep(1.0)
+        w.stop_drive()
+        time.sleep(1.5)  # the robot stops; the last frames arrive
+        rig.check()
+        crashed = sum(1 for n in ("bridge", "sim") if rig.procs.procs[n].poll() is not None)
+        truth = px.truth()
+        real_ms = set(truth[:, 2].astype(int).tolist())
+        with w.lock:
+            odom, clock = list(w.odom), list(w.clock)
+        bad_odom = sum(1 for o in odom if o[1] not in real_ms)
+        bad_clock = sum(1 for c in clock if c[1] not in real_ms)
+        ref = reference_odometry(truth, robot)
+        last = odom[-1]
+        err = math.hypot(last[2] - ref[0], last[3] - ref[1])
+        # odom published during the fuzz against the frames the simulator sent then
+        in_fuzz = [o for o in odom if t_fuzz0 <= o[0] <= t_fuzz0 + fuzz_wall]
+        frames_in_fuzz = int(np.sum((truth[:, 0] >= t_fuzz0) & (truth[:, 0] <= t_fuzz0 + fuzz_wall)))
+        time.sleep(1.2)
+        d = w.stream_diag()
+        out = {
+            "fuzz_datagrams_sent": int(sent["total"]) + px.counts["injected"],
+            "fuzz_inband_sent": px.counts["injected"], "fuzz_wall_s": round(fuzz_wall, 1),
+            "fuzz_second_sender_frames": sent["second_sender"], "fuzz_send_errors": sent["errors"],
+            "fuzz_crashes": crashed,
+            "fuzz_odom_messages": len(odom), "fuzz_frames_sent_by_sim": len(truth),
+            "fuzz_odom_rate_during_fuzz_hz": round(len(in_fuzz) / fuzz_wall, 2),
+            "fuzz_sim_frame_rate_during_fuzz_hz": round(frames_in_fuzz / fuzz_wall, 2),
+            "fuzz_odom_from_forged_or_foreign": bad_odom, "fuzz_clock_from_forged_or_foreign": bad_clock,
+            "fuzz_odometry_error_m": err,
+            "fuzz_odometry_distance_m": float(np.sum(np.hypot(np.diff(truth[:, 5]), np.diff(truth[:, 6])))),
+        }
+        for k in ("rejected_foreign_source", "rejected_malformed", "rejected_oversized", "rejected_foreign_protocol",
+                  "held", "implausible", "restarts", "stale", "duplicates", "lost", "bound_source",
+                  "source_takeovers"):
+            if k in d:
+                out[f"fuzz_bridge_{k}"] = d[k] if k == "bound_source" else int(float(d[k]))
+        out.update({
+            "fuzz_crashes_target_met": crashed == 0,
+            "fuzz_odom_from_forged_or_foreign_target_met": bad_odom == 0,
+            "fuzz_clock_from_forged_or_foreign_target_met": bad_clock == 0,
+            "fuzz_odometry_error_target_met": err <= 0.01,
+            "fuzz_odometry_reset_target_met": int(float(d.get("restarts", -1))) == 0,
+        })
+    finally:
+        rig.down()
+    return out
+
+
+def part_loss(args, log_dir: Path, robot) -> dict:
+    (log_dir / "loss").mkdir(parents=True, exist_ok=True)
+    rig = Rig(args, log_dir / "loss", start_pose="-0.45,0.36,0").up()  # the corridor along the north machines
+    w, px = rig.watch, rig.proxy
+    try:
+        px.set_faults(args.drop, args.dup, args.reorder)
+        straight = min(4.5, args.loss_seconds / 2)  # 0.9 m at 0.2 m/s, then turning on the spot
+        w.drive(lambda t: (0.2, 0.0) if t < straight else (0.0, 0.8 * math.sin(0.5 * (t - straight))))
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < args.loss_seconds:
+            rig.check()
+            time.sleep(0.2)
+        w.stop_drive()
+        time.sleep(2.0)  # stopped: the totals stop changing, the last ones get through
+        px.set_faults()
+        time.sleep(1.0)
+        rig.check()
+        truth = px.truth()
+        np.save(log_dir / "loss" / "truth.npy", truth)
+        with w.lock:
+            joints = list(w.joints)
+        tpr = robot.ticks_per_rev
+        jl, jr = joints[-1][2], joints[-1][3]
+        bl, br = round(jl * tpr / (2 * math.pi)), round(jr * tpr / (2 * math.pi))
+        sl, sr = int(truth[-1, 3]), int(truth[-1, 4])
+        lost = abs(bl - sl) + abs(br - sr)
+        # speed over the straight segment (from the simulator's own poses), after 1.5 s of acceleration
+        tt = truth[:, 0] - t0
+        seg = truth[(tt > 1.0) & (tt < straight - 0.2)]
+        if len(seg) > 10:
+            dist = np.sum(np.hypot(np.diff(seg[:, 5]), np.diff(seg[:, 6])))
+            v = dist / ((seg[-1, 2] - seg[0, 2]) / 1000)
+        else:
+            v = float("nan")
+        ref = reference_odometry(truth, robot)
+        with w.lock:
+            last = w.odom[-1]
+        time.sleep(1.2)
+        d = w.stream_diag()
+        out = {"loss_drop": args.drop, "loss_dup": args.dup, "loss_reorder": args.reorder,
+               "loss_proxy_dropped": px.counts["dropped"], "loss_proxy_duplicated": px.counts["duplicated"],
+               "loss_proxy_reordered": px.counts["reordered"], "loss_frames_sent_by_sim": len(truth),
+               "loss_bridge_ticks": f"{bl},{br}", "loss_sim_ticks": f"{sl},{sr}", "loss_ticks_lost": int(lost),
+               "loss_speed_mps": float(v), "loss_speed_error_mps": float(abs(v - 0.2)),
+               "loss_odometry_vs_lossfree_m": math.hypot(last[2] - ref[0], last[3] - ref[1])}
+        for k in ("lost", "duplicates", "stale", "held", "restarts", "accepted"):
+            if k in d:
+                out[f"loss_bridge_{k}"] = int(float(d[k]))
+        out["loss_ticks_lost_target_met"] = lost == 0
+        out["loss_speed_error_target_met"] = bool(abs(v - 0.2) <= 0.01)
+    finally:
+        rig.down()
+    return out
+
+
+def part_restarts(args, log_dir: Path, robot) -> dict:
+    (log_dir / "restarts").mkdir(parents=True, exist_ok=True)
+    camera = not args.no_camera_restart
+    rig = Rig(args, log_dir / "restarts", camera=camera).up()
+    w, px, out = rig.watch, rig.proxy, {}
+    try:
+        w.drive(circles())
+        if camera:
+            _wait(lambda: len(w.images) > 3, 60, "camera images", rig.check)
+        time.sleep(2.0)
+        d0 = _wait_diag(w)
+        # -- the simulator (and its camera publisher) killed and restarted
+        rig.procs.kill("sim")
+        n_frames = len(px.frames)
+        t_kill = time.monotonic()
+        time.sleep(1.0)
+        rig.start_sim()
+        _wait(lambda: len(px.frames) > n_frames, 90, "the restarted simulator's first frame", rig.check)
+        with px.lock:
+            t_first = px.frames[n_frames][0]
+
+        def back(lst, what):
+            _wait(lambda: any(x[0] > t_first for x in lst), 10, what, rig.check)
+            return min(x[0] for x in lst if x[0] > t_first) - t_first
+
+        out["restart_sim_odom_back_s"] = back(w.odom, "odom after the restart")
+        out["restart_sim_clock_back_s"] = back(w.clock, "/clock after the restart")
+        if camera:
+            out["restart_sim_image_back_s"] = back(w.images, "images after the restart")
+        out["restart_sim_process_start_to_first_frame_s"] = t_first - t_kill - 1.0
+        time.sleep(2.5)
+        d1 = _wait_diag(w, after=time.monotonic())
+        out["restart_sim_odometry_resets"] = int(float(d1.get("restarts", -1))) - int(float(d0.get("restarts", 0)))
+        with w.lock:
+            first_after = [o for o in w.odom if o[0] > t_first][:1]
+        out["restart_sim_first_odom_stamp_s"] = first_after[0][1] / 1000 if first_after else -1.0
+        # -- the bridge killed and restarted
+        time.sleep(1.0)
+        n_rep = len(px.replies)
+        rig.procs.kill("bridge")
+        t_kill = time.monotonic()
+        with px.lock:
+            last_rep = px.replies[-1] if px.replies else None
+        time.sleep(2.0)
+        truth = px.truth()
+        out.update(_stop_after_last_command(truth, px, t_kill))
+        rig.start_bridge()
+        n_rep = len(px.replies)
+        _wait(lambda: len(px.replies) > n_rep, 90, "the restarted bridge's first reply", rig.check)
+        with px.lock:
+            t_rep = px.replies[n_rep][0]
+        _wait(lambda: any(o[0] > t_rep for o in w.odom), 15, "odom from the restarted bridge", rig.check)
+        out["restart_bridge_resume_s"] = min(o[0] for o in w.odom if o[0] > t_rep) - t_rep
+        out["restart_bridge_process_start_to_first_reply_s"] = t_rep - t_kill - 2.0
+        del last_rep
+        # -- roscore killed and restarted on the same port
+        out.update(_roscore_restart(rig))
+        out.update({
+            "restart_sim_odom_back_target_met": out["restart_sim_odom_back_s"] <= 1.0,
+            "restart_sim_clock_back_target_met": out["restart_sim_clock_back_s"] <= 1.0,
+            "restart_sim_odometry_resets_target_met": out["restart_sim_odometry_resets"] == 1,
+            "restart_bridge_stop_target_met": out["restart_bridge_stop_s"] <= 0.5 + 1e-6,
+            "restart_bridge_resume_target_met": out["restart_bridge_resume_s"] <= 1.0,
+        })
+        if camera:
+            out["restart_sim_image_back_target_met"] = out["restart_sim_image_back_s"] <= 1.0
+    finally:
+        rig.down()
+    return out
+
+
+def _wait_diag(w: Watch, after: float | None = None, timeout: float = 10.0) -> dict:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        d = w.stream_diag()
+        if d and (after is None or time.monotonic() - after > 1.2):
+            return d
+        time.sleep(0.1)
+    return w.stream_diag()
+
+
+def _stop_after_last_command(truth: np.ndarray, px: Proxy, t_kill: float) -> dict:
+    """From the frames the simulator sent after the bridge died: when (simulation time, after the last command
+    it got) its command timeout stopped the wheels (the first cycle whose encoder counts do not move), and
+    when the robot was at rest."""
+    with px.lock:
+        reps = [r for r in px.replies if r[0] <= t_kill]
+    if not reps:
+        return {"restart_bridge_stop_s": float("nan")}
+    t_last_rep = reps[-1][0]
+    before = truth[truth[:, 0] <= t_last_rep]
+    after = truth[truth[:, 0] > t_last_rep]
+    t_cmd = before[-1, 2] / 1000  # the simulator applied the last command from this frame's time on
+    stop_t = rest_t = float("nan")
+    prev = before[-1]
+    for r in after:
+        dl, dr = r[3] - prev[3], r[4] - prev[4]
+        moving = math.hypot(r[5] - prev[5], r[6] - prev[6]) > 2e-4
+        if math.isnan(rest_t) and dl == 0 and dr == 0 and not moving:
+            rest_t = r[2] / 1000 - t_cmd
+        prev = r
+    # the policy's decision is the first cycle the wheels decelerate to rest from: at rest minus the ramp
+    return {"restart_bridge_at_rest_s": rest_t, "restart_bridge_stop_s": _policy_stop(after, before, t_cmd)}
+
+
+def _policy_stop(after, before, t_cmd) -> float:
+    """Simulation seconds from the last command to the first cycle whose encoder speed drops (the timeout
+    replacing it by V = W = 0)."""
+    rows = np.vstack([before[-3:], after])
+    ticks = np.abs(np.diff(rows[:, 3])) + np.abs(np.diff(rows[:, 4]))
+    base = ticks[:2].mean() if len(ticks) >= 2 else 0.0
+    for i in range(2, len(ticks)):
+        if ticks[i] < 0.7 * base:
+            return rows[i, 2] / 1000 - t_cmd  # the cycle ending at rows[i + 1] started at rows[i]
+    return float("nan")
+
+
+def _roscore_restart(rig: Rig) -> dict:
+    from ..ros.master import stop_process
+
+    names = [n for n in ("bridge", "localize") if n in rig.procs.procs]
+    stop_process(rig.master.proc, signal.SIGINT)
+    time.sleep(1.0)
+    rig.master.start()
+    t0 = time.monotonic()
+    exited, clear = {}, {}
+    while time.monotonic() - t0 < 15 and len(exited) < len(names):
+        for n in names:
+            p = rig.procs.procs[n]
+            if n not in exited and p.poll() is not None:
+                exited[n] = p.returncode
+        time.sleep(0.2)
+    for n in names:
+        log = rig.procs.log(n)
+        clear[n] = "the ROS master restarted" in log
+    ok = all(n in exited and clear[n] for n in names)
+    return {"restart_roscore_exit_codes": json.dumps(exited), "restart_roscore_exit_s": round(time.monotonic() - t0, 1),
+            "restart_roscore_nodes_clear": ok, "restart_roscore_nodes_clear_target_met": ok}
+
+
+def part_soak(args, log_dir: Path, robot) -> dict:
+    (log_dir / "soak").mkdir(parents=True, exist_ok=True)
+    sim_s = args.soak_sim_seconds if args.soak_sim_seconds is not None else args.soak_minutes * 60
+    rig = Rig(args, log_dir / "soak", camera=True, localize=True, fast=True, lockstep=True).up()
+    w, px = rig.watch, rig.proxy
+    samples: list[tuple] = []  # (sim s, {name: rss KiB})
+    try:
+        w.drive(circles())
+        wall0 = time.monotonic()
+
+        def procs():
+            out = {}
+            for n in ("sim", "bridge", "localize"):
+                p = rig.procs.procs[n]
+                out[n] = p.pid
+                if n == "bridge":
+                    for c in children(p.pid):
+                        out["bridge_camera"] = c
+            out["roscore"] = rig.master.proc.pid
+            return out
+
+        pids = procs()
+        while True:
+            rig.check()
+            with px.lock:
+                t_sim = px.frames[-1][2] / 1000 if px.frames else 0.0
+            samples.append((t_sim, {n: rss_kib(p) for n, p in pids.items()}))
+            if t_sim >= sim_s:
+                break
+            time.sleep(2.0)
+        wall = time.monotonic() - wall0
+        w.stop_drive()
+        time.sleep(1.5)
+        d = w.stream_diag()
+        with w.lock:
+            diag = {k: dict(v) for k, v in w.diag.items()}
+    finally:
+        rig.down()
+    out = {"soak_sim_seconds": round(samples[-1][0], 1), "soak_wall_seconds": round(wall, 1),
+           "soak_samples": len(samples)}
+    warm = [s for s in samples if s[0] >= 0.2 * samples[-1][0]]
+    worst = 0.0
+    for n in samples[0][1]:
+        series = [s[1][n] for s in warm if s[1].get(n)]
+        if len(series) < 3:
+            continue
+        k = max(1, len(series) // 10)
+        start, end = float(np.median(series[:k])), float(np.median(series[-k:]))
+        g = 100.0 * (end - start) / start
+        out[f"soak_rss_{n}_mib"] = round(end / 1024, 1)
+        out[f"soak_rss_{n}_growth_pct"] = round(g, 2)
+        worst = max(worst, g)
+    out["soak_rss_growth_max_pct"] = round(worst, 2)
+    out["soak_rss_growth_target_met"] = worst < 5.0
+    for k in ("accepted", "lost", "duplicates", "stale", "held", "restarts", "rejected_foreign_source"):
+        if k in d:
+            out[f"soak_bridge_{k}"] = int(float(d[k]))
+    for name, vals in diag.items():
+        if "camera" in name:
+            for k in ("received", "published", "skipped", "rejected_wrong_size"):
+                if k in vals:
+                    out[f"soak_camera_{k}"] = int(float(vals[k]))
+    out["soak_frames_sent_by_sim"] = len(px.frames)
+    return out
+
+
+PARTS = {"fuzz": part_fuzz, "loss": part_loss, "restarts": part_restarts, "soak": part_soak}
+
+
+def table(res: dict) -> str:
+    rows = ["| figure | value | target | met |", "|---|---|---|---|"]
+    for k, v in res.items():
+        if k.endswith("_target_met") or k == "notes":
+            continue
+        met = res.get(_met_key(k, res))
+        target = TARGETS.get(k, "")
+        val = f"{v:.4g}" if isinstance(v, float) else str(v)
+        rows.append(f"| {k} | {val} | {target} | {'' if met is None else ('yes' if met else '**NO**')} |")
+    return "\n".join(rows)
+
+
+def _met_key(k: str, res: dict) -> str:
+    for cand in (f"{k}_target_met", f"{k.rsplit('_', 1)[0]}_target_met"):
+        if cand in res:
+            return cand
+    return ""
+
+
+def run(args, out_dir: Path | None) -> dict:
+    from ..errors import ConfigError
+    from ..robot import load_robot
+
+    parts = [p.strip() for p in args.parts.split(",") if p.strip()]
+    for p in parts:
+        if p not in PARTS:
+            raise ConfigError(f"--parts: unknown part {p!r}; choose from {', '.join(PARTS)}")
+    if args.fuzz_datagrams < 0 or not 0 <= args.fuzz_inband <= 1:
+        raise ConfigError("--fuzz-datagrams must be >= 0 and --fuzz-inband within 0..1")
+    if not (0 <= args.drop < 1 and 0 <= args.dup < 1 and 0 <= args.reorder < 1
+            and args.drop + args.dup + args.reorder < 1):
+        raise ConfigError("--drop, --dup and --reorder are shares within 0..1 (their sum below 1)")
+    robot = load_robot()
+    log_dir = (out_dir / "logs") if out_dir is not None else Path(tempfile.mkdtemp(prefix="raf-exp-faults-"))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    res: dict = {}
+    notes = []
+    for p in parts:
+        t0 = time.monotonic()
+        print(f"faults: {p} ...", flush=True)
+        try:
+            res.update(PARTS[p](args, log_dir, robot))
+        except RuntimeError as e:
+            notes.append(f"{p}: {e}")
+            res[f"{p}_completed_target_met"] = False
+            print(f"faults: {p} failed: {e} (logs in {log_dir})", file=sys.stderr, flush=True)
+        res[f"{p}_wall_s"] = round(time.monotonic() - t0, 1)
+    print(table(res))
+    if out_dir is not None:
+        (out_dir / "faults_table.md").write_text(table(res) + "\n")
+    res["notes"] = "; ".join(notes) + (f"; logs in {log_dir}" if notes else "")
+    return res
