@@ -1,8 +1,10 @@
 """A small fake SimTwo for bridge tests: SensorFrames over UDP, camera frames over ZMQ, no physics.
 
 It integrates the commanded V, W kinematically (so a cmd_vel visibly moves it), counts encoder ticks the
-way SimTwo does (floor of the accumulated wheel angle, remainder carried), refreshes a synthetic LIDAR in
-turn like ranger2d (every ray reads 1.0 m + 0.001 m * ray index, ray 7 never returns), and renders a
+way SimTwo does (floor of the accumulated wheel angle, remainder carried), measures a synthetic LIDAR in
+turn like ranger2d (every ray reads 1.0 m + 0.001 m * ray index, ray 7 never returns) and, like SimTwo,
+delivers it a whole sweep at once at the end of each sweep period (zeros before the first;
+``lidar_update="per_ray"``: each ray as soon as measured, the old idealisation), and renders a
 synthetic camera frame on SimTwo's render clock (60 FPS, every 4th tick), published BEFORE the SensorFrame
 of the cycle it falls in. Each camera frame carries its true render time for tests: pixel row 0 (the top
 row, after the bottom-up flip) holds the tick number k (render time k/60 s) in its first 4 bytes,
@@ -44,8 +46,9 @@ def tick_of_image(bgr: np.ndarray) -> int:
 class FakeSim:
     def __init__(self, bridge=("127.0.0.1", 9810), camera: str | None = None, lockstep=False, realtime=True,
                  rate=1.0, lockstep_timeout=0.5, rays=360, start_seq=0, bind_host="127.0.0.1", width=640,
-                 height=480):
+                 height=480, lidar_update="sweep"):
         self.robot = load_robot()
+        self.lidar_update = lidar_update  # "sweep" (SimTwo) | "per_ray"
         self.bridge = bridge
         self.lockstep, self.realtime, self.rate = lockstep, realtime, rate
         self.lockstep_timeout = lockstep_timeout
@@ -94,7 +97,9 @@ class FakeSim:
             self.wheel_angle = [0.0, 0.0]
             self.enc_frac = [0.0, 0.0]
             self.total = [0, 0]
-            self.ranges = np.full(self.rays, -1.0)
+            self.measured = np.full(self.rays, -1.0)  # the rays as last measured
+            # what a frame carries: SimTwo's Measures[] (0 until the first sweep is delivered)
+            self.ranges = np.zeros(self.rays) if self.lidar_update == "sweep" else self.measured
             self.next_render_tick = 0
 
     def pose(self):
@@ -123,7 +128,9 @@ class FakeSim:
                 c = (self.step * n * dt_ns) // period_ns
                 for g in range(prev, c):
                     i = g % n
-                    self.ranges[i] = -1.0 if i == 7 else 1.0 + 0.001 * i
+                    self.measured[i] = -1.0 if i == 7 else 1.0 + 0.001 * i
+                if self.lidar_update == "sweep" and (self.step * dt_ns) % period_ns == 0:
+                    self.ranges = self.measured.copy()  # delivered at once, at the end of the sweep
                 while self.next_render_tick / 60 <= t + 1e-12:
                     renders.append(self.next_render_tick)
                     self.next_render_tick += 4

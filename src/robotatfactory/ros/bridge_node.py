@@ -45,7 +45,9 @@ from ..simtwo.labels import LabelledValues
 from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
 from ..simtwo.stream import (LogLimiter, RateMeter, SourceGate, StreamTracker, Verdict, source_key,
                              stream_health)
-from ..simtwo.timing import SimClock, SweepAssembler
+from ..simtwo.scan import PerRayAssembler, WholeSweepAssembler, make_assembler
+from ..simtwo.selfhits import SelfFilter
+from ..simtwo.timing import SimClock
 from ..simtwo.watchdog import CommandWatchdog
 from . import messages as rm
 from .cli import publish_every, read_private_params, spin_node
@@ -91,7 +93,8 @@ class Bridge:
         self.clock = SimClock()
         self.odo = DiffDriveOdometry(wheel_radius=cfg.wheel_radius, track=cfg.track, ticks_per_rev=cfg.ticks_per_rev,
                                      slip_var_per_m=cfg.slip_var_per_m)
-        self.sweeps: SweepAssembler | None = None
+        self.sweeps: WholeSweepAssembler | PerRayAssembler | None = None  # LIDAR sweeps (simtwo.scan)
+        self.self_filter: SelfFilter | None = None  # the LIDAR's hits on its own robot -> NaN (simtwo.selfhits)
         self.log = LogLimiter(cfg.log_period)
         self.datagram_rate = RateMeter()
         self.counts = {"replies": 0, "reply_errors": 0, "cmd_vel": 0, "cmd_vel_rejected": 0, "magnet_cmds": 0,
@@ -386,17 +389,51 @@ class Bridge:
         cfg = self.cfg
         n = len(f.ranges)
         if cfg.lidar_mode == "cycle":
-            self.pub_scan.publish(rm.laser_scan(stamp, cfg.frames["laser"], f.ranges, cfg.lidar_fov_deg,
+            self.pub_scan.publish(rm.laser_scan(stamp, cfg.frames["laser"], self._self_filtered(f.ranges),
+                                                cfg.lidar_fov_deg,
                                                 cfg.lidar_range_min, cfg.lidar_range_max, cfg.control_period, 0.0))
             self.counts["scans"] += 1
             return
         if self.sweeps is None or self.sweeps.n != n:
-            self.sweeps = SweepAssembler(n, cfg.lidar_period, cfg.physics_step)
+            self.sweeps = make_assembler(cfg.lidar_update, n, cfg.lidar_period, cfg.control_period,
+                                         cfg.physics_step, cfg.lidar_ray_timing)
         for sw in self.sweeps.add(f.time_ms, f.ranges):
-            self.pub_scan.publish(rm.laser_scan(rm.stamp_s(sw.t0), cfg.frames["laser"], sw.ranges, cfg.lidar_fov_deg,
-                                                cfg.lidar_range_min, cfg.lidar_range_max, cfg.lidar_period,
-                                                sw.time_increment))
+            self.pub_scan.publish(rm.laser_scan(rm.stamp_s(sw.t0), cfg.frames["laser"], self._self_filtered(sw.ranges),
+                                                cfg.lidar_fov_deg, cfg.lidar_range_min, cfg.lidar_range_max,
+                                                cfg.lidar_period, sw.time_increment))
             self.counts["scans"] += 1
+
+    def _self_filtered(self, ranges):
+        """The ranges with the rays that end on the robot itself as NaN (REP 117: invalid), if enabled."""
+        cfg = self.cfg
+        if not cfg.lidar_self_filter:
+            return ranges
+        n = len(ranges)
+        if self.self_filter is None or self.self_filter.n != n:
+            import dataclasses
+
+            from ..robot import load_robot
+            from ..simtwo.selfhits import Footprint
+
+            robot = dataclasses.replace(load_robot(cfg.robot), wheel_radius=cfg.wheel_radius, track=cfg.track)
+            fov = math.radians(cfg.lidar_fov_deg)
+            angles = -fov / 2 + np.arange(n) * (fov / (n - 1) if n > 1 else 0.0)  # as rm.laser_scan
+            self.self_filter = SelfFilter(Footprint.from_robot(robot, cfg.lidar_xyz[2], cfg.lidar_self_margin),
+                                          angles, cfg.lidar_xyz[:2])
+        return self.self_filter.apply(ranges)[0]
+
+    def scan_diagnostics(self) -> dict:
+        """The LIDAR's counters for /diagnostics."""
+        sw, sf = self.sweeps, self.self_filter
+        out = {"lidar_self_hits_filtered": sf.filtered_total if sf else 0}
+        if sw is not None:
+            c = sw.counters
+            out.update({"lidar_sweeps_published": c.sweeps, "lidar_rays_missing": c.missing_rays,
+                        "lidar_frames_before_first_sweep": c.pre_sweep, "lidar_sweeps_repeated": c.repeated,
+                        "lidar_changes_off_phase": c.off_phase, "lidar_sweeps_unstamped": c.unstamped,
+                        "lidar_sweeps_lost": c.lost, "lidar_phase_relocks": c.relocks,
+                        "lidar_phase_locked": bool(getattr(sw, "locked", True))})
+        return out
 
     # ---- diagnostics ---------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:
@@ -434,7 +471,7 @@ class Bridge:
                 vals[f"{key}_delay_median_ms"] = float(np.median(a))
                 vals[f"{key}_delay_p99_ms"] = float(np.percentile(a, 99))
         vals.update({"replies_sent": c["replies"], "reply_errors": c["reply_errors"], "scans_published": c["scans"],
-                     "lidar_rays_missing": self.sweeps.missing_total if self.sweeps else 0,
+                     **self.scan_diagnostics(),
                      "publish_errors": c["publish_errors"],
                      "camera_timing_dropped": self.camera.dropped if self.camera else 0})
         st1 = rm.diagnostic_status(f"{name}: sensor stream", level, text, hw, vals)

@@ -78,7 +78,8 @@ def default_params(robot: RobotSpec | None = None) -> dict:
         "odometry": {"slip_var_per_m": 1e-4},
         "lidar": {
             "enabled": True, "xyz": list(lid.xyz), "fov_deg": lid.fov_deg, "range_min": lid.range_min,
-            "range_max": lid.range_max, "period": lid.period, "mode": "sweep",
+            "range_max": lid.range_max, "period": lid.period, "mode": "sweep", "update": "sweep",
+            "ray_timing": "rolling", "self_filter": True, "self_margin": 0.005,
         },
         "camera": {
             "enabled": True, "endpoint": "tcp://127.0.0.1:9899",
@@ -240,6 +241,10 @@ class BridgeConfig:
     lidar_range_max: float
     lidar_period: float
     lidar_mode: str
+    lidar_update: str  # "sweep": all rays delivered at once per period (SimTwo) | "per_ray"
+    lidar_ray_timing: str  # "rolling": ray i measured at t_u - P + i*P/N (SimTwo) | "instant": all at t_u
+    lidar_self_filter: bool  # rays ending inside the robot's footprint published as NaN
+    lidar_self_margin: float  # m, added around the footprint
     camera_enabled: bool
     camera_endpoint: str
     camera_xyz: tuple[float, float, float]
@@ -361,6 +366,10 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
         lidar_range_max=_real(p, ("lidar", "range_max"), 0.0, lo_open=True),
         lidar_period=_real(p, ("lidar", "period"), 0.0, lo_open=True),
         lidar_mode=_str(p, ("lidar", "mode"), allowed=("sweep", "cycle")),
+        lidar_update=_str(p, ("lidar", "update"), allowed=("sweep", "per_ray")),
+        lidar_ray_timing=_str(p, ("lidar", "ray_timing"), allowed=("rolling", "instant")),
+        lidar_self_filter=_bool(p, ("lidar", "self_filter")),
+        lidar_self_margin=_real(p, ("lidar", "self_margin"), 0.0, 0.1),
         camera_enabled=_bool(p, ("camera", "enabled")),
         camera_endpoint=_str(p, ("camera", "endpoint"), r"(tcp|ipc|inproc)://\S+",
                              "a ZMQ endpoint such as tcp://192.168.1.20:9899"),
