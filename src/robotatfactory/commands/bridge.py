@@ -28,6 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cam = parser.add_mutually_exclusive_group()
     cam.add_argument("--camera", metavar="ENDPOINT", help="ZMQ endpoint of the camera (default tcp://127.0.0.1:9899)")
     cam.add_argument("--no-camera", action="store_true", help="do not subscribe to the camera")
+    parser.add_argument("--calibration", metavar="FILE",
+                        help="camera calibration YAML from raf calibrate: camera_info K and D and the camera TF "
+                             "(after --config, before --set)")
     add_node_arguments(parser, "raf_bridge")
 
 
@@ -48,11 +51,25 @@ def build_params(args) -> dict:
         opts.setdefault("camera", {})["endpoint"] = args.camera
     if args.no_camera:
         opts.setdefault("camera", {})["enabled"] = False
+    if getattr(args, "calibration", None):
+        opts.setdefault("camera", {}).update(calibration_params(args.calibration))
     if args.frame_prefix is not None:
         opts["frame_prefix"] = args.frame_prefix
     deep_update(params, opts)
     deep_update(params, parse_set(args.set))
     return params
+
+
+def calibration_params(path: str) -> dict:
+    """The bridge's ``camera/...`` parameters set by a calibration file (``raf calibrate``)."""
+    from ..localization.calibration import load_calibration
+
+    c = load_calibration(path).camera
+    out = {k: c[k] for k in ("fx", "fy", "cx", "cy", "xyz", "pitch_down_deg", "roll_deg", "width", "height")
+           if k in c}
+    if "distortion" in c:
+        out["distortion"] = [float(v) for v in c["distortion"]] + [0.0] * (5 - len(c["distortion"]))
+    return out
 
 
 def run(args) -> int:

@@ -24,10 +24,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..ros.cli import add_node_arguments, add_settings_arguments
 
     add_settings_arguments(parser, "config/localization.yaml", "node/use_lidar=false")
+    parser.add_argument("--calibration", metavar="FILE",
+                        help="camera calibration YAML from raf calibrate: intrinsics, distortion and mount (it "
+                             "then takes precedence over camera_info)")
     add_node_arguments(parser, "raf_localization")
 
 
 def build_settings(args) -> dict:
+    from pathlib import Path
+
     from ..field import DEFAULT_FIELD
     from ..localization.config import DEFAULT_FILE, read_yaml
     from ..settings import deep_update, parse_set
@@ -37,6 +42,11 @@ def build_settings(args) -> dict:
         d["field"] = args.field
     if args.frame_prefix is not None:
         d["frame_prefix"] = args.frame_prefix
+    if getattr(args, "calibration", None):
+        from ..localization.calibration import load_calibration
+
+        load_calibration(args.calibration)  # a bad file is an error now, not in the node
+        d["calibration"] = str(Path(args.calibration).resolve())
     deep_update(d, parse_set(args.set))
     return d
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 NAME = "calibration"
-HELP = "stand-in frames rendered with a perturbed camera (fx +3 %, cx +4 px, cy -3 px, pitch +1 deg): raf calibrate's errors"
+HELP = "raf calibrate on stand-in frames rendered with a perturbed camera (fx, fy +3 pct, cx +4 px, cy -3 px, pitch +1 deg)"
 TARGETS = {
     "fx_error_pct": "|.| <= 0.3 (issue 9)",
     "fy_error_pct": "|.| <= 0.3 (issue 9)",

@@ -323,8 +323,9 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
         free += [t for t in cfg.distortion_terms if t not in free]
     if cfg.fit_forward and links and "x" not in free:
         free.append("x")
-    if "x" in free and not links:
-        free.remove("x")
+    if ("x" in free or cfg.fit_forward) and not links:
+        if "x" in free:
+            free.remove("x")
         notes.append("no odometry: the forward offset x is held at its initial value (not observable)")
     fidx = [PARAMS.index(k) for k in free]
     LI = np.array([q[0] for q in links], dtype=int)
@@ -681,3 +682,50 @@ def synthetic_frames(fld: Field, camera: CameraSpec, poses: Sequence[tuple[float
         c[int(rng.integers(4))] += rng.uniform(5, 20, 2) * rng.choice([-1, 1], 2)
         f.detections[i] = Detection(d.id, c)
     return out
+
+
+# ------------------------------------------------------------------------------------ recorded data
+
+
+def interpolate_odometry(odom: Sequence[tuple[float, float, float, float]], stamps: Sequence[float],
+                         max_gap_s: float = 0.5) -> list[tuple[float, float, float] | None]:
+    """Odometry (t, x, y, theta rows, oldest first) linearly interpolated at each stamp; None outside the
+    recorded span or where the neighbouring messages are more than ``max_gap_s`` apart."""
+    if not len(odom):
+        return [None] * len(stamps)
+    a = np.asarray(odom, dtype=float).reshape(-1, 4)
+    a = a[np.argsort(a[:, 0], kind="stable")]
+    t = a[:, 0]
+    th = np.unwrap(a[:, 3])
+    out = []
+    for s in stamps:
+        i = int(np.searchsorted(t, s))
+        if i == 0 or i >= len(t):
+            out.append(tuple(a[i, 1:]) if i < len(t) and abs(t[i] - s) < 1e-6 else None)
+            continue
+        if t[i] - t[i - 1] > max_gap_s:
+            out.append(None)
+            continue
+        f = (s - t[i - 1]) / max(t[i] - t[i - 1], 1e-12)
+        out.append((float(a[i - 1, 1] + f * (a[i, 1] - a[i - 1, 1])),
+                    float(a[i - 1, 2] + f * (a[i, 2] - a[i - 1, 2])),
+                    float(wrap_angle(th[i - 1] + f * (th[i] - th[i - 1])))))
+    return out
+
+
+def frames_from_images(images: Iterable[tuple[float, np.ndarray]], fld: Field,
+                       odom: Sequence[tuple[float, float, float, float]] | None = None,
+                       detector=None) -> tuple[list[FrameData], int]:
+    """Detect the field's markers in (stamp, BGR image) pairs; attach interpolated odometry. Returns the
+    frames with at least one known marker and the number of images looked at."""
+    from .detect import DetectorConfig, MarkerDetector
+
+    det = detector or MarkerDetector(DetectorConfig(dictionary=fld.dictionary))
+    kept, n = [], 0
+    for stamp, img in images:
+        n += 1
+        dets = [d for d in det.detect(img) if fld.has_marker(d.id)]
+        if dets:
+            kept.append((float(stamp), dets))
+    o = interpolate_odometry(odom or [], [s for s, _ in kept])
+    return [FrameData(s, d, oo) for (s, d), oo in zip(kept, o)], n

@@ -83,6 +83,7 @@ class LocalizationConfig:
     field: str = "rules2026"
     robot: str = "simtwo"
     frame_prefix: str = ""
+    calibration: str = ""  # camera calibration YAML (raf calibrate): overrides the robot file's camera and camera_info
     detector: DetectorConfig = dc_field(default_factory=DetectorConfig)
     pose: PoseConfig = dc_field(default_factory=PoseConfig)
     ekf: EkfConfig = dc_field(default_factory=EkfConfig)
@@ -138,6 +139,7 @@ def from_dict(d: dict | None) -> LocalizationConfig:
     cfg = LocalizationConfig(
         field=str(d.get("field", "rules2026")), robot=str(d.get("robot", "simtwo")),
         frame_prefix=str(d.get("frame_prefix", "") or ""),
+        calibration=str(d.get("calibration", "") or ""),
         detector=_section(DetectorConfig, d.get("detector"), "detector"),
         pose=_section(PoseConfig, d.get("pose"), "pose"),
         ekf=_section(EkfConfig, d.get("ekf"), "ekf"),
@@ -156,7 +158,23 @@ def from_dict(d: dict | None) -> LocalizationConfig:
                 raise ConfigError(f"{key}/{k} must be a non-empty string, got {v!r}")
             target[k] = v
     cfg.node.check()
+    if cfg.calibration:
+        from .calibration import load_calibration
+
+        load_calibration(cfg.calibration)
     return cfg
+
+
+def robot_for(cfg: LocalizationConfig):
+    """The robot spec the localization uses: ``cfg.robot`` with the camera of ``cfg.calibration`` if set."""
+    from ..robot import load_robot
+    from .calibration import calibrated_robot
+
+    try:
+        robot = load_robot(cfg.robot)
+    except FileNotFoundError as e:
+        raise ConfigError(f"localization setting robot: {e}") from None
+    return calibrated_robot(robot, cfg.calibration) if cfg.calibration else robot
 
 
 def read_yaml(path: str | Path) -> dict:

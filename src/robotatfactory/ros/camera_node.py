@@ -180,7 +180,7 @@ class CameraBridge:
         w, h = cfg.width, cfg.height
         expected = w * h * 4
         frame_id = cfg.frames["camera_optical"]
-        info = rm.camera_info(rospy.Time(0), frame_id, w, h, cfg.fx, cfg.fy, cfg.cx, cfg.cy)
+        info = rm.camera_info(rospy.Time(0), frame_id, w, h, cfg.fx, cfg.fy, cfg.cx, cfg.cy, cfg.distortion)
         carried = 0  # skipped frames counted with a wrong-sized message, passed on to the next frame
         while self._running:
             with self._cv:

@@ -30,12 +30,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..errors import ConfigError
 from ..field import load_field
 from ..localization import reasons
-from ..localization.config import LocalizationConfig, from_dict
+from ..localization.config import LocalizationConfig, from_dict, robot_for
 from ..localization.ekf import Ekf
 from ..localization.geometry import inv, matrix_se2, se2_matrix
 from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
-from ..robot import load_robot
 from . import messages as rm
 from .cli import publish_every, read_private_params, spin_node
 
@@ -44,7 +43,7 @@ class LocalizationNode:
     def __init__(self, cfg: LocalizationConfig):
         self.cfg = cfg
         self.field = load_field(cfg.field)
-        self.robot = load_robot(cfg.robot)
+        self.robot = robot_for(cfg)  # the calibration file's camera, if any
         nc = cfg.node
         self.loc = FrameLocalizer(self.field, self.robot, cfg.detector, cfg.pose, nc.methods())
         ekf_cfg = cfg.ekf
@@ -120,18 +119,22 @@ class LocalizationNode:
 
     # ------------------------------------------------------------------ callbacks
     def on_camera_info(self, msg: CameraInfo) -> None:
-        if not self.cfg.node.use_camera_info:
+        if not self.cfg.node.use_camera_info or self.cfg.calibration:  # a calibration file takes precedence
             return
         K = np.array(msg.K, dtype=float).reshape(3, 3)
-        if np.allclose(K, self.loc.K):
+        D = np.zeros(5)
+        if msg.D:
+            D[:min(5, len(msg.D))] = np.asarray(msg.D, dtype=float)[:5]
+        D_now = self.loc.D if self.loc.D is not None else np.zeros(5)
+        if np.allclose(K, self.loc.K) and np.allclose(D, D_now):
             self._K_from_info = True
             return
         try:
             with self.lock:
-                self.loc.set_intrinsics(K)
+                self.loc.set_intrinsics(K, D)
             self._K_from_info = True
             rospy.loginfo(f"localization: camera matrix from camera_info: fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} "
-                          f"cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}")
+                          f"cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}, distortion {np.round(D, 5).tolist()}")
         except ConfigError as e:
             self.counts["bad_camera_info"] += 1
             self._warn("camera_info", f"localization: ignoring camera_info: {e}")

@@ -142,13 +142,16 @@ def joint_states(stamp, names: tuple[str, str], angles: tuple[float, float], rat
     return m
 
 
-def camera_info(stamp, frame: str, width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> CameraInfo:
+def camera_info(stamp, frame: str, width: int, height: int, fx: float, fy: float, cx: float, cy: float,
+                D=None) -> CameraInfo:
+    """CameraInfo of a camera with OpenCV's distortion ``D`` (k1, k2, p1, p2, k3; None: none): plumb_bob;
+    P = K (the images are not rectified: consumers undistort points with K and D)."""
     m = CameraInfo()
     m.header.stamp = stamp
     m.header.frame_id = frame
     m.width, m.height = width, height
     m.distortion_model = "plumb_bob"
-    m.D = [0.0] * 5
+    m.D = [float(v) for v in D] if D is not None else [0.0] * 5
     m.K = [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]
     m.R = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
     m.P = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]

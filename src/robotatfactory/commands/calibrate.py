@@ -1,0 +1,108 @@
+"""``raf calibrate``: the camera's intrinsics and mount from a recording (rosbag) or the live topics."""
+from __future__ import annotations
+
+import argparse
+
+NAME = "calibrate"
+HELP = "estimate the camera's fx, fy, cx, cy and mount (height, forward, pitch, roll) from the field's markers"
+ORDER = 37
+DESCRIPTION = """\
+Estimate the camera calibration from frames of the robot moving on the field: every detected marker's
+corners against the field map, one joint least-squares fit over all frames with the robot's poses unknown
+(odometry, when recorded, ties consecutive poses). Writes a YAML file that `raf bridge --calibration FILE`
+and `raf localize --calibration FILE` load. The data must contain wall markers (floor markers alone cannot
+separate focal length, height and pitch) and turns (for the forward offset); docs/calibration.md.
+
+examples:
+  raf calibrate --bag drive.bag --out calib.yaml
+  raf --field simtwo2022 calibrate --bag drive.bag --image-topic /camera/image_raw --odom-topic /odom --out calib.yaml --json fit.json
+  raf calibrate --live --duration 60 --out calib.yaml          # while the robot drives round the field
+"""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    src = parser.add_mutually_exclusive_group(required=True)
+    src.add_argument("--bag", metavar="FILE", help="a rosbag with camera images (and odometry)")
+    src.add_argument("--live", action="store_true", help="record the live topics (needs a ROS master)")
+    parser.add_argument("--duration", type=float, default=60.0, metavar="S",
+                        help="with --live: seconds to record (default 60)")
+    parser.add_argument("--image-topic", default="camera/image_raw", help="sensor_msgs/Image topic (default camera/image_raw)")
+    parser.add_argument("--odom-topic", default="odom",
+                        help="nav_msgs/Odometry topic, the prior between frames ('' for none; default odom)")
+    parser.add_argument("--out", required=True, metavar="FILE", help="calibration YAML to write")
+    parser.add_argument("--json", metavar="FILE", help="also write the fit's results (flat JSON)")
+    parser.add_argument("--robot", default="simtwo",
+                        help="robot file whose camera is the starting point and prior (default simtwo)")
+    parser.add_argument("--initial", metavar="FILE", help="start from this calibration YAML instead")
+    parser.add_argument("--every", type=int, default=1, metavar="N", help="use every N-th image (default 1)")
+    parser.add_argument("--max-frames", type=int, default=1500, metavar="N",
+                        help="use at most N images (default 1500)")
+    parser.add_argument("--fit-distortion", action="store_true", help="also estimate k1, k2 (SimTwo's camera has none)")
+    parser.add_argument("--no-forward", action="store_true", help="hold the camera's forward offset")
+
+
+def run(args) -> int:
+    import json
+    from dataclasses import replace
+    from pathlib import Path
+
+    from ..errors import ConfigError
+    from ..field import load_field
+    from ..localization.calibration import (CalibrationConfig, calibrate, compare, frames_from_images,
+                                            load_calibration, write_calibration)
+    from ..robot import load_robot
+
+    if args.every < 1 or args.max_frames < 1:
+        raise ConfigError("--every and --max-frames must be >= 1")
+    fld = load_field(args.field)
+    try:
+        robot = load_robot(args.robot)
+    except FileNotFoundError as e:
+        raise ConfigError(f"--robot: {e}") from None
+    if args.initial:
+        robot = replace(robot, camera=load_calibration(args.initial).apply(robot.camera))
+    odom_topic = args.odom_topic or None
+    if args.bag:
+        if not Path(args.bag).is_file():
+            raise ConfigError(f"--bag {args.bag}: no such file")
+        from ..ros.calibration_source import read_bag
+
+        images, odom = read_bag(args.bag, args.image_topic, odom_topic, args.every, args.max_frames)
+        source = f"bag {args.bag}"
+    else:
+        from ..ros.calibration_source import record_live
+
+        images, odom = record_live(args.image_topic, odom_topic, args.duration, args.every, args.max_frames)
+        source = f"live topics, {args.duration:g} s"
+    shapes = {img.shape[:2] for _, img in images}
+    if shapes != {(robot.camera.height, robot.camera.width)}:
+        raise ConfigError(f"images are {sorted(shapes)} (rows, columns) but the camera of --robot is "
+                          f"{robot.camera.width}x{robot.camera.height}")
+    frames, n_images = frames_from_images(images, fld, odom)
+    print(f"raf calibrate: {n_images} images from {source}, {len(frames)} with markers of field {fld.name}, "
+          f"{len(odom)} odometry messages", flush=True)
+    cfg = CalibrationConfig(fit_distortion=args.fit_distortion, fit_forward=not args.no_forward)
+    res = calibrate(frames, fld, robot, cfg)
+    path = write_calibration(args.out, res)
+    c = res.camera
+    print(f"camera: fx {c.fx:.3f} +- {res.sigma.get('fx', 0):.3f}  fy {c.fy:.3f} +- {res.sigma.get('fy', 0):.3f}  "
+          f"cx {c.cx:.3f} +- {res.sigma.get('cx', 0):.3f}  cy {c.cy:.3f} +- {res.sigma.get('cy', 0):.3f} px")
+    print(f"mount: xyz {tuple(round(v, 4) for v in c.xyz)} m  pitch down {c.pitch_down_deg:.3f} "
+          f"+- {res.sigma.get('pitch_down_deg', 0):.3f} deg  roll {c.roll_deg:.3f} +- {res.sigma.get('roll_deg', 0):.3f} deg")
+    print(f"fit: residual {res.residual_px_rms:.3f} px RMS over {res.detections} markers in {res.frames} frames "
+          f"({res.wall_detections} on walls), {res.rejected} rejected, {res.odometry_links} odometry links")
+    for n in res.notes:
+        print(f"note: {n}")
+    print(f"wrote {path}")
+    if args.json:
+        flat = {"source": source, "images": n_images, **{f"{k}": v for k, v in res.summary().items()
+                                                          if not isinstance(v, (dict, list))}}
+        flat.update({f"{k}_px" if k in ("fx", "fy", "cx", "cy") else k: getattr(c, k)
+                     for k in ("fx", "fy", "cx", "cy", "pitch_down_deg", "roll_deg")})
+        flat.update({"camera_x_m": c.xyz[0], "camera_y_m": c.xyz[1], "camera_z_m": c.xyz[2]})
+        flat.update({f"sigma_{k}": v for k, v in res.sigma.items()})
+        flat.update({f"change_{k}": round(v, 4) for k, v in compare(c, robot.camera).items()})
+        flat["degenerate"] = ",".join(res.degenerate) or "none"
+        Path(args.json).write_text(json.dumps(flat, indent=1))
+        print(f"wrote {args.json}")
+    return 0

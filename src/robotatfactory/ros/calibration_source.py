@@ -1,0 +1,137 @@
+"""Camera images and odometry for ``raf calibrate``: read from a rosbag or recorded live (thin ROS wiring).
+
+Both return ``(images, odometry)``: images as a list of ``(stamp_s, BGR uint8 array)`` and odometry as a list
+of ``(stamp_s, x, y, theta)`` (``base_link`` in ``odom``), oldest first. Everything else (detection,
+interpolation, the fit) is plain Python in :mod:`robotatfactory.localization.calibration` and the command.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..errors import ConfigError
+
+
+def image_to_bgr(msg) -> np.ndarray:
+    """A sensor_msgs/Image (bgr8, rgb8, bgra8, rgba8, mono8) as an HxWx3 BGR (or HxW grey) uint8 array."""
+    import cv2
+
+    enc = (msg.encoding or "").lower()
+    ch = {"bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4, "mono8": 1, "8uc1": 1, "8uc3": 3}.get(enc)
+    if ch is None:
+        raise ConfigError(f"image encoding {msg.encoding!r} not supported (bgr8, rgb8, bgra8, rgba8, mono8)")
+    buf = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    step = int(msg.step) or int(msg.width) * ch
+    if buf.size < step * int(msg.height):
+        raise ConfigError(f"image of {buf.size} bytes is smaller than {msg.height} rows of {step} bytes")
+    a = buf[:step * msg.height].reshape(msg.height, step)[:, :msg.width * ch].reshape(msg.height, msg.width, ch)
+    if enc in ("rgb8",):
+        return cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
+    if enc == "rgba8":
+        return cv2.cvtColor(a, cv2.COLOR_RGBA2BGR)
+    if enc == "bgra8":
+        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
+    return a[:, :, 0] if ch == 1 else a.copy()
+
+
+def odom_pose(msg) -> tuple[float, float, float, float]:
+    from .messages import quaternion_yaw
+
+    p = msg.pose.pose
+    return (msg.header.stamp.to_sec(), p.position.x, p.position.y, quaternion_yaw(p.orientation))
+
+
+def _match(topic: str, wanted: str) -> bool:
+    t, w = topic.strip("/"), wanted.strip("/")
+    return t == w or t.endswith("/" + w)
+
+
+def read_bag(path: str, image_topic: str, odom_topic: str | None, every: int = 1, max_images: int = 0):
+    """Images (every ``every``-th, at most ``max_images`` if > 0) and odometry from a bag file."""
+    import rosbag
+
+    try:
+        bag = rosbag.Bag(path)
+    except (OSError, rosbag.ROSBagException) as e:
+        raise ConfigError(f"cannot read bag {path}: {e}") from None
+    with bag:
+        info = bag.get_type_and_topic_info()
+        topics = info.topics
+        img_topics = [t for t in topics if _match(t, image_topic)]
+        if not img_topics:
+            listing = ", ".join(f"{t} ({v.msg_type}, {v.message_count})" for t, v in sorted(topics.items())) or "none"
+            raise ConfigError(f"bag {path} has no image topic {image_topic!r} (--image-topic); its topics: {listing}")
+        if len(img_topics) > 1:
+            raise ConfigError(f"bag {path}: several topics match {image_topic!r}: {img_topics}; name one exactly")
+        if topics[img_topics[0]].msg_type != "sensor_msgs/Image":
+            raise ConfigError(f"bag {path}: {img_topics[0]} holds {topics[img_topics[0]].msg_type}, not sensor_msgs/Image")
+        od_topics = [t for t in topics if odom_topic and _match(t, odom_topic)
+                     and topics[t].msg_type == "nav_msgs/Odometry"]
+        wanted = img_topics + od_topics[:1]
+        images, odom = [], []
+        k = 0
+        for topic, msg, t in bag.read_messages(topics=wanted):
+            if topic == img_topics[0]:
+                if k % max(1, every) == 0 and (max_images <= 0 or len(images) < max_images):
+                    stamp = msg.header.stamp.to_sec() or t.to_sec()
+                    images.append((stamp, image_to_bgr(msg)))
+                k += 1
+            else:
+                odom.append(odom_pose(msg))
+    if not images:
+        raise ConfigError(f"bag {path}: no images on {img_topics[0]}")
+    images.sort(key=lambda a: a[0])
+    odom.sort(key=lambda a: a[0])
+    return images, odom
+
+
+def record_live(image_topic: str, odom_topic: str | None, duration: float, every: int = 1, max_images: int = 0):
+    """Subscribe for ``duration`` wall seconds (needs a ROS master) and return what arrived."""
+    import threading
+
+    import rosgraph
+    import rospy
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import Image
+
+    if not rosgraph.is_master_online():
+        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore and the bridge first")
+    if not duration > 0 or not math.isfinite(duration):
+        raise ConfigError(f"--duration must be a positive number of seconds, got {duration!r}")
+    rospy.init_node("raf_calibrate", anonymous=True, disable_signals=True)
+    lock = threading.Lock()
+    images, odom, count = [], [], [0]
+
+    def on_image(msg):
+        with lock:
+            k = count[0]
+            count[0] += 1
+            if k % max(1, every) or (max_images > 0 and len(images) >= max_images):
+                return
+        try:
+            img = image_to_bgr(msg)
+        except ConfigError:
+            return
+        with lock:
+            images.append((msg.header.stamp.to_sec(), img))
+
+    def on_odom(msg):
+        with lock:
+            odom.append(odom_pose(msg))
+
+    subs = [rospy.Subscriber(image_topic, Image, on_image, queue_size=10, buff_size=1 << 24)]
+    if odom_topic:
+        subs.append(rospy.Subscriber(odom_topic, Odometry, on_odom, queue_size=200))
+    t_end = time.monotonic() + duration
+    while time.monotonic() < t_end and not rospy.is_shutdown():
+        time.sleep(0.1)
+    for s in subs:
+        s.unregister()
+    rospy.signal_shutdown("raf calibrate: recording done")
+    with lock:
+        if not images:
+            raise ConfigError(f"no images arrived on {rospy.resolve_name(image_topic)} in {duration:g} s "
+                              f"(is the bridge running and the robot's camera on?)")
+        return sorted(images, key=lambda a: a[0]), sorted(odom, key=lambda a: a[0])
