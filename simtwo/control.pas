@@ -11,22 +11,28 @@
 //      protocol version and Seq, turns V and W into wheel speed references for SimTwo's own
 //      speed controller (SetAxisSpeedRef) and switches the electromagnet (SetSensorVin).
 // A missing or garbled reply keeps the last command; no valid command for COMMAND_TIMEOUT_MS
-// of simulation time stops the wheels. Nothing here ever waits longer than LOCKSTEP_WAIT_MS.
+// of simulation time stops the wheels. Nothing here ever waits.
 //
-// Plain procedural PascalScript: no classes, no nested routines, no reliance on short-circuit
-// evaluation (PascalScript evaluates both sides of `and`/`or`). Settings: the constants below.
-// docs/simtwo.md explains the installation; tests/test_simtwo_pascal.py compiles this very file
-// with Free Pascal against a stand-in of SimTwo's script API (simtwo/test/) and runs it.
+// Timing: SimTwo runs this script and receives UDP on the same (GUI) thread, so no datagram can
+// arrive while Control runs. The reply to the frame sent in cycle n is read and applied in cycle
+// n+1 (40 ms later); waiting for it inside Control would only stall SimTwo. (There is no lockstep.)
+//
+// Written for SimTwo's script engine, RemObjects PascalScript, as SimTwo sets it up: the header
+// `const MaxDim = 8; const k = MaxDim-1;` comes before this file, so no identifier here may be
+// MaxDim or k (PascalScript refuses a local that repeats a global: "Duplicate identifier");
+// `and`/`or` short-circuit (icBooleanShortCircuit); Format writes '.' as the decimal point (SimTwo
+// sets it at start-up, whatever the Windows locale). Plain procedural code: no classes, no nested
+// routines. Settings: the constants below.
+// docs/simtwo.md explains the installation; tests/test_simtwo_pascalscript.py compiles this very
+// file with PascalScript, registered as SimTwo registers its script API, and runs it against a
+// stand-in of that API (simtwo/test/).
 
 const
   // ---- where the bridge is ----------------------------------------------------------------
   BRIDGE_IP = '127.0.0.1';     // the machine running `raf bridge` (its IPv4 address)
   BRIDGE_PORT = 9810;          // the bridge's UDP port (SimTwo itself listens on 9808, I/O tab)
 
-  // ---- waiting for the reply --------------------------------------------------------------
-  LOCKSTEP = 0;                // 1: after sending, poll for the reply for up to LOCKSTEP_WAIT_MS
-                               // 0: free running, apply what arrived since the previous cycle
-  LOCKSTEP_WAIT_MS = 30;       // the most one cycle ever waits (wall-clock milliseconds)
+  // ---- the reply -------------------------------------------------------------------------
   COMMAND_TIMEOUT_MS = 500;    // no valid command for this long (simulation ms): stop the wheels
 
   // ---- the robot (AGV.xml of RobotFactoryPro2022) -----------------------------------------
@@ -40,12 +46,18 @@ const
   TRACK = 0.135;               // m, between the wheels
   MAGNET_VIN_ON = 1;           // SetSensorVin value for "on" (force 0.5 * Vin * fmax)
 
-  // ---- wheel speed control: SimTwo's PID (every 10 ms, inside the physics loop) ---------------
+  // ---- wheel speed control: SimTwo's own PID (CalcPID), enabled and set ONCE in Initialize ----
+  // SimTwo runs it inside the physics loop every controller period (the scene's <controller
+  // period='10'/>, ms) as V = KP*e + KI*S + KD*(e - e_prev)/0.001 + KF*w_ref, e = w_ref - w (rad/s
+  // at the wheel), S += e * 0.001 (the 1 ms physics step, whatever the period), V clamped to the
+  // motor's Vmax. SetMotorControllerState and SetMotorControllerPars both reset S to 0, which is
+  // why neither is ever called again after Initialize. The gains are robot_simtwo.json's
+  // "simtwo_pid" (tests/test_simtwo_pascalscript.py checks they agree).
   SET_SPEED_GAINS = 1;         // 1: set the gains below at Initialize; 0: keep the scene's
-  SPEED_KP = 1.0;              // V per rad/s of error
-  SPEED_KI = 0.1;              // V per rad/s of error, per controller period (SimTwo sums errors)
-  SPEED_KD = 0.0;
-  SPEED_KF = 0.2585;           // V per rad/s of reference: the motors' back-EMF constant
+  SPEED_KP = 0.1;              // V per rad/s of error
+  SPEED_KI = 100.0;            // V per (rad/s * s) of integrated error
+  SPEED_KD = 0.0;              // V per rad/s^2
+  SPEED_KF = 0.42;             // V per rad/s of reference
 
   // ---- LIDAR range noise, sigma = A * exp(B * d) metres (A = 0: SimTwo's ranges unchanged) ----
   LIDAR_NOISE_A = 0.001524;
@@ -64,13 +76,10 @@ var
   // settings in effect: Initialize copies the constants (a test harness may change them after)
   CfgBridgeIP: string;
   CfgBridgePort: integer;
-  CfgLockstep: integer;
-  CfgLockstepWaitMs: integer;
   CfgCommandTimeoutMs: integer;
   CfgLidarNoiseA, CfgLidarNoiseB: double;
 
   iRobot, iAxisLeft, iAxisRight, iContact, iMagnet, iLidar: integer;
-  DecSep: string;              // this Windows locale's decimal separator, as Format writes it
 
   FrameSeq: integer;           // Seq of the frame this cycle sends: 0 for the first
   TimeMs: integer;             // simulation time at the end of this cycle, ms
@@ -83,7 +92,7 @@ var
   LastValidMs: integer;        // TimeMs when a valid reply was last accepted
   TimedOut: integer;           // 1 while the wheels are stopped for lack of commands
 
-  NFrames, NAccepted, NRejected, NTimeouts, NWaitTimeouts: integer;
+  NFrames, NAccepted, NRejected, NTimeouts: integer;
 
   // the reply being decoded
   RLines: array[0..2047] of string;
@@ -98,19 +107,13 @@ var
 
 
 // ---------------------------------------------------------------------------------------------
-// Text helpers (locale-free)
+// Text helpers
 // ---------------------------------------------------------------------------------------------
 
+// %.6g with a '.' decimal point: SimTwo sets DecimalSeparator to '.' at start-up (Viewer.pas)
 function FmtReal(x: double): string;
-var s: string;
-    p: integer;
 begin
-  s := Format('%.6g', [x]);
-  if DecSep <> '.' then begin
-    p := Pos(DecSep, s);
-    if p > 0 then s := Copy(s, 1, p - 1) + '.' + Copy(s, p + Length(DecSep), Length(s));
-  end;
-  result := s;
+  result := Format('%.6g', [x]);
 end;
 
 function LabelLine(lbl, value: string): string;
@@ -220,7 +223,7 @@ end;
 // A real as Python's float() reads it (without inf/nan/underscores): [sign] digits [. digits]
 // [e|E [sign] digits], or [sign] . digits [...]. Magnitudes of 1e15 and more are refused.
 function ParseRealStr(s: string; var v: double): boolean;
-var i, n, nd, e10, ev, ae, k: integer;
+var i, n, nd, e10, ev, ae, j: integer;
     m, p: double;
     neg, eneg, sawDigit, sawExpDigit, go: boolean;
     c: char;
@@ -278,7 +281,7 @@ begin
   ae := e10;
   if ae < 0 then ae := -ae;
   p := 1;
-  for k := 1 to ae do p := p * 10;
+  for j := 1 to ae do p := p * 10;
   if e10 >= 0 then v := m * p else v := m / p;
   if neg then v := -v;
   result := true;
@@ -431,34 +434,13 @@ end;
 // This script reads with ReadUDPData, so it empties the list to keep it from growing.
 procedure DrainPacketList;
 var s: string;
-    k: integer;
+    n: integer;
 begin
-  k := 0;
-  while (GetUDPPacketCount() > 0) and (k < 10000) do begin
+  n := 0;
+  while (GetUDPPacketCount() > 0) and (n < 10000) do begin
     s := ReadUDPPacket();
-    k := k + 1;
+    n := n + 1;
   end;
-end;
-
-// Polls ReadUDPData for at most waitMs wall-clock milliseconds; '' when nothing arrived
-function WaitForReply(waitMs: integer): string;
-var t0: LongWord;
-    elapsed: integer;
-    s: string;
-    go: boolean;
-begin
-  t0 := GetTickCount();
-  s := ReadUDPData();
-  go := (s = '');
-  while go do begin
-    elapsed := GetTickCount() - t0;
-    if (elapsed >= waitMs) or (elapsed < 0) then go := false
-    else begin
-      s := ReadUDPData();
-      if s <> '' then go := false;
-    end;
-  end;
-  result := s;
 end;
 
 
@@ -524,13 +506,12 @@ end;
 // Actuators
 // ---------------------------------------------------------------------------------------------
 
+// Wheel speed references for SimTwo's speed controller (enabled once, in Initialize) and the magnet
 procedure ApplyCommand;
 var wl, wr: double;
 begin
   wl := (CmdV - CmdW * TRACK / 2) / WHEEL_RADIUS;     // rad/s, axis 0
   wr := (CmdV + CmdW * TRACK / 2) / WHEEL_RADIUS;     // rad/s, axis 1
-  SetMotorControllerState(iRobot, iAxisLeft, true);
-  SetMotorControllerState(iRobot, iAxisRight, true);
   SetAxisSpeedRef(iRobot, iAxisLeft, wl);
   SetAxisSpeedRef(iRobot, iAxisRight, wr);
   MagnetApplied := 0;
@@ -547,7 +528,7 @@ end;
 
 // this procedure is called periodically (the script period, 40 ms)
 procedure Control;
-var pending, fresh, txt, frame, lidar: string;
+var txt, frame, lidar: string;
     encL, encR, contact, nRays: integer;
     accepted: boolean;
 begin
@@ -564,8 +545,10 @@ begin
   end;
   lidar := LidarLine(nRays);
 
-  // 2. replies that arrived since the previous cycle (they answer earlier frames)
-  pending := ReadUDPData();
+  // 2. replies that arrived since the previous cycle (they answer earlier frames: the reply to
+  //    this cycle's frame cannot arrive before Control returns)
+  txt := ReadUDPData();
+  DrainPacketList;
 
   // 3. the SensorFrame
   frame := LabelLine('RAF', IntToStr(PROTOCOL_VERSION))
@@ -586,17 +569,6 @@ begin
   NFrames := NFrames + 1;
 
   // 4. the reply
-  txt := pending;
-  if CfgLockstep = 1 then begin
-    fresh := WaitForReply(CfgLockstepWaitMs);
-    if fresh <> '' then txt := fresh
-    else begin
-      NWaitTimeouts := NWaitTimeouts + 1;
-      LogRepeated(NWaitTimeouts, 'lockstep: no reply within ' + IntToStr(CfgLockstepWaitMs) + ' ms');
-    end;
-  end;
-  DrainPacketList;
-
   accepted := false;
   if txt <> '' then begin
     if DecodeReply(txt) then begin
@@ -639,8 +611,7 @@ begin
 
   if (FrameSeq > 0) and (FrameSeq mod STATUS_EVERY = 0) then
     LogMsg('frames ' + IntToStr(NFrames) + ', replies applied ' + IntToStr(NAccepted)
-           + ', ignored ' + IntToStr(NRejected) + ', timeouts ' + IntToStr(NTimeouts)
-           + ', lockstep waits that ran out ' + IntToStr(NWaitTimeouts));
+           + ', ignored ' + IntToStr(NRejected) + ', timeouts ' + IntToStr(NTimeouts));
   FrameSeq := FrameSeq + 1;
 end;
 
@@ -651,15 +622,9 @@ var i: integer;
 begin
   CfgBridgeIP := BRIDGE_IP;
   CfgBridgePort := BRIDGE_PORT;
-  CfgLockstep := LOCKSTEP;
-  CfgLockstepWaitMs := LOCKSTEP_WAIT_MS;
   CfgCommandTimeoutMs := COMMAND_TIMEOUT_MS;
   CfgLidarNoiseA := LIDAR_NOISE_A;
   CfgLidarNoiseB := LIDAR_NOISE_B;
-
-  // the decimal separator Format uses in this locale (',' on a Portuguese Windows)
-  s := Format('%.1f', [1.5]);
-  DecSep := Copy(s, 2, Length(s) - 2);
 
   iRobot := GetRobotIndex(ROBOT_ID);
   if iRobot < 0 then begin
@@ -698,23 +663,25 @@ begin
   NAccepted := 0;
   NRejected := 0;
   NTimeouts := 0;
-  NWaitTimeouts := 0;
   RCount := 0;
   for i := 0 to 1023 do begin
     LidarRaw[i] := -1;
     LidarNoisy[i] := -1;
   end;
 
+  // SimTwo's speed controller: gains and state set here, once (each call resets its integral)
   if SET_SPEED_GAINS = 1 then begin
     SetMotorControllerPars(iRobot, iAxisLeft, SPEED_KI, SPEED_KD, SPEED_KP, SPEED_KF);
     SetMotorControllerPars(iRobot, iAxisRight, SPEED_KI, SPEED_KD, SPEED_KP, SPEED_KF);
   end;
+  SetMotorControllerState(iRobot, iAxisLeft, true);
+  SetMotorControllerState(iRobot, iAxisRight, true);
   ApplyCommand;
 
   // whatever was queued before this start answers frames of an earlier run
   s := ReadUDPData();
   DrainPacketList;
 
-  LogMsg('streaming to ' + BRIDGE_IP + ':' + IntToStr(BRIDGE_PORT) + ', lockstep ' + IntToStr(LOCKSTEP)
+  LogMsg('streaming to ' + BRIDGE_IP + ':' + IntToStr(BRIDGE_PORT)
          + ', command timeout ' + IntToStr(COMMAND_TIMEOUT_MS) + ' ms');
 end;

@@ -1,25 +1,28 @@
 unit simtwo_api;
 
 { A stand-in for the part of SimTwo's script API that simtwo/control.pas uses, so that the script
-  can be compiled unchanged with Free Pascal and run on Linux by tests/test_simtwo_pascal.py.
+  runs on Linux in SimTwo's own script engine (pscript/pscript_harness.pas registers these functions
+  with PascalScript under SimTwo's declarations; tests/test_simtwo_pascalscript.py drives it).
 
   Names and parameter lists are SimTwo's (ODERobotsPublished, dynmatrix and the functions the script
   editor registers: WriteUDPData, ReadUDPData, ReadUDPPacket, GetUDPPacketCount, ScriptPeriod,
   GetTickCount, RandG, WriteLn). Behaviour copied from SimTwo's source where it matters:
   - ReadUDPData returns every datagram received since the previous call, concatenated, and clears
     that buffer; each datagram is also appended to a packet list that only ReadUDPPacket empties and
-    GetUDPPacketCount counts (SimTwo's UDPGenData and UDPGenPackets).
+    GetUDPPacketCount counts (Params.pas 1273-1281 TFParams.UDPGenericReceive, Editor.pas 1438-1464).
+  - Datagrams are sent from, and received on, one socket (SimTwo's UDPGeneric, port 9808): replies
+    come back to the port the frames came from.
+  - Datagrams arrive (are moved into those buffers) only between script runs: SimTwo's lNet socket
+    delivers them through the GUI thread's event loop, the thread that runs the script.
   - GetSensorVal returns -1 when the sensor has no measure; GetSensorValues returns an n x 1 Matrix
     of the raw values (-1 for a ranger2d ray without a hit); Mgetv raises on an index out of range.
-  - Datagrams arrive (are moved into those buffers) between Control calls, as SimTwo's event loop
-    does; with the option live=1 also during ReadUDPData/ReadUDPPacket/GetUDPPacketCount calls.
 
   Sensor values are a deterministic function of the cycle number, and every value returned and
   every actuator call is written to the record file (one line each) for the Python test to check.
   The harness waits for a datagram 'HARNESS-TICK' on its own UDP socket before each cycle (these
   never reach the script), so the test drives the cycles. Options are key=value arguments:
-    record=FILE cycles=N bridge_ip=A bridge_port=N lockstep=0|1 wait_ms=N timeout_ms=N
-    live=0|1 comma=0|1 noise_z=F noise_a=F missing=ID,ID,... tick_timeout_ms=N }
+    record=FILE cycles=N bridge_ip=A bridge_port=N timeout_ms=N noise_z=F noise_a=F
+    missing=ID,ID,... tick_timeout_ms=N }
 
 {$mode delphi}{$H+}
 
@@ -28,6 +31,9 @@ interface
 uses SysUtils, Classes, Math, Sockets, BaseUnix;
 
 type
+  { dynmatrix's Matrix. SimTwo (Windows) receives `const Mat: Matrix` by reference, as PascalScript's
+    caller passes it; Free Pascal on x86_64 Linux would pass this 16-byte record in registers, so the
+    stand-in declares those parameters constref: the same by-reference passing, spelled for this ABI. }
   Matrix = record
     data: array of double;
     rows: LongWord;
@@ -48,9 +54,9 @@ procedure SetSensorVin(R, i: integer; Vin: byte);
 procedure SetAxisSpeedRef(R, i: integer; aSpeed: double);
 procedure SetMotorControllerState(R, i: integer; newState: boolean);
 procedure SetMotorControllerPars(R, i: integer; nKi, nKd, nKp, nKf: double);
-function MNumRows(const Mat: Matrix): Longword;
-function MNumCols(const Mat: Matrix): Longword;
-function Mgetv(const Mat: Matrix; r, c: Longword): double;
+function MNumRows(constref Mat: Matrix): Longword;
+function MNumCols(constref Mat: Matrix): Longword;
+function Mgetv(constref Mat: Matrix; r, c: Longword): double;
 function ScriptPeriod: double;
 function GetTickCount: LongWord;
 function RandG(Mean, StdDev: Extended): Extended;
@@ -91,7 +97,6 @@ var
   HSock: cint = -1;
   HPort: integer;
   HTicks: integer = 0;
-  HLive: boolean = false;
   HNoiseZ: double = 0;
   HTickTimeoutMs: QWord = 20000;
   HGenData: string = '';
@@ -193,7 +198,6 @@ end;
 
 function ReadUDPData: string;
 begin
-  if HLive then Pump;
   result := HGenData;
   HGenData := '';
   if result <> '' then HarnessRec(Format('READ %d %d', [HCycle, Length(result)]));
@@ -201,7 +205,6 @@ end;
 
 function ReadUDPPacket: string;
 begin
-  if HLive then Pump;
   result := '';
   if HGenPackets.Count > 0 then begin
     result := HGenPackets[0];
@@ -211,7 +214,6 @@ end;
 
 function GetUDPPacketCount: integer;
 begin
-  if HLive then Pump;
   result := HGenPackets.Count;
 end;
 
@@ -326,17 +328,17 @@ begin
   HarnessRec(Format('GET %d SensorValues %d %d %s', [HCycle, i, n, s]));
 end;
 
-function MNumRows(const Mat: Matrix): Longword;
+function MNumRows(constref Mat: Matrix): Longword;
 begin
   result := Mat.rows;
 end;
 
-function MNumCols(const Mat: Matrix): Longword;
+function MNumCols(constref Mat: Matrix): Longword;
 begin
   result := Mat.cols;
 end;
 
-function Mgetv(const Mat: Matrix; r, c: Longword): double;
+function Mgetv(constref Mat: Matrix; r, c: Longword): double;
 begin
   if (r >= Mat.rows) or (c >= Mat.cols) then
     Fail(Format('Mgetv: (%d, %d) outside a %d x %d matrix', [r, c, Mat.rows, Mat.cols]));
@@ -406,7 +408,6 @@ begin
   HMissing.StrictDelimiter := true;
   HMissing.DelimitedText := HarnessOpt('missing', '');
   HGenPackets := TStringList.Create;
-  HLive := HarnessOpt('live', '0') = '1';
   HNoiseZ := HarnessOptReal('noise_z', 0);
   HTickTimeoutMs := StrToInt(HarnessOpt('tick_timeout_ms', '20000'));
 
@@ -414,12 +415,6 @@ begin
   Rewrite(HRec);
   HRecOpen := true;
 
-  // SimTwo runs scripts with these floating-point exceptions masked (TFEditor.RunOnce)
-  SetExceptionMask([exInvalidOp, exDenormalized, exOverflow, exUnderflow, exPrecision]);
-  if HarnessOpt('comma', '0') = '1' then begin  // a Portuguese Windows locale
-    DefaultFormatSettings.DecimalSeparator := ',';
-    DefaultFormatSettings.ThousandSeparator := '.';
-  end;
 
   HSock := fpSocket(AF_INET, SOCK_DGRAM, 0);
   if HSock < 0 then Fail('socket() failed');
