@@ -28,7 +28,8 @@ def _recording():
     pad = np.zeros((len(tc), 3))
     return {"gt": gt, "odom": odo, "ekf": ekf, "camera_pose": np.zeros((0, 5)),
             "closest": np.hstack([closest, pad]), "closest_checked": np.hstack([ref, pad]),
-            "all_pnp": np.hstack([ref, pad]), "planar": np.hstack([ref, pad])}
+            "all_pnp": np.hstack([ref, pad]), "planar": np.hstack([ref, pad]),
+            "accepted": np.hstack([ref, pad]), "rejected": np.hstack([closest[5:6], pad[:1]])}
 
 
 def test_analysis_on_known_errors():
@@ -44,9 +45,59 @@ def test_analysis_on_known_errors():
     assert out["odometry_end_position_error_m"] == pytest.approx(0.019, abs=0.002)  # 1 mm/s for ~19 s
     assert out["odometry_over_ekf_end_position_error"] > 10
     assert out["ekf_position_rmse_target_met"] and out["ekf_3x_closest_target_met"]
-    assert out["ekf_10x_odometry_end_target_met"]
+    assert out["ekf_10x_odometry_end_met"]
     assert 1.0 < out["ekf_nees_diag_mean"] < 3.0  # x exact, y with the claimed variance: about 1
     assert "| EKF" in table(out) and "closest marker (paper)" in table(out)
+    # the filter's verdicts: every accepted fix exact, the one rejected fix 50 cm off
+    assert out["ekf_accepted_fixes"] == n and out["ekf_accepted_fixes_over_5cm"] == 0
+    assert out["ekf_rejected_fixes"] == 1 and out["ekf_rejected_fixes_over_5cm"] == 1
+    assert out["ekf_no_bad_fix_accepted_target_met"]
+    d["accepted"] = np.vstack([d["accepted"], d["rejected"]])  # had the filter taken the flipped fix
+    _, out2 = analyse(d, done_t=19.0)
+    assert out2["ekf_accepted_fixes_over_5cm"] == 1 and not out2["ekf_no_bad_fix_accepted_target_met"]
+    assert out2["ekf_accepted_fix_error_max_m"] == pytest.approx(0.504, abs=1e-6)
+
+
+def _parse(*argv):
+    import argparse
+
+    from robotatfactory.experiments import localization as exp
+
+    p = argparse.ArgumentParser()
+    exp.add_arguments(p)
+    return exp.plan_from_args(p.parse_args(list(argv)))
+
+
+def test_options_resolve_to_a_plan(tmp_path):
+    from robotatfactory.errors import ConfigError
+
+    p = _parse()
+    assert p.mode == "simtwo" and p.calibration == "auto" and not p.camera_error
+    assert p.routes == (("reference", 2), ("second", 1))
+    assert (p.track_error, p.radius_error) == (0.01, -0.005)
+    p = _parse("--ideal", "--route", "second", "--laps", "1")
+    assert p.mode == "ideal" and p.routes == (("second", 1),) and p.calibration == "none"
+    assert _parse("--mode", "ideal", "--camera-error").calibration == "true"
+    assert _parse("--calibration", "none", "--wheel-error", "0,0").calibration == "none"
+    assert (_parse("--calibration-error", "0.02,0.01").track_error) == 0.02  # the old name still works
+    f = tmp_path / "calib.yaml"
+    f.write_text("camera: {fx: 230.0}\n")
+    assert _parse("--calibration", str(f)).calibration == str(f.resolve())
+    for bad in (["--calibration", str(tmp_path / "missing.yaml")], ["--laps", "0"], ["--speed", "2"],
+                ["--wheel-error", "0.5,0"], ["--wheel-error", "x"]):
+        with pytest.raises(ConfigError):
+            _parse(*bad)
+    with pytest.raises(SystemExit):
+        _parse("--mode", "ideal", "--ideal")  # one or the other
+    with pytest.raises(SystemExit):
+        _parse("--route", "third")
+
+
+def test_mode_and_route_appear_in_every_target_key():
+    from robotatfactory.experiments.localization import MODES, TARGETS
+
+    assert all(k.split("_")[0] in MODES and k.split("_")[1] in ("reference", "second") for k in TARGETS)
+    assert "simtwo_second_ekf_position_rmse_m" in TARGETS and "ideal_reference_ekf_accepted_fixes_over_5cm" in TARGETS
 
 
 def test_xwd_reader(tmp_path):

@@ -34,4 +34,5 @@ def run(args) -> int:
     failed = [k for k, ok in results.items() if k.endswith("_target_met") and ok is False]
     if failed:
         print(f"targets not met: {', '.join(failed)}")
-    return 0
+    # an experiment whose targets are its pass/fail criterion says so (EXIT_STATUS_FROM_TARGETS): exit status 1
+    return 1 if failed and getattr(mod, "EXIT_STATUS_FROM_TARGETS", False) else 0

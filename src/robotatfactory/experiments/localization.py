@@ -1,18 +1,34 @@
-"""``raf experiment localization``: the paper's second validation test, made quantitative.
+"""``raf experiment localization``: the paper's second validation test, made quantitative, where it would run.
 
 Runs, each in its own process against a private roscore on a free port: the stand-in simulator (``raf sim``,
-lockstep, LIDAR beacons in the team areas), the bridge (``raf bridge``) and the localization
-(``raf localize`` with every method computed). This process drives the reference route
-(:mod:`robotatfactory.localization.route`, two laps round the whole field, the same every time) with a
-pure-pursuit controller on the GROUND-TRUTH pose (so that control does not depend on what is measured),
-records ground truth, odometry, every camera fix and the EKF, and prints position and heading errors (RMSE,
-95th percentile, maximum) of odometry alone, the paper's closest-marker method, the closest marker with the
-mount check, the all-marker PnP, the planar fit and the EKF. With ``--out DIR``: a trajectory figure, an
-error-against-time figure, the TF tree (tf2_tools view_frames, PDF and PNG), an RViz screenshot taken under
-Xvfb, the RViz configuration and the processes' logs.
+LIDAR beacons in the team areas), the bridge (``raf bridge``) and the localization (``raf localize`` with
+every method computed). This process drives a route (:mod:`robotatfactory.localization.route`: the
+``reference`` loop the localization was tuned on and the held-out ``second`` route, a figure-eight with
+station visits) with a pure-pursuit controller on the GROUND-TRUTH pose (so that control does not depend on
+what is measured), records ground truth, odometry, every camera fix, the filter's verdict on each fix and the
+EKF, and prints position and heading errors (RMSE, 95th percentile, maximum) of odometry alone, the paper's
+closest-marker method, the closest marker with the mount check, the all-marker PnP, the planar fit and the
+EKF.
+
+Two modes (every key and table carries the mode's name):
+
+- ``simtwo`` (default): the stand-in as SimTwo behaves -- its defaults (camera frames not on a grid of
+  simulation time, whole-sweep LIDAR updates with the robot's own wheels in the scan, SimTwo's speed
+  controller), no lockstep (SimTwo cannot wait for a reply), the wheel calibration error, and the camera
+  calibration from ``raf calibrate`` on a recording of a short calibration drive (``--calibration auto``)
+  instead of the renderer's own values.
+- ``ideal`` (``--ideal``): the idealisations the earlier figures were measured with, as far as ``raf sim``
+  offers them (lockstep, camera on the render grid, per-ray LIDAR, no self-hits, the project's own speed
+  controller) and the exact camera calibration.
+
+With ``--out DIR``: per route a trajectory figure and an error-against-time figure, the TF tree (tf2_tools
+view_frames, PDF and PNG), an RViz screenshot taken under Xvfb, the RViz configuration and the processes'
+logs.
 """
 from __future__ import annotations
 
+import argparse
+import json
 import math
 import os
 import shutil
@@ -21,40 +37,140 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 NAME = "localization"
-HELP = "simulator + bridge + localization on a scripted route: errors of odometry, closest marker, all markers, EKF"
-TARGETS = {
-    "ekf_position_rmse_m": "<= 0.010 (issue 5)",
-    "ekf_heading_rmse_deg": "<= 1.0 (issue 5)",
-    "closest_over_ekf_position_rmse": ">= 3 (issue 5)",
-    "odometry_over_ekf_end_position_error": ">= 10 (issue 5)",
+HELP = ("simulator + bridge + localization on two routes, SimTwo-like by default (--ideal for the idealised "
+        "stand-in): errors of odometry, closest marker, all markers, planar fit, EKF")
+MODES = ("simtwo", "ideal")
+ROUTE_CHOICES = ("reference", "second", "both")
+DEFAULT_LAPS = {"reference": 2, "second": 1}
+BAD_FIX_M = 0.05  # an accepted camera fix further than this from the truth is a failure
+#: the targets (issue 9, item 5), per mode and route: key suffix -> target text
+ROUTE_TARGETS = {
+    "ekf_position_rmse_m": "<= 0.010",
+    "ekf_heading_rmse_deg": "<= 1.0",
+    "closest_over_ekf_position_rmse": ">= 3",
+    "ekf_accepted_fixes_over_5cm": "== 0",
+    "odometry_over_ekf_end_position_error": ">= 10 (informative)",
 }
+TARGETS = {f"{m}_{r}_{k}": v for m in MODES for r in ("reference", "second") for k, v in ROUTE_TARGETS.items()}
+#: raf experiment exits with status 1 when one of the *_target_met keys is false
+EXIT_STATUS_FROM_TARGETS = True
 METHODS = ("closest", "closest_checked", "all_pnp", "planar")
 LABELS = {"odometry": "odometry alone", "closest": "closest marker (paper)", "closest_checked":
           "closest marker + mount check", "all_pnp": "all-marker PnP", "planar": "planar fit (mount fixed)",
           "ekf": "EKF (odometry + planar fixes + beacons)"}
 
+#: idealisations of the stand-in for --ideal: (option of raf sim, its value or None, what it does). Each is
+#: applied when ``raf sim`` offers the option (the results list the ones applied and the ones missing).
+IDEAL_SIM_OPTIONS = (
+    ("--lockstep", None, "lockstep: the simulator waits for the reply to each frame"),
+    ("--lockstep-timeout", "2.0", "lockstep timeout"),
+    ("--camera-timing", "grid", "camera frames rendered on the k/15 s grid of simulation time"),
+    ("--lidar-update", "per_ray", "each LIDAR ray delivered as soon as it is measured"),
+    ("--no-lidar-self-hits", None, "LIDAR rays pass through the robot's own wheels"),
+    ("--speed-control", "ideal_pi", "the project's own speed PI with feed-forward every 1 ms"),
+)
+#: bridge settings for --ideal (``--set KEY=VALUE``), each applied when the bridge has the setting
+IDEAL_BRIDGE_SETS = (
+    ("camera/use_grid", "true", "camera stamps on the render grid"),
+    ("lidar/update", "per_ray", "LIDAR rays assembled one by one"),
+)
+#: options for the SimTwo-like mode that are not ``raf sim``'s defaults (none: its defaults are SimTwo's)
+SIMTWO_SIM_OPTIONS: tuple = ()
+
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--laps", type=int, default=2, help="laps of the reference loop (default 2)")
-    parser.add_argument("--speed", type=float, default=0.2, help="cruise speed, m/s (default 0.2)")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--mode", choices=MODES, default="simtwo",
+                      help="simtwo: the stand-in as SimTwo behaves, calibration from raf calibrate (default); "
+                           "ideal: the idealised stand-in and the exact calibration (the earlier figures)")
+    mode.add_argument("--ideal", dest="mode", action="store_const", const="ideal", help="same as --mode ideal")
+    parser.add_argument("--route", choices=ROUTE_CHOICES, default="both",
+                        help="reference: the loop the localization was tuned on; second: the held-out "
+                             "figure-eight with station visits; both (default), one after the other")
+    parser.add_argument("--laps", type=int, default=None,
+                        help="laps of each route (default: 2 of the reference loop, 1 of the second route)")
+    parser.add_argument("--speed", type=float, default=0.2,
+                        help="cruise speed, m/s (default 0.2; the second route drives 0.6-1.25x of it)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed (sensor noise, parts)")
     parser.add_argument("--no-beacons", action="store_true", help="no LIDAR beacons in the team areas")
-    parser.add_argument("--calibration-error", default="0.01,-0.005", metavar="TRACK,RADIUS",
-                        help="relative errors of the robot's nominal geometry (what the bridge's odometry and the "
-                             "filter use) against the simulated robot: the simulated track is (1 + TRACK) and the "
-                             "wheel radius (1 + RADIUS) times the nominal ones (default 0.01,-0.005: a robot "
+    parser.add_argument("--wheel-error", "--calibration-error", dest="wheel_error", default="0.01,-0.005",
+                        metavar="TRACK,RADIUS",
+                        help="relative errors of the robot's nominal wheel geometry (what the bridge's odometry and "
+                             "the filter use) against the simulated robot: the simulated track is (1 + TRACK) and "
+                             "the wheel radius (1 + RADIUS) times the nominal ones (default 0.01,-0.005: a robot "
                              "calibrated to 1 %% and 0.5 %%; 0,0 for the nominal robot, whose odometry in the "
                              "stand-in simulator is almost perfect)")
+    parser.add_argument("--calibration", default=None, metavar="FILE|auto|true|none",
+                        help="camera calibration given to the bridge and the localization: auto = drive a short "
+                             "calibration route recording camera/image_raw and odom in a rosbag and run raf "
+                             "calibrate on it (default in the simtwo mode); true = the stand-in's true camera "
+                             "(default in the ideal mode with --camera-error); none = the robot file's nominal "
+                             "values (default in the ideal mode); or a calibration YAML file")
+    parser.add_argument("--camera-error", action="store_true",
+                        help="render with a camera that differs from the nominal one (fx and fy +3 %%, cx +4 px, "
+                             "cy -3 px, pitch +1 degree), as a user's SimTwo may")
+    parser.add_argument("--calibration-speed", type=float, default=0.15,
+                        help="cruise speed of the calibration drive, m/s (default 0.15)")
     parser.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
                         help="a localization setting for the node, e.g. node/use_lidar=false (repeatable)")
-    parser.add_argument("--timeout", type=float, default=900.0, help="wall seconds for the whole drive (default 900)")
+    parser.add_argument("--timeout", type=float, default=900.0,
+                        help="wall seconds for each drive (default 900)")
     parser.add_argument("--no-rviz", action="store_true", help="skip the RViz screenshot")
     parser.add_argument("--no-tf-tree", action="store_true", help="skip the TF tree")
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What one run of the experiment does (parsed and checked options)."""
+
+    mode: str
+    routes: tuple[tuple[str, int], ...]  # (route name, laps)
+    calibration: str  # auto | true | none | a file path
+    camera_error: bool
+    track_error: float
+    radius_error: float
+    speed: float
+
+    @property
+    def prefix(self) -> str:
+        return self.mode
+
+
+def plan_from_args(args) -> Plan:
+    """Check the options and resolve the mode's defaults; ConfigError names the bad option."""
+    from ..errors import ConfigError
+
+    mode = getattr(args, "mode", "simtwo") or "simtwo"
+    if mode not in MODES:
+        raise ConfigError(f"--mode {mode!r}: choose one of {', '.join(MODES)}")
+    if args.laps is not None and args.laps < 1:
+        raise ConfigError("--laps must be >= 1")
+    if not 0.02 <= args.speed <= 0.5:
+        raise ConfigError("--speed must be in 0.02..0.5 m/s")
+    names = ("reference", "second") if args.route == "both" else (args.route,)
+    if any(n not in DEFAULT_LAPS for n in names):
+        raise ConfigError(f"--route {args.route!r}: choose one of {', '.join(ROUTE_CHOICES)}")
+    routes = tuple((n, args.laps if args.laps is not None else DEFAULT_LAPS[n]) for n in names)
+    try:
+        track_err, radius_err = (float(v) for v in str(args.wheel_error).split(","))
+    except ValueError:
+        raise ConfigError(f"--wheel-error {args.wheel_error!r}: expected TRACK,RADIUS, e.g. 0.01,-0.005") from None
+    if not (abs(track_err) < 0.2 and abs(radius_err) < 0.2):
+        raise ConfigError("--wheel-error: each relative error must be within +-0.2")
+    cal = args.calibration
+    if cal is None:
+        cal = "auto" if mode == "simtwo" else ("true" if args.camera_error else "none")
+    if cal not in ("auto", "true", "none"):
+        if not Path(cal).is_file():
+            raise ConfigError(f"--calibration {cal!r}: not a file (or auto, true, none)")
+        cal = str(Path(cal).resolve())
+    return Plan(mode, routes, cal, bool(args.camera_error), track_err, radius_err, float(args.speed))
 
 
 # ------------------------------------------------------------------------------------------- recording
@@ -63,7 +179,7 @@ def add_arguments(parser) -> None:
 class Recorder:
     """The experiment's ROS node: drives the route on ground truth and records every pose stream."""
 
-    def __init__(self, route_pts, speed: float, robot):
+    def __init__(self, route, speed: float, robot, bag_path: Path | None = None, image_every: int = 3):
         import rospy
         from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
         from nav_msgs.msg import Odometry
@@ -73,10 +189,11 @@ class Recorder:
 
         self.rospy = rospy
         self.Twist = Twist
-        self.pp = PurePursuit(route_pts, speed=speed)
+        self.pp = PurePursuit.for_route(route, speed=speed)
         self.T_cam_base = inv(robot.camera.base_to_optical())
         self.lock = threading.Lock()
-        self.data = {k: [] for k in ("gt", "odom", "ekf", "camera_pose", *METHODS)}
+        self.data = {k: [] for k in ("gt", "odom", "ekf", "camera_pose", "accepted", "rejected", *METHODS)}
+        self.last_gt_t = -math.inf
         self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=5)
         self.done_t: float | None = None
         self.subs = [rospy.Subscriber("ground_truth", Odometry, self._on_gt, queue_size=50, tcp_nodelay=True),
@@ -85,10 +202,47 @@ class Recorder:
                      rospy.Subscriber("camera_pose", PoseWithCovarianceStamped, self._on_camera, queue_size=50)]
         self.subs += [rospy.Subscriber(f"aruco/fixes/{m}", PoseWithCovarianceStamped, self._rec(m), queue_size=50)
                       for m in METHODS]
+        self.subs += [rospy.Subscriber(f"aruco/fixes/filter_{k}", PoseWithCovarianceStamped, self._rec(k),
+                                       queue_size=100) for k in ("accepted", "rejected")]
+        # the calibration drive: camera/image_raw (every image_every-th frame), camera_info and odom to a rosbag
+        self.bag = None
+        self.bag_counts = {"images": 0, "odom": 0, "camera_info": 0}
+        if bag_path is not None:
+            import rosbag
+            from sensor_msgs.msg import CameraInfo, Image
+
+            self.bag = rosbag.Bag(str(bag_path), "w")
+            self._bag_lock = threading.Lock()
+            self._image_every, self._image_n = max(1, int(image_every)), 0
+            self.subs += [rospy.Subscriber("camera/image_raw", Image, self._bag_image, queue_size=20,
+                                           buff_size=1 << 24),
+                          rospy.Subscriber("camera/camera_info", CameraInfo, self._bag_write("camera/camera_info",
+                                                                                             "camera_info"),
+                                           queue_size=20),
+                          rospy.Subscriber("odom", Odometry, self._bag_write("odom", "odom"), queue_size=100)]
         from diagnostic_msgs.msg import DiagnosticArray
 
         self.diag: dict[str, str] = {}
         self.subs.append(rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diag, queue_size=20))
+
+    def _bag_write(self, topic: str, counter: str):
+        def cb(msg):
+            with self._bag_lock:
+                if self.bag is not None:
+                    self.bag.write(topic, msg, msg.header.stamp)
+                    self.bag_counts[counter] += 1
+        return cb
+
+    def _bag_image(self, msg):
+        self._image_n += 1
+        if (self._image_n - 1) % self._image_every == 0:
+            self._bag_write("camera/image_raw", "images")(msg)
+
+    def close_bag(self) -> None:
+        if self.bag is not None:
+            with self._bag_lock:
+                self.bag.close()
+                self.bag = None
 
     def _on_diag(self, msg):
         for st in msg.status:
@@ -106,7 +260,7 @@ class Recorder:
     def _rec(self, key):
         def cb(msg):
             row = self._planar(msg)
-            if key in ("ekf", *METHODS):
+            if key in ("ekf", "accepted", "rejected", *METHODS):
                 c = np.array(msg.pose.covariance).reshape(6, 6)
                 row = row + (c[0, 0], c[1, 1], c[5, 5])
             with self.lock:
@@ -130,6 +284,10 @@ class Recorder:
         row = self._planar(msg)
         with self.lock:
             self.data["gt"].append(row)
+            self.last_gt_t = row[0]
+        if self.done_t is not None:  # route done: keep the robot stopped
+            self.cmd.publish(self.Twist())
+            return
         v, w = self.pp.command(row[1:])
         if self.pp.done and self.done_t is None:
             self.done_t = row[0]
@@ -140,6 +298,7 @@ class Recorder:
     def stop(self):
         for s in self.subs:
             s.unregister()
+        self.close_bag()
 
     def arrays(self) -> dict:
         with self.lock:
@@ -241,6 +400,20 @@ def analyse(d: dict, done_t: float | None) -> tuple[dict, dict]:
         dd[:, 2] = wrap_angle(dd[:, 2])
         var = a[ok, 4:7]
         out["ekf_nees_diag_mean"] = float(np.mean(np.sum(dd ** 2 / np.maximum(var, 1e-18), axis=1)))
+    # the filter's final verdict on each camera fix: accepted fixes far from the truth are failures
+    for key in ("accepted", "rejected"):
+        a = d.get(key, np.zeros((0, 4)))
+        a = a[a[:, 0] <= t_end + 1e-9] if len(a) else a
+        n, n_bad, emax = 0, 0, math.nan
+        if len(a):
+            te, ep, eh = errors(a[:, 0], a[:, 1:4], t_gt, P_gt)
+            n, n_bad = len(ep), int(np.sum(ep > BAD_FIX_M))
+            emax = float(np.max(ep)) if len(ep) else math.nan
+            if key == "accepted":
+                errs["accepted"] = (te, ep, eh)
+        out[f"ekf_{key}_fixes"] = n
+        out[f"ekf_{key}_fixes_over_5cm"] = n_bad
+        out[f"ekf_{key}_fix_error_max_m"] = emax
     ekf_rmse = out.get("ekf_position_rmse_m", math.nan)
     out["closest_over_ekf_position_rmse"] = out.get("closest_position_rmse_m", math.nan) / ekf_rmse
     out["odometry_over_ekf_end_position_error"] = (out.get("odometry_end_position_error_m", math.nan)
@@ -248,13 +421,16 @@ def analyse(d: dict, done_t: float | None) -> tuple[dict, dict]:
     out["ekf_position_rmse_target_met"] = bool(ekf_rmse <= 0.010)
     out["ekf_heading_rmse_target_met"] = bool(out.get("ekf_heading_rmse_deg", math.inf) <= 1.0)
     out["ekf_3x_closest_target_met"] = bool(out["closest_over_ekf_position_rmse"] >= 3)
-    out["ekf_10x_odometry_end_target_met"] = bool(out["odometry_over_ekf_end_position_error"] >= 10)
+    out["ekf_no_bad_fix_accepted_target_met"] = bool(out["ekf_accepted_fixes"] > 0
+                                                     and out["ekf_accepted_fixes_over_5cm"] == 0)
+    out["ekf_10x_odometry_end_met"] = bool(out["odometry_over_ekf_end_position_error"] >= 10)
     return errs, out
 
 
-def table(out: dict) -> str:
-    rows = ["| method | samples | position RMSE / p95 / max (cm) | heading RMSE / p95 / max (deg) |",
-            "|---|---|---|---|"]
+def table(out: dict, title: str = "") -> str:
+    rows = [title] if title else []
+    rows += ["| method | samples | position RMSE / p95 / max (cm) | heading RMSE / p95 / max (deg) |",
+             "|---|---|---|---|"]
     for m in ("odometry", *METHODS, "ekf"):
         if f"{m}_samples" not in out:
             continue
@@ -262,13 +438,18 @@ def table(out: dict) -> str:
         rows.append(f"| {LABELS[m]} | {out[f'{m}_samples']} | {100 * g('position_rmse_m'):.2f} / "
                     f"{100 * g('position_p95_m'):.2f} / {100 * g('position_max_m'):.2f} | "
                     f"{g('heading_rmse_deg'):.2f} / {g('heading_p95_deg'):.2f} / {g('heading_max_deg'):.2f} |")
+    if "ekf_accepted_fixes" in out:
+        rows.append(f"\ncamera fixes accepted by the filter: {out['ekf_accepted_fixes']} (over 5 cm off: "
+                    f"{out['ekf_accepted_fixes_over_5cm']}, worst {100 * out['ekf_accepted_fix_error_max_m']:.2f} cm); "
+                    f"rejected: {out['ekf_rejected_fixes']} ({out['ekf_rejected_fixes_over_5cm']} over 5 cm off)")
     return "\n".join(rows)
 
 
 # ------------------------------------------------------------------------------------------- figures
 
 
-def figures(d: dict, errs: dict, field, route_pts, out_dir: Path, t_end: float | None) -> None:
+def figures(d: dict, errs: dict, field, route_pts, out_dir: Path, t_end: float | None, prefix: str = "localization",
+            title: str = "") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -303,9 +484,9 @@ def figures(d: dict, errs: dict, field, route_pts, out_dir: Path, t_end: float |
     ax.set_ylim(field.floor.y[0] - 0.12, field.floor.y[1] + 0.12)
     ax.set_aspect("equal")
     ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
-    ax.set_title("raf experiment localization: trajectories in map")
+    ax.set_title(f"raf experiment localization: trajectories in map {title}")
     fig.tight_layout()
-    fig.savefig(out_dir / "localization_trajectory.png", dpi=110)
+    fig.savefig(out_dir / f"{prefix}_trajectory.png", dpi=110)
     plt.close(fig)
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
@@ -325,9 +506,9 @@ def figures(d: dict, errs: dict, field, route_pts, out_dir: Path, t_end: float |
     a2.set_ylabel("heading error (deg)")
     a2.set_xlabel("simulation time (s)")
     a1.legend(fontsize=8, ncol=3)
-    a1.set_title("errors against ground truth (dashed: the 1 cm / 1 deg targets of the EKF)")
+    a1.set_title(f"errors against ground truth {title} (dashed: the 1 cm / 1 deg targets of the EKF)")
     fig.tight_layout()
-    fig.savefig(out_dir / "localization_errors.png", dpi=110)
+    fig.savefig(out_dir / f"{prefix}_errors.png", dpi=110)
     plt.close(fig)
 
 
@@ -528,134 +709,264 @@ def tf_tree(env: dict, out_dir: Path, log_dir: Path) -> str:
 # ------------------------------------------------------------------------------------------- run
 
 
-def run(args, out_dir: Path | None) -> dict:
-    from ..errors import ConfigError
-    from ..field import load_field
-    from ..localization.route import LOOP, route
-    from ..ros.master import PrivateMaster, free_port
+def _known_options(command: str) -> set[str]:
+    """The option strings a ``raf`` subcommand accepts (from its parser, without running it)."""
+    import importlib
+
+    mod = importlib.import_module(f"robotatfactory.commands.{command}")
+    p = argparse.ArgumentParser(add_help=False)
+    mod.add_arguments(p)
+    return {o for a in p._actions for o in a.option_strings}
+
+
+def _has_command(name: str) -> bool:
+    from importlib.util import find_spec
+
+    return find_spec(f"robotatfactory.commands.{name}") is not None
+
+
+def sim_robot(plan: Plan, work: Path):
+    """The robot the stand-in simulates (the nominal one with the wheel and camera errors) and its JSON file,
+    or (nominal robot, None) when it is the nominal one."""
     from ..robot import load_robot
 
-    if args.laps < 1 or not 0.02 <= args.speed <= 0.5:
-        raise ConfigError("--laps must be >= 1 and --speed in 0.02..0.5 m/s")
-    field = load_field(args.field)
-    robot = load_robot()
-    try:
-        track_err, radius_err = (float(v) for v in args.calibration_error.split(","))
-    except ValueError:
-        raise ConfigError(f"--calibration-error {args.calibration_error!r}: expected TRACK,RADIUS, e.g. 0.01,-0.005")
-    if not (abs(track_err) < 0.2 and abs(radius_err) < 0.2):
-        raise ConfigError("--calibration-error: each relative error must be within +-0.2")
-    pts = route(args.laps)
-    work = Path(tempfile.mkdtemp(prefix="raf-exp-loc-"))
-    log_dir = (out_dir / "logs") if out_dir else work
-    log_dir.mkdir(parents=True, exist_ok=True)
-    master = PrivateMaster().start()
-    procs = Procs(log_dir)
-    rec = None
-    notes = []
-    ok = False
-    try:
-        env = master.env()
-        bport, sport, cport = free_port(__import__("socket").SOCK_DGRAM), free_port(__import__("socket").SOCK_DGRAM), free_port()
+    nominal = load_robot()
+    robot = replace(nominal, track=nominal.track * (1 + plan.track_error),
+                    wheel_radius=nominal.wheel_radius * (1 + plan.radius_error))
+    if plan.camera_error:
+        from ..localization.calibration import perturbed_robot
+
+        robot = perturbed_robot(robot)  # fx, fy +3 %, cx +4 px, cy -3 px, pitch +1 degree
+    if robot == nominal:
+        return robot, None
+    from ..localization.calibration import write_robot_json
+
+    return robot, write_robot_json(robot, work / "robot_sim.json")
+
+
+class Session:
+    """One drive: bridge, localization (optional) and simulator processes under the experiment's master, and
+    this process's recorder. Use as a context manager; ``drive()`` returns when the route is done."""
+
+    def __init__(self, args, plan: Plan, master, log_dir: Path, name: str, route, robot_file: Path | None,
+                 calibration_file: Path | None, localize: bool = True, bag: Path | None = None,
+                 speed: float | None = None):
+        self.args, self.plan, self.master, self.name, self.route = args, plan, master, name, route
+        self.log_dir = log_dir / name
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.procs = Procs(self.log_dir)
+        self.robot_file, self.calibration_file, self.localize, self.bag = robot_file, calibration_file, localize, bag
+        self.speed = speed if speed is not None else plan.speed
+        self.rec = None
+        self.notes: list[str] = []
+        self.applied: list[str] = []  # simulator options applied for the mode
+        self.missing: list[str] = []  # idealisations raf sim does not offer
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.rec is not None:
+            self.rec.stop()
+        self.procs.stop_all()
+
+    def _calibration_args(self, command: str) -> list[str]:
+        if self.calibration_file is None:
+            return []
+        if "--calibration" in _known_options(command):
+            return ["--calibration", str(self.calibration_file)]
+        # until the command takes --calibration: the same values through its settings
+        from ..localization.calibration import load_calibration
+
+        cam = load_calibration(self.calibration_file).camera
+        if command == "bridge":
+            out = []
+            for k in ("fx", "fy", "cx", "cy", "pitch_down_deg"):
+                if k in cam:
+                    out += ["--set", f"camera/{k}={cam[k]}"]
+            if "xyz" in cam:
+                out += ["--set", "camera/xyz=[" + ",".join(str(v) for v in cam["xyz"]) + "]"]
+            self.notes.append("bridge: calibration passed as camera settings (raf bridge has no --calibration yet)")
+            return out
+        from ..localization.calibration import calibrated_robot, write_robot_json
+        from ..robot import load_robot
+
+        f = write_robot_json(calibrated_robot(load_robot(), self.calibration_file),
+                             self.log_dir / "robot_calibrated.json")
+        self.notes.append("localize: calibration passed as a robot file (raf localize has no --calibration yet)")
+        return ["--set", f"robot={f}"]
+
+    def _bridge_mode_args(self) -> list[str]:
+        if self.plan.mode != "ideal":
+            return []
+        from ..ros.config import default_params
+
+        params = default_params()
+        out = []
+        for key, val, what in IDEAL_BRIDGE_SETS:
+            d = params
+            for part in key.split("/")[:-1]:
+                d = d.get(part, {}) if isinstance(d, dict) else {}
+            if isinstance(d, dict) and key.split("/")[-1] in d:
+                out += ["--set", f"{key}={val}"]
+                self.applied.append(f"bridge {key}={val}")
+            else:
+                self.missing.append(f"bridge {key} ({what})")
+        return out
+
+    def _sim_mode_args(self) -> list[str]:
+        known = _known_options("sim")
+        table = IDEAL_SIM_OPTIONS if self.plan.mode == "ideal" else SIMTWO_SIM_OPTIONS
+        out = []
+        for opt, val, what in table:
+            if opt in known:
+                out += [opt] + ([val] if val is not None else [])
+                self.applied.append(opt + (f" {val}" if val is not None else ""))
+            else:
+                self.missing.append(f"{opt} ({what})")
+        return out
+
+    def start(self) -> None:
+        from ..ros.master import free_port
+
+        args, env = self.args, self.master.env()
+        import socket
+
+        bport, sport, cport = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM), free_port()
         cam = f"tcp://127.0.0.1:{cport}"
-        x0, y0 = LOOP[0]
-        start = f"{x0},{y0},{math.pi / 2}"
-        procs.start("bridge", _raf("--field", args.field, "bridge", "--port", str(bport), "--camera", cam,
-                                   "--sim-host", "127.0.0.1"), env)
-        loc_args = ["--field", args.field, "localize", "--set", "node/all_methods=true"]
-        for s in args.set:
-            loc_args += ["--set", s]
-        procs.start("localize", _raf(*loc_args), env)
+        self.procs.start("bridge", _raf("--field", args.field, "bridge", "--port", str(bport), "--camera", cam,
+                                        "--sim-host", "127.0.0.1", *self._calibration_args("bridge"),
+                                        *self._bridge_mode_args()), env)
+        if self.localize:
+            loc_args = ["--field", args.field, "localize", "--set", "node/all_methods=true",
+                        *self._calibration_args("localize")]
+            for s_ in args.set:
+                loc_args += ["--set", s_]
+            self.procs.start("localize", _raf(*loc_args), env)
         time.sleep(3.0)  # let the bridge bind its port before the simulator starts sending
+        x0, y0, th0 = self.route.start
         sim_args = ["--field", args.field, "sim", "--port", str(sport), "--bridge", f"127.0.0.1:{bport}",
-                    "--camera-bind", cam, "--no-server", "--lockstep", "--lockstep-timeout", "2.0",
-                    f"--start-pose={start}", "--seed", str(args.seed), "--status-every", "5"]
+                    "--camera-bind", cam, "--no-server", f"--start-pose={x0},{y0},{th0}", "--seed", str(args.seed),
+                    "--status-every", "5", *self._sim_mode_args()]
         if not args.no_beacons:
             sim_args.append("--beacons")
-        if track_err or radius_err:
-            import json
-            from importlib import resources
+        if self.robot_file is not None:
+            sim_args += ["--robot", str(self.robot_file)]
+        self.procs.start("sim", _raf(*sim_args), env)
 
-            raw = json.loads((resources.files("robotatfactory") / "data" / "robot_simtwo.json").read_text())
-            raw["track"] = raw["track"] * (1 + track_err)
-            raw["wheel_radius"] = raw["wheel_radius"] * (1 + radius_err)
-            raw["description"] = (f"the nominal robot with its track {100 * track_err:+.2f} % and wheel radius "
-                                  f"{100 * radius_err:+.2f} % (raf experiment localization --calibration-error)")
-            robot_file = work / "robot_sim.json"
-            robot_file.write_text(json.dumps(raw, indent=1))
-            sim_args += ["--robot", str(robot_file)]
-        procs.start("sim", _raf(*sim_args), env)
-        master.use_in_this_process()
-        import rospy
-
-        rospy.init_node("raf_experiment_localization", anonymous=True, disable_signals=True)
-        rec = Recorder(pts, args.speed, robot)
+    def drive(self, robot, settle_s: float = 0.0) -> None:
+        """Drive the route on ground truth; then keep the robot stopped for ``settle_s`` simulation seconds
+        (the filter's verdicts on the last fixes become final when they leave its history)."""
+        self.rec = rec = Recorder(self.route, self.speed, robot, bag_path=self.bag)
         wall0 = time.monotonic()
         last_report = wall0
         while rec.done_t is None:
-            procs.check()
+            self.procs.check()
             now = time.monotonic()
-            if now - wall0 > args.timeout:
-                notes.append(f"timeout after {args.timeout:.0f} wall s at {100 * rec.pp.progress:.0f} % of the route")
+            if now - wall0 > self.args.timeout:
+                self.notes.append(f"{self.name}: timeout after {self.args.timeout:.0f} wall s at "
+                                  f"{100 * rec.pp.progress:.0f} % of the route")
                 break
             if now - last_report > 15:
                 last_report = now
                 d = rec.arrays()
                 ts = d["gt"][-1, 0] if len(d["gt"]) else 0.0
-                print(f"  route {100 * rec.pp.progress:5.1f} %, sim time {ts:6.1f} s, {len(d['planar'])} planar "
-                      f"fixes, {len(d['ekf'])} EKF poses", flush=True)
+                print(f"  {self.name}: route {100 * rec.pp.progress:5.1f} %, sim time {ts:6.1f} s, "
+                      f"{len(d['planar'])} planar fixes, {len(d['ekf'])} EKF poses", flush=True)
             time.sleep(0.2)
         for _ in range(10):  # stop the robot
             rec.cmd.publish(rec.Twist())
             time.sleep(0.05)
-        time.sleep(1.0)
-        if out_dir is not None:
-            out_dir.mkdir(parents=True, exist_ok=True)
-            save_debug_image(out_dir / "localization_debug_image.png", notes)
-            cfg = out_dir / "localization.rviz"
-            d = rec.arrays()
-            # look over the robot's shoulder at what its camera sees (the paper's figure 7)
-            x, y, th = d["gt"][-1, 1:4] if len(d["gt"]) else (0.0, 0.0, 0.0)
-            fx, fy = x + 0.25 * math.cos(th), y + 0.25 * math.sin(th)
-            view = RVIZ.replace("X: 0.0\n        Y: -0.15", f"X: {fx:.3f}\n        Y: {fy:.3f}")
-            view = view.replace("Yaw: 4.71", f"Yaw: {(th + math.pi) % (2 * math.pi):.3f}")
-            cfg.write_text(view)
-            if not args.no_tf_tree:
-                why = tf_tree(env, out_dir, log_dir)
-                if why:
-                    notes.append(f"TF tree: {why}")
-            if not args.no_rviz:
-                why = rviz_screenshot(env, cfg, out_dir / "localization_rviz.png", log_dir)
-                if why:
-                    notes.append(f"RViz screenshot: {why}")
-        data = rec.arrays()
-        done_t = rec.done_t
-        with rec.lock:
-            diag = dict(rec.diag)
-        ok = len(data["gt"]) >= 10
-    finally:
-        if rec is not None:
-            rec.stop()
-        procs.stop_all()
-        master.cleanup()
-        if ok:
-            shutil.rmtree(work, ignore_errors=True)  # logs live in out_dir/logs when --out is given
+        if rec.done_t is not None and settle_s > 0:
+            t_wait = time.monotonic()
+            while rec.last_gt_t < rec.done_t + settle_s and time.monotonic() - t_wait < 60:
+                self.procs.check()
+                time.sleep(0.2)
         else:
-            print(f"logs: {log_dir}", file=sys.stderr)
+            time.sleep(1.0)
+        rec.close_bag()
+
+
+def calibration_drive(args, plan: Plan, master, log_dir: Path, work: Path, robot_file: Path | None, robot,
+                      out_dir: Path | None, notes: list) -> tuple[Path | None, dict]:
+    """``--calibration auto``: drive the calibration route recording a rosbag of camera/image_raw (every 3rd
+    frame), camera_info and odom, then ``raf calibrate --bag`` on it. Returns the calibration file (None if
+    raf calibrate is not available) and result keys."""
+    from ..localization.route import make_route
+
+    out: dict = {}
+    if not _has_command("calibrate"):
+        notes.append("calibration: raf calibrate is not available: the drives use the robot file's nominal camera")
+        return None, {"calibration_source": "none (raf calibrate not available)"}
+    bag = (out_dir or work) / "calibration.bag"
+    route = make_route("calibration", 1)
+    with Session(args, plan, master, log_dir, "calibration", route, robot_file, None, localize=False, bag=bag,
+                 speed=args.calibration_speed) as ses:
+        ses.start()
+        ses.drive(robot)
+        counts = dict(ses.rec.bag_counts)
+        notes.extend(ses.notes)
+    out.update({"calibration_bag_images": counts["images"], "calibration_bag_odom": counts["odom"]})
+    calib = (out_dir or work) / "calibration.yaml"
+    cmd = _raf("--field", args.field, "calibrate", "--bag", str(bag), "--out", str(calib))
+    t0 = time.monotonic()
+    with open(log_dir / "calibrate.log", "wb") as log:
+        r = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=master.env(), timeout=1800)
+    out["calibration_wall_s"] = time.monotonic() - t0
+    if r.returncode != 0 or not calib.is_file():
+        tail = (log_dir / "calibrate.log").read_text(errors="replace").splitlines()[-15:]
+        raise RuntimeError(f"raf calibrate failed (exit {r.returncode}):\n" + "\n".join(tail))
+    out["calibration_source"] = "raf calibrate on the calibration drive"
+    if out_dir is None:
+        keep = work / "calibration.yaml"
+        out["calibration_file"] = str(keep)
+    return calib, out
+
+
+def calibration_keys(calib: Path | None, true_camera) -> dict:
+    """The calibration's values and their errors against the stand-in's true camera."""
+    if calib is None:
+        return {}
+    from ..localization.calibration import compare, load_calibration
+
+    c = load_calibration(calib).apply(true_camera)
+    out = {f"calibration_{k}": float(getattr(c, k)) for k in ("fx", "fy", "cx", "cy", "pitch_down_deg")}
+    out.update({f"calibration_{k}": float(v) for k, v in compare(c, true_camera).items()})
+    return out
+
+
+def run_route(args, plan: Plan, master, log_dir: Path, work: Path, name: str, laps: int, robot_file, robot,
+              nominal_robot, calib: Path | None, field, out_dir: Path | None, notes: list) -> dict:
+    """One route: start the processes, drive, analyse; returns the route's keys, unprefixed."""
+    from ..localization.config import load_config
+    from ..localization.route import make_route
+
+    route = make_route(name, laps)
+    with Session(args, plan, master, log_dir, name, route, robot_file, calib) as ses:
+        ses.start()
+        ses.drive(nominal_robot, settle_s=load_config().ekf.history_s + 1.0)
+        data = ses.rec.arrays()
+        done_t = ses.rec.done_t
+        with ses.rec.lock:
+            diag = dict(ses.rec.diag)
+        notes.extend(ses.notes)
+        if out_dir is not None and name == plan.routes[0][0]:
+            _pictures(args, master, data, out_dir, log_dir, notes)
+        applied, missing = list(ses.applied), list(ses.missing)
     if len(data["gt"]) < 10:
-        raise RuntimeError("no ground truth recorded: did the simulator and the bridge run? "
+        raise RuntimeError(f"{name}: no ground truth recorded: did the simulator and the bridge run? "
                            f"(logs in {log_dir})")
     errs, out = analyse(data, done_t)
-    out = {"laps": args.laps, "speed_m_per_s": args.speed, "controller": "pure pursuit on ground truth",
-           "beacons": not args.no_beacons, "sim_track_error_fraction": track_err,
-           "sim_wheel_radius_error_fraction": radius_err, **out}
-    print(table(out))
-    for n in notes:
-        print(f"note: {n}")
+    out = {"laps": laps, **out}
+    title = f"mode {plan.mode}, route {name} ({laps} lap{'s' if laps > 1 else ''})"
+    print(table(out, f"\n{title}:"))
     if out_dir is not None:
-        figures(data, errs, field, pts, out_dir, done_t)
-        (out_dir / "localization_table.md").write_text(table(out) + "\n")
-        np.savez_compressed(out_dir / "localization_data.npz", **{k: v for k, v in data.items()})
+        prefix = "localization" if name == "reference" else f"localization_{name}"
+        if plan.mode != "simtwo":
+            prefix += f"_{plan.mode}"
+        figures(data, errs, field, route.points, out_dir, done_t, prefix, f"({title})")
+        (out_dir / f"{prefix}_table.md").write_text(table(out, f"{title}:") + "\n")
+        np.savez_compressed(out_dir / f"{prefix}_data.npz", **{k: v for k, v in data.items()})
     for k in sorted(diag):  # the node's counters at the end: frames, fixes, rejections by reason, filter
         if k.startswith(("rejected_", "filter_")) or k in ("frames", "fixes", "beacons_seen", "beacons_used",
                                                            "frame_ms_median", "scans"):
@@ -663,5 +974,89 @@ def run(args, out_dir: Path | None) -> dict:
                 out[f"node_{k.replace(':', '_')}"] = float(diag[k]) if "." in diag[k] else int(diag[k])
             except ValueError:
                 pass
+    out["mode_options"] = " ".join(applied) or "(raf sim and raf bridge defaults)"
+    if missing:
+        out["mode_options_missing"] = "; ".join(missing)
+    return out
+
+
+def _pictures(args, master, data: dict, out_dir: Path, log_dir: Path, notes: list) -> None:
+    """The debug image, the TF tree and the RViz screenshot, while the processes still run."""
+    env = master.env()
+    save_debug_image(out_dir / "localization_debug_image.png", notes)
+    cfg = out_dir / "localization.rviz"
+    # look over the robot's shoulder at what its camera sees (the paper's figure 7)
+    x, y, th = data["gt"][-1, 1:4] if len(data["gt"]) else (0.0, 0.0, 0.0)
+    fx, fy = x + 0.25 * math.cos(th), y + 0.25 * math.sin(th)
+    view = RVIZ.replace("X: 0.0\n        Y: -0.15", f"X: {fx:.3f}\n        Y: {fy:.3f}")
+    view = view.replace("Yaw: 4.71", f"Yaw: {(th + math.pi) % (2 * math.pi):.3f}")
+    cfg.write_text(view)
+    if not args.no_tf_tree:
+        why = tf_tree(env, out_dir, log_dir)
+        if why:
+            notes.append(f"TF tree: {why}")
+    if not args.no_rviz:
+        why = rviz_screenshot(env, cfg, out_dir / "localization_rviz.png", log_dir)
+        if why:
+            notes.append(f"RViz screenshot: {why}")
+
+
+def run(args, out_dir: Path | None) -> dict:
+    from ..field import load_field
+    from ..localization.calibration import write_calibration
+    from ..robot import load_robot
+    from ..ros.master import PrivateMaster
+
+    plan = plan_from_args(args)
+    field = load_field(args.field)
+    nominal = load_robot()
+    work = Path(tempfile.mkdtemp(prefix="raf-exp-loc-"))
+    log_dir = (out_dir / "logs") if out_dir else work / "logs"
+    log_dir.mkdir(parents=True, exist_ok=True)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    robot, robot_file = sim_robot(plan, work)
+    m = plan.mode
+    out: dict = {"mode": m, "routes": " ".join(f"{n}x{k}" for n, k in plan.routes), "speed_m_per_s": plan.speed,
+                 "controller": "pure pursuit on ground truth", "beacons": not args.no_beacons,
+                 "sim_track_error_fraction": plan.track_error, "sim_wheel_radius_error_fraction": plan.radius_error,
+                 "camera_error": plan.camera_error}
+    notes: list[str] = []
+    master = PrivateMaster().start()
+    ok = False
+    try:
+        master.use_in_this_process()
+        import rospy
+
+        rospy.init_node("raf_experiment_localization", anonymous=True, disable_signals=True)
+        calib: Path | None = None
+        if plan.calibration == "auto":
+            calib, keys = calibration_drive(args, plan, master, log_dir, work, robot_file, nominal, out_dir, notes)
+            out.update({f"{m}_{k}": v for k, v in keys.items()})
+        elif plan.calibration == "true":
+            calib = write_calibration((out_dir or work) / "calibration_true.yaml", robot.camera,
+                                      {"source": "the stand-in's true camera (raf experiment localization)"})
+            out[f"{m}_calibration_source"] = "the stand-in's true camera"
+        elif plan.calibration == "none":
+            out[f"{m}_calibration_source"] = "none (the robot file's nominal camera)"
+        else:
+            calib = Path(plan.calibration)
+            out[f"{m}_calibration_source"] = f"file {calib}"
+        out.update({f"{m}_{k}": v for k, v in calibration_keys(calib, robot.camera).items()})
+        for name, laps in plan.routes:
+            keys = run_route(args, plan, master, log_dir, work, name, laps, robot_file, robot, nominal, calib,
+                             field, out_dir, notes)
+            out.update({f"{m}_{name}_{k}": v for k, v in keys.items()})
+        ok = True
+    finally:
+        master.cleanup()
+        if ok and out_dir is not None:
+            shutil.rmtree(work, ignore_errors=True)  # logs live in out_dir/logs when --out is given
+        elif not ok:
+            print(f"logs: {log_dir}", file=sys.stderr)
+    failed = [k for k, v in out.items() if k.endswith("_target_met") and v is False]
+    out["targets_met"] = not failed
     out["notes"] = "; ".join(notes)
+    for n in notes:
+        print(f"note: {n}")
     return out

@@ -61,7 +61,18 @@ EIGHT = (
     (-0.64, -0.32, 1.0), (-0.60, -0.44, SLOW), (-0.70, -0.48, SLOW), (-0.755, -0.38, SLOW),
 )
 
-ROUTES = ("reference", "second")
+#: (x, y, speed factor[, STOP]) waypoints of the calibration drive (``raf experiment localization
+#: --calibration auto`` records it for ``raf calibrate``): up the west side, along the incoming warehouse,
+#: turns on the spot facing the warehouse, the middle and machine A, so that wall and floor markers cross the
+#: whole image at many distances. Neither localization route.
+CALIBRATION = (
+    (-0.725, -0.40, 1.0), (-0.70, -0.05, 1.0), (-0.62, 0.25, 1.0), (-0.40, 0.32, 1.0),
+    (-0.40, 0.37, SLOW, STOP), (-0.25, 0.25, 1.0), (-0.05, 0.30, 1.0), (0.00, 0.36, SLOW, STOP),
+    (0.00, 0.10, 1.0), (0.02, -0.10, 1.0), (-0.12, -0.10, SLOW, STOP), (0.00, -0.30, 1.0),
+    (-0.20, -0.40, 1.0), (-0.50, -0.36, 1.0),
+)
+
+ROUTES = ("reference", "second", "calibration")
 
 
 @dataclass(frozen=True)
@@ -87,11 +98,12 @@ def route(laps: int = 2, name: str = "reference") -> np.ndarray:
 
 
 def make_route(name: str, laps: int = 2) -> Route:
-    """``laps`` laps of the route ``name`` (``reference`` or ``second``), with its speed factors."""
+    """``laps`` laps of the route ``name`` (``reference``, ``second`` or ``calibration``), with its speed
+    factors and visits."""
     if name == "reference":
         lap = [(x, y, 1.0, 0) for x, y in LOOP]
-    elif name == "second":
-        lap = [tuple(w) + (0,) * (4 - len(w)) for w in EIGHT]
+    elif name in ("second", "calibration"):
+        lap = [tuple(w) + (0,) * (4 - len(w)) for w in (EIGHT if name == "second" else CALIBRATION)]
     else:
         raise ValueError(f"unknown route {name!r}: choose one of {', '.join(ROUTES)}")
     if laps < 1:
