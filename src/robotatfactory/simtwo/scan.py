@@ -43,8 +43,16 @@ instant is ``ray_timing="instant"`` (``t0 = t_u``, ``time_increment = 0``).
   deliveries are ``P`` apart; a closer change is no delivery). Identical arrays give nothing: before the
   first change the delivery instant of the array is unknown (within ``P``), so the first array seen
   mid-run is not published (``unstamped``).
-* The stamp error is therefore at most half the phase arc, ``D/2`` = 20 ms, plus one physics step (the
-  rolling timing model, ``Tms`` versus the physics clock), within one control cycle as required.
+* **Where in the bracket.** SimTwo's sensor clock and its script clock start together (``SecondsCount := 0``
+  at ``Viewer.pas`` 4245; ``TimeFromLastMeasure`` 0 when the sensor is created with the scene) and both
+  count 1 ms steps with ``>`` tests on float64 sums: the script runs at the start of step 40 m and sees the
+  state after 40 m - 1 steps; the sweep is delivered at the end of step 200 j, i.e. 1 ms after a script
+  call (H2's reading of the same lines agrees; the stand-in reproduces it). So the estimate is placed
+  ``delivery_lag`` = 1 ms after the frame before the bracket (``delivery_lag=None``: the bracket's middle).
+  The stamp then has the error of the model (<= 1.5 ms) when SimTwo aligns as read, and at worst the arc's
+  width (39 ms) if it does not (``error_bound`` reports that worst case); with ``delivery_lag=None``, or
+  when an arc is wider than a cycle (frames lost) so that only its middle stays within ``max_error``, at
+  worst half the arc (19.5 ms for one cycle). Either way within one control cycle, as required.
 
 **Per-ray mode** (:class:`PerRayAssembler`, ``update="per_ray"``): the idealisation in which the array a
 frame carries shows each ray as soon as it is measured (ray ``i`` of sweep ``s`` at the first physics step
@@ -106,7 +114,7 @@ class WholeSweepAssembler:
 
     def __init__(self, rays: int, period: float, control_period: float, ray_timing: str = "rolling",
                  zero_below: float = 0.02, max_error: float | None = None, lock_after: int = 2,
-                 relock_after: int = 3):
+                 relock_after: int = 3, delivery_lag: float | None = 0.001):
         _check(rays, period)
         if ray_timing not in RAY_TIMINGS:
             raise ValueError(f"ray_timing {ray_timing!r}: one of {RAY_TIMINGS}")
@@ -121,6 +129,10 @@ class WholeSweepAssembler:
         self.max_error_ms = self.control_ms if max_error is None else float(max_error) * 1000
         self.lock_after = max(1, int(lock_after))
         self.relock_after = max(1, int(relock_after))
+        if delivery_lag is not None and not 0 < delivery_lag <= control_period:
+            raise ValueError(f"delivery_lag {delivery_lag} must be in (0, control_period] or None")
+        # ms from the frame before a delivery to the delivery (SimTwo: 1), None = unknown (bracket middle)
+        self.lag_ms = None if delivery_lag is None else float(delivery_lag) * 1000
         self.counters = ScanCounters()
         self.reset()
 
@@ -240,7 +252,8 @@ class WholeSweepAssembler:
             self.counters.lost += k - self._next_k
         self._next_k = k + 1
         self._last_lo = start + k * p - 1
-        return self._sweep(int(k), start + k * p + width / 2, width / 2, ranges, "phase")
+        pos, bound = self._place(width)
+        return self._sweep(int(k), start + k * p + pos, bound, ranges, "phase")
 
     def _from_change(self, lo: int, t: int, ranges: np.ndarray) -> Sweep | None:
         """A change seen at ``t`` (previous frame at ``lo``) without a locked phase."""
@@ -248,12 +261,22 @@ class WholeSweepAssembler:
         if self._last_lo is not None and t <= self._last_lo + self.period_ms:
             c.off_phase += 1  # less than a period after the last delivery: not a delivery
             return None
-        bound = (t - lo - 1) / 2
+        pos, bound = self._place(t - lo - 1)
         if bound > self.max_error_ms:
             c.unstamped += 1
             return None
         self._last_lo = lo
-        return self._sweep(self._count, (lo + 1 + t) / 2, bound, ranges, "bracket")
+        return self._sweep(self._count, lo + 1 + pos, bound, ranges, "bracket")
+
+    def _place(self, width: float) -> tuple[float, float]:
+        """Where in an arc of allowed delivery instants ``[start, start + width]`` (ms) the estimate goes, and
+        its worst-case error given only the arc: the middle, or ``delivery_lag`` after the frame before it
+        (the arc's start is 1 ms after that frame), kept inside the arc."""
+        if self.lag_ms is not None:
+            pos = min(max(self.lag_ms - 1, 0.0), width)
+            if max(pos, width - pos) <= self.max_error_ms:
+                return pos, max(pos, width - pos)
+        return width / 2, width / 2  # no lag known, or a wide arc (frames lost) where only the middle is safe
 
     def add(self, time_ms: int, ranges) -> list[Sweep]:
         """Feed the array of the frame at ``time_ms``; returns the sweeps to publish (0 or 1)."""
@@ -376,12 +399,13 @@ class PerRayAssembler:
 
 
 def make_assembler(update: str, rays: int, period: float, control_period: float, physics_step: float,
-                   ray_timing: str = "rolling", zero_below: float = 0.02,
-                   max_error: float | None = None) -> WholeSweepAssembler | PerRayAssembler:
+                   ray_timing: str = "rolling", zero_below: float = 0.02, max_error: float | None = None,
+                   delivery_lag: float | None = 0.001) -> WholeSweepAssembler | PerRayAssembler:
     """The assembler for a ranger that updates its values a whole ``"sweep"`` at once (SimTwo, the default)
     or ``"per_ray"`` (the stand-in's idealisation)."""
     if update == "sweep":
-        return WholeSweepAssembler(rays, period, control_period, ray_timing, zero_below, max_error)
+        return WholeSweepAssembler(rays, period, control_period, ray_timing, zero_below, max_error,
+                                   delivery_lag=delivery_lag)
     if update == "per_ray":
         return PerRayAssembler(rays, period, physics_step)
     raise ValueError(f"update {update!r}: one of {UPDATE_MODES}")
