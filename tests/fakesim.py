@@ -3,7 +3,7 @@
 It integrates the commanded V, W kinematically (so a cmd_vel visibly moves it), counts encoder ticks the
 way SimTwo does (floor of the accumulated wheel angle, remainder carried), measures a synthetic LIDAR in
 turn like ranger2d (every ray reads 1.0 m + 0.001 m * ray index, ray 7 never returns) and, like SimTwo,
-delivers it a whole sweep at once at the end of each sweep period (zeros before the first;
+delivers it a whole sweep at once every sweep period, 1 ms after a cycle's end (zeros before the first;
 ``lidar_update="per_ray"``: each ray as soon as measured, the old idealisation), and renders a
 synthetic camera frame on SimTwo's render clock (60 FPS, every 4th tick), published BEFORE the SensorFrame
 of the cycle it falls in. Each camera frame carries its true render time for tests: pixel row 0 (the top
@@ -129,8 +129,9 @@ class FakeSim:
                 for g in range(prev, c):
                     i = g % n
                     self.measured[i] = -1.0 if i == 7 else 1.0 + 0.001 * i
-                if self.lidar_update == "sweep" and (self.step * dt_ns) % period_ns == 0:
-                    self.ranges = self.measured.copy()  # delivered at once, at the end of the sweep
+                if self.lidar_update == "sweep" and self.step > 1 and ((self.step - 1) * dt_ns) % period_ns == 0:
+                    # delivered at once, 1 ms after a cycle's end, as SimTwo's UpdateMeasures falls
+                    self.ranges = self.measured.copy()
                 while self.next_render_tick / 60 <= t + 1e-12:
                     renders.append(self.next_render_tick)
                     self.next_render_tick += 4

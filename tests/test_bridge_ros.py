@@ -99,11 +99,10 @@ def test_every_topic_arrives_with_types_frames_and_stamps(rig):
     assert sc.time_increment == pytest.approx(0.2 / 360, rel=0.01)
     assert len(sc.ranges) == 360 and math.isinf(sc.ranges[7])
     assert sc.ranges[100] == pytest.approx(1.1, abs=1e-6)
-    # a sweep is stamped with the time of its first ray: the fake simulator delivers whole sweeps at
-    # k * 0.2 s like SimTwo, measured over the period before; the bridge's stamp is within half a cycle of it
+    # a sweep is stamped with the time of its first ray: the fake simulator delivers whole sweeps 1 ms after
+    # a cycle's end like SimTwo (measured over the period before), which lidar/delivery_lag assumes
     for s in m["/scan"]:
-        off = (s.header.stamp.to_nsec() + 100_000_000) % 200_000_000 - 100_000_000
-        assert abs(off) <= 20_500_000, s.header.stamp.to_sec()
+        assert (s.header.stamp.to_nsec() - 1_000_000) % 200_000_000 == 0, s.header.stamp.to_sec()
     assert m["/contact"][-1].data is False
     img = m["/camera/image_raw"]
     for im in img:

@@ -396,7 +396,8 @@ class Bridge:
             return
         if self.sweeps is None or self.sweeps.n != n:
             self.sweeps = make_assembler(cfg.lidar_update, n, cfg.lidar_period, cfg.control_period,
-                                         cfg.physics_step, cfg.lidar_ray_timing)
+                                         cfg.physics_step, cfg.lidar_ray_timing,
+                                         delivery_lag=cfg.lidar_delivery_lag or None)
         for sw in self.sweeps.add(f.time_ms, f.ranges):
             self.pub_scan.publish(rm.laser_scan(rm.stamp_s(sw.t0), cfg.frames["laser"], self._self_filtered(sw.ranges),
                                                 cfg.lidar_fov_deg, cfg.lidar_range_min, cfg.lidar_range_max,

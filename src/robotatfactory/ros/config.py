@@ -79,7 +79,8 @@ def default_params(robot: RobotSpec | None = None) -> dict:
         "lidar": {
             "enabled": True, "xyz": list(lid.xyz), "fov_deg": lid.fov_deg, "range_min": lid.range_min,
             "range_max": lid.range_max, "period": lid.period, "mode": "sweep", "update": "sweep",
-            "ray_timing": "rolling", "self_filter": True, "self_margin": 0.005,
+            "ray_timing": "rolling", "self_filter": True, "self_margin": 0.009,
+            "delivery_lag": 0.001,
         },
         "camera": {
             "enabled": True, "endpoint": "tcp://127.0.0.1:9899",
@@ -245,6 +246,7 @@ class BridgeConfig:
     lidar_ray_timing: str  # "rolling": ray i measured at t_u - P + i*P/N (SimTwo) | "instant": all at t_u
     lidar_self_filter: bool  # rays ending inside the robot's footprint published as NaN
     lidar_self_margin: float  # m, added around the footprint
+    lidar_delivery_lag: float  # s from the frame before a sweep's delivery to it (SimTwo 0.001); 0 = unknown
     camera_enabled: bool
     camera_endpoint: str
     camera_xyz: tuple[float, float, float]
@@ -370,6 +372,7 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
         lidar_ray_timing=_str(p, ("lidar", "ray_timing"), allowed=("rolling", "instant")),
         lidar_self_filter=_bool(p, ("lidar", "self_filter")),
         lidar_self_margin=_real(p, ("lidar", "self_margin"), 0.0, 0.1),
+        lidar_delivery_lag=_real(p, ("lidar", "delivery_lag"), 0.0, period),
         camera_enabled=_bool(p, ("camera", "enabled")),
         camera_endpoint=_str(p, ("camera", "endpoint"), r"(tcp|ipc|inproc)://\S+",
                              "a ZMQ endpoint such as tcp://192.168.1.20:9899"),
