@@ -118,7 +118,7 @@ def test_lockstep_timeout_policy(field, robot, bridge, policy):
         assert abs(v) < 0.005
     else:
         assert runner.sim.command.v == 0.3
-        assert v == pytest.approx(0.3, abs=0.01)
+        assert v == pytest.approx(0.3, abs=0.03)  # instantaneous: SimTwo's PID leaves a ripple within each cycle
 
 
 @pytest.mark.render

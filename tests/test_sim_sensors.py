@@ -17,9 +17,16 @@ def make(field, robot, **kw):
 
 
 def full_sweep(sim, cmd=None):
-    """Run one LIDAR period (0.2 s = 5 cycles) so every ray is measured at the present pose."""
+    """Run until the LIDAR has published a sweep whose every ray was measured after this call (SimTwo's
+    whole-sweep updates: the sweep published next still holds rays measured before; the one after it
+    does not), or, with ``lidar_update="per_ray"``, one period (5 cycles)."""
     frame = None
-    for _ in range(5):
+    if sim.config.lidar_update == "per_ray":
+        for _ in range(5):
+            frame = sim.step_cycle(cmd)
+        return frame
+    target = sim.lidar_sweeps + 2
+    while sim.lidar_sweeps < target:
         frame = sim.step_cycle(cmd)
     return frame
 
@@ -69,9 +76,181 @@ def test_lidar_ranges_match_analytic_distances_to_wall_faces(field, robot):
     f = full_sweep(sim)
     ahead = np.abs(robot.lidar.angles()) < math.radians(20)
     assert np.all(f.ranges[ahead] == -1.0)
-    # the robot never sees itself: every return is beyond its own body
-    assert np.all((f.ranges == -1) | (f.ranges > 0.09))
+    # no return closer than the robot's own wheels
+    assert np.all((f.ranges == -1) | (f.ranges > 0.064))
     sim.close()
+
+
+def wheel_hits(robot):
+    """Analytic ranges of the rays that hit the robot's own wheels (SimTwo's AGV.xml: cylinders of radius
+    0.0325 m and thickness ``wheel.width`` on the axle at y = +-track/2): the scan plane cuts each wheel in
+    a rectangle |x| <= sqrt(r^2 - (z - r)^2), |y| in track/2 -+ width/2; a ray meets its inner face."""
+    r, half_w = robot.wheel_radius, robot.wheel["width"] / 2
+    lx, ly, lz = robot.lidar.xyz
+    half_chord = math.sqrt(r * r - (lz - r) ** 2)
+    inner = robot.track / 2 - half_w
+    out = {}
+    for i, a in enumerate(robot.lidar.angles()):
+        s, c = math.sin(a), math.cos(a)
+        if abs(s) < 1e-9:
+            continue
+        t = (inner - math.copysign(ly, s)) / abs(s)
+        x = lx + t * c
+        if abs(x) < half_chord - 1e-4:
+            out[i] = t
+    return out
+
+
+def test_lidar_rays_hit_the_robots_own_wheels_as_in_simtwo(field, robot):
+    """SimTwo's rays are ODE rays on the base body: the wheels (separate bodies, tops 0.065 m above the
+    0.05 m scan plane) are hit by the rays within about 23 degrees of +-90 degrees, at 0.0645-0.0705 m."""
+    expect = wheel_hits(robot)
+    angles = np.degrees(robot.lidar.angles())
+    assert 80 <= len(expect) <= 100  # about 90 of 360 rays
+    assert all(abs(abs(angles[i]) - 90) < 24 for i in expect)
+    assert 0.064 < min(expect.values()) and max(expect.values()) < 0.0706
+    for self_hits in (True, False):
+        sim = make(field, robot, lidar_noise=False, lidar_self_hits=self_hits)
+        sim.set_pose(0.0, -0.1, 0.3)  # in the middle of the field: nothing else within 0.2 m
+        f = full_sweep(sim)
+        near = set(np.flatnonzero((f.ranges > 0) & (f.ranges < 0.2)))
+        if self_hits:
+            assert near == set(expect)
+            for i, d in expect.items():
+                assert f.ranges[i] == pytest.approx(d, abs=2e-4), i
+        else:  # the idealisation: rays pass through the wheels
+            assert not near
+        sim.close()
+
+
+def test_lidar_sweeps_are_published_whole_once_per_period_and_read_0_before(field, robot):
+    """SimTwo copies every ray into the values the script reads at once, when its sensor clock passes the
+    period (1 ms after the frames at 200 ms, 400 ms, ...): the frames up to Tms = 200 read all 0, the
+    values then change all together in the frames at Tms = 240, 440, 640, ... and in no other."""
+    sim = make(field, robot, lidar_noise=True, seed=5, start_pose=(-0.62, 0.0, 0.3))
+    frames = [sim.step_cycle(None) for _ in range(17)]
+    sim.close()
+    for f in frames[:6]:  # Tms 40 .. 240
+        if f.time_ms <= 200:
+            assert np.all(f.ranges == 0.0), f.time_ms
+    returns = frames[5].ranges > 0
+    assert returns.sum() > 200 and np.all(frames[5].ranges[~returns] == -1.0)
+    for prev, f in zip(frames, frames[1:]):
+        changed = f.ranges != prev.ranges
+        if f.time_ms in (240, 440, 640):  # a new sweep: with noise on, every ray with a return changes
+            assert changed[returns].all(), f.time_ms
+        else:
+            assert not changed.any(), f.time_ms
+
+
+def test_lidar_per_ray_option_refreshes_rays_in_turn(field, robot):
+    """``lidar_update="per_ray"`` (the idealisation): ray i of a sweep is measured 0.2 s * i / 360 after the
+    sweep starts and published at once: a 40 ms cycle refreshes the next 72 rays, -1 before."""
+    sim = make(field, robot, lidar_noise=True, seed=5, lidar_update="per_ray")
+    first = sim.step_cycle(None)
+    assert np.all(first.ranges[72:] == -1.0) and np.any(first.ranges[:72] != -1.0)
+    sim.set_pose(-0.62, 0.0, 0.3)
+    prev = full_sweep(sim).ranges
+    returns = prev >= 0
+    n = robot.lidar.rays
+    per_cycle = round(n * robot.control_period / robot.lidar.period)  # 72
+    changed_total = np.zeros(n, dtype=bool)
+    for _ in range(5):
+        f = sim.step_cycle(None)
+        scheduled = np.zeros(n, dtype=bool)
+        scheduled[np.arange(f.seq * per_cycle, (f.seq + 1) * per_cycle) % n] = True
+        changed = f.ranges != prev
+        # with noise on, a refreshed ray with a return always changes; nothing else does
+        assert np.array_equal(changed, scheduled & returns)
+        changed_total |= changed
+        prev = f.ranges
+    assert changed_total[returns].all() and returns.sum() > 100
+    sim.close()
+
+
+def simtwo_ranger_loop(n_rays, period, dt, steps):
+    """A transcription of SimTwo's physics loop for one ranger2d (Viewer.pas 5436-5452, ODERobots.pas
+    1593-1624 and 1842-1846) on SimTwo's own step count k: before step k the rays round(N*t/P) ..
+    +round(N*dt/P)+1 are enabled and measured (we record k); after it t += dt and, when t > P, t -= P and
+    the values are copied. Returns the list of (k of the copy, the k each copied value was measured at)."""
+    t = 0.0
+    measured_at = [None] * n_rays
+    copies = []
+    active = round(n_rays * dt / period) + 1
+    for k in range(steps):
+        first = round(n_rays * t / period)
+        for i in range(n_rays):
+            if first <= i <= first + active:
+                measured_at[i] = k
+        t = t + dt
+        if t > period:
+            t = t - period
+            copies.append((k, list(measured_at)))
+    return copies
+
+
+def test_lidar_schedule_is_simtwos_loop(robot):
+    """The stand-in's schedule against the transcription above: sweeps published at the same steps and
+    every ray from the same step, with the stand-in's step s being SimTwo's step s - 1 (SimTwo's first
+    script call comes after 39 physics steps, the stand-in's first frame after 40)."""
+    from robotatfactory.sim.sensors import Lidar, simtwo_ray_steps
+
+    spec, dt, n = robot.lidar, robot.physics_step, robot.lidar.rays
+    lid = Lidar(spec, dt, 0, False, (1, 0, 0, 0, 0, 0))
+    measured_at, published = {}, []
+    for c in range(30):  # 1.2 s
+        s0 = 40 * c
+        due = lid.plan(s0, 40)
+        for j, (rays, latch) in zip(due, lid._items):
+            s = s0 + j + 1  # the pose after stand-in step s
+            if latch:
+                published.append((s, dict(measured_at)))
+            for i in rays:
+                measured_at[i] = s
+        lid._items = None
+    ref = simtwo_ranger_loop(n, spec.period, dt, 1200)
+    # SimTwo copies after its step k; the stand-in after its step k + 2 (its step s ends at SimTwo's k + 1)
+    assert [s for s, _ in published] == [k + 2 for k, _ in ref][:len(published)] == [201, 401, 601, 801, 1001]
+    for (s, got), (k, want) in zip(published, ref):
+        # a ray measured before SimTwo's step k (from the pose after k steps) = after stand-in step k + 1
+        assert [got[i] for i in range(n)] == [w + 1 for w in want]
+    # the helper the bridge uses: ray i of the sweep published after step 200 m + 1 is measured
+    # after step 200 (m - 1) + 1 + j_i
+    j = simtwo_ray_steps(n, spec.period, dt)
+    s, got = published[1]
+    assert [got[i] - (s - 200) for i in range(n)] == j
+    assert j[0] == 0 and j[-1] == 199
+
+
+def test_lidar_reports_the_sweep_measured_during_the_previous_period(field, robot):
+    """Driving at 0.3 m/s towards a wall, the published range straight ahead is the distance from where the
+    robot was when SimTwo measured the ray (up to 239 ms before the frame), not from where it is."""
+    from robotatfactory.sim.sensors import simtwo_ray_steps
+
+    sim = make(field, robot, lidar_noise=False, start_pose=(-0.80, 0.0, 0.0))  # facing machine A's input
+    cmd = Command(0.3, 0.0, False)
+    frames = [sim.step_cycle(cmd) for _ in range(26)]
+    sim.close()
+    i = int(np.argmin(np.abs(robot.lidar.angles())))  # the ray nearest straight ahead
+    a = robot.lidar.angles()[i]
+    j = simtwo_ray_steps(robot.lidar.rays, robot.lidar.period, robot.physics_step)[i]
+    t = np.array([f.time_ms for f in frames], dtype=float)
+    x = np.array([f.x for f in frames])
+    # the frame at Tms = 1040 carries the sweep published at 1001 ms: ray i measured at 801 + j ms
+    f = frames[-1]
+    assert f.time_ms == 1040
+    t_meas = 1040 - 239 + j
+    x_meas = float(np.interp(t_meas, t, x))
+    x_now = f.x
+    wall = x_meas + f.ranges[i] * math.cos(a)  # the wall's face as the measured ray places it
+    assert wall == pytest.approx(-0.3575, abs=0.001)  # machine A's input face: 1 mm is 3 ms at 0.3 m/s
+    # the same wall from a later sweep must agree: the ranges are consistent with the measuring instants
+    g = frames[-6]  # Tms 840, the sweep published at 801 ms
+    x_meas_g = float(np.interp(840 - 239 + j, t, x))
+    assert g.ranges[i] > f.ranges[i] + 0.05  # the robot moved ~60 mm per sweep
+    assert x_meas_g + g.ranges[i] * math.cos(a) == pytest.approx(wall, abs=0.001)
+    # and reading the range as if measured at the frame's own time would place the wall ~4 cm too far
+    assert x_now + f.ranges[i] * math.cos(a) - wall > 0.03
 
 
 def test_lidar_sees_beacons_and_parts(field, robot):
@@ -111,29 +290,6 @@ def test_lidar_noise_follows_simtwos_law(field, robot):
     sigma = robot.lidar.noise_sigma(true)
     assert abs(samples.mean() - true) < 4 * sigma / math.sqrt(len(samples)) + 1e-4
     assert samples.std() == pytest.approx(sigma, rel=0.35)
-    sim.close()
-
-
-def test_lidar_rays_are_refreshed_in_turn_over_the_sweep(field, robot):
-    """Ray i of a sweep is measured 0.2 s * i / 360 after the sweep starts: a 40 ms cycle refreshes the
-    next 72 rays (counting on from the last cycle), one period refreshes them all."""
-    sim = make(field, robot, lidar_noise=True, seed=5)
-    sim.set_pose(-0.62, 0.0, 0.3)
-    prev = full_sweep(sim).ranges
-    returns = prev >= 0
-    n = robot.lidar.rays
-    per_cycle = round(n * robot.control_period / robot.lidar.period)  # 72
-    changed_total = np.zeros(n, dtype=bool)
-    for _ in range(5):
-        f = sim.step_cycle(None)
-        scheduled = np.zeros(n, dtype=bool)
-        scheduled[np.arange(f.seq * per_cycle, (f.seq + 1) * per_cycle) % n] = True
-        changed = f.ranges != prev
-        # with noise on, a refreshed ray with a return always changes; nothing else does
-        assert np.array_equal(changed, scheduled & returns)
-        changed_total |= changed
-        prev = f.ranges
-    assert changed_total[returns].all() and returns.sum() > 100
     sim.close()
 
 

@@ -125,6 +125,7 @@ class RobotSpec:
     lidar: LidarSpec
     contact: dict
     electromagnet: dict
+    simtwo_pid: dict | None = None  # SimTwo's own speed controller's gains (CalcPID), see data/robot_simtwo.json
 
     @property
     def metres_per_tick(self) -> float:
@@ -158,5 +159,5 @@ def load_robot(name_or_path: str = "simtwo") -> RobotSpec:
         wheel_radius=raw["wheel_radius"], track=raw["track"], ticks_per_rev=raw["ticks_per_rev"],
         base=raw["base"], wheel=raw["wheel"], caster=raw["caster"], motor=raw["motor"],
         speed_controller=raw["speed_controller"], camera=CameraSpec(**cam), lidar=LidarSpec(**lid),
-        contact=raw["contact"], electromagnet=raw["electromagnet"],
+        contact=raw["contact"], electromagnet=raw["electromagnet"], simtwo_pid=raw.get("simtwo_pid"),
     )

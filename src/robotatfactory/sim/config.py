@@ -24,6 +24,11 @@ class PartPlacement:
             raise ConfigError(f"part type {self.letter!r}: expected R, G or B")
 
 
+LIDAR_UPDATES = ("sweep", "per_ray")
+SPEED_CONTROLS = ("simtwo", "simtwo_per_cycle", "ideal_pi")
+PID_TIMINGS = ("script_enabled", "scene_enabled", "script_holds_voltage")
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """Everything that changes what :class:`~robotatfactory.sim.Simulator` computes.
@@ -40,6 +45,24 @@ class SimConfig:
       (s), ``start_after`` (s of simulation time before the run may start; the factory server says STOP
       until then) and ``round_duration`` (s) configure it.
     * ``extra_parts``: more parts placed by hand (they take part in physics, LIDAR, camera and magnet).
+
+    SimTwo's behaviours are the defaults; the idealisations are named options (docs/simulator.md):
+
+    * ``lidar_update``: ``"sweep"`` (SimTwo: rays measured in turn over the period, the values the script
+      reads replaced all at once once per period, 0 before the first sweep) or ``"per_ray"`` (idealised:
+      each ray's value is replaced as soon as it is measured, -1 before).
+    * ``lidar_self_hits``: rays hit the robot's own wheels as SimTwo's ODE rays do (False: they pass
+      through, an idealisation).
+    * ``speed_control``: ``"simtwo"`` (SimTwo's CalcPID with the robot's ``simtwo_pid`` gains, enabled and
+      set once at the start, as control.pas does), ``"simtwo_per_cycle"`` (the same, but the script calls
+      SetMotorControllerState every control cycle, which resets the integral) or ``"ideal_pi"`` (the
+      stand-in's own PI with feed-forward and a reference ramp, every 1 ms, ``speed_controller`` gains).
+    * ``simtwo_pid_timing``: SimTwo zeroes every motor voltage before each script call and its controller
+      runs on its own 10 ms clock, which counts only while the controller is on: ``"script_enabled"``
+      (the script switched it on: it runs 9 ms after each script call and the motors get 0 V in between),
+      ``"scene_enabled"`` (``active='1'`` in the scene XML: it runs in the script's own physics step, no
+      gap) or ``"script_holds_voltage"`` (switched on by the script, which also re-applies the
+      controller's last output each call, ``SetAxisVoltageRef(GetAxisU)``: no gap).
     """
 
     seed: int = 0
@@ -58,6 +81,11 @@ class SimConfig:
     # -- camera timing (sim/camera.py RenderCadence): "simtwo" = when SimTwo's GUI loop renders (ends of 17 ms
     # physics chunks on a seeded wall clock, every 4th render published); "grid" = the idealisation k/15 s
     camera_timing: str = "simtwo"
+    # --- SimTwo fidelity of physics and sensors (defaults = SimTwo; see the docstring) ---
+    lidar_update: str = "sweep"
+    lidar_self_hits: bool = True
+    speed_control: str = "simtwo"
+    simtwo_pid_timing: str = "script_enabled"
 
     def __post_init__(self):
         if self.start_pose is not None:
@@ -67,6 +95,10 @@ class SimConfig:
             raise ConfigError(f"--start-after {self.start_after}: must be >= 0 seconds")
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError(f"seed {self.seed!r}: must be a non-negative integer")
+        for name, allowed in (("lidar_update", LIDAR_UPDATES), ("speed_control", SPEED_CONTROLS),
+                              ("simtwo_pid_timing", PID_TIMINGS)):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(f"{name} {getattr(self, name)!r}: expected one of {', '.join(allowed)}")
 
 
 def parse_pose(text: str) -> tuple[float, float, float]:

@@ -162,3 +162,121 @@ class SpeedPI:
         self.integral = integral
         self.output = u
         return u
+
+
+# ------------------------------------------------------------------------------------------------------------
+# SimTwo's own wheel speed controller
+# ------------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SimTwoPIDParams:
+    """The gains and timing of SimTwo's motor controller (``TMotController``, ODERobots.pas 47-54).
+
+    ``kp``, ``ki``, ``kd``, ``kf`` as ``SetMotorControllerPars(R, i, Ki, Kd, Kp, Kf)`` sets them
+    (ODERobotsPublished.pas 1784-1793); ``period`` (s) is the scene XML's ``<controller period='10'/>``
+    (in ms there, Viewer.pas 3095; no script call changes it); ``y_sat`` (V) is the motor's ``vmax``
+    (Viewer.pas 3065); ``ode_dt`` (s) is SimTwo's physics step ``Ode_dt := 1/1000`` (Viewer.pas 4240), which
+    CalcPID uses for its integral and derivative whatever ``period`` is.
+    """
+
+    kp: float
+    ki: float
+    kd: float
+    kf: float
+    period: float = 0.01
+    y_sat: float = 8.2
+    ode_dt: float = 0.001
+
+    @classmethod
+    def from_spec(cls, pid: dict, ode_dt: float = 0.001) -> "SimTwoPIDParams":
+        return cls(kp=float(pid["kp"]), ki=float(pid["ki"]), kd=float(pid["kd"]), kf=float(pid["kf"]),
+                   period=float(pid.get("period", 0.01)), y_sat=float(pid.get("y_sat", 8.2)), ode_dt=float(ode_dt))
+
+
+class SimTwoPID:
+    """One axis' speed controller exactly as SimTwo computes it (mode ``pidspeed``).
+
+    Per physics step, in the order of ``TFViewer.GLCadencerProgress`` (Viewer.pas 5228-5339):
+
+    1. at a control (script) iteration, SimTwo first sets every axis' ``ref.volts := 0`` and ``ref.w := 0``
+       (Viewer.pas 5255-5260), then runs the script, which sets ``ref.w`` (``SetAxisSpeedRef``) and may call
+       ``SetMotorControllerState`` / ``SetMotorControllerPars`` (both set ``Sek := 0``,
+       ODERobotsPublished.pas 1784-1793, 1814-1820): :meth:`script_cycle`;
+    2. ``AxisTorqueModel`` (Viewer.pas 4568-4603): if the controller is active, ``ticks += Ode_dt`` and when
+       ``ticks >= ControlPeriod``: ``ticks -= ControlPeriod`` and ``ref.volts := CalcPID(ref.w, ref.w - w)``;
+       the motor then gets ``clamp(ref.volts, -Vmax, Vmax)`` this step (held between controller runs):
+       :meth:`tick`;
+    3. ``CalcPID`` (Viewer.pas 528-546)::
+
+           dek := (ek - ek_1) / Ode_dt;   Sek := Sek + ek * Ode_dt
+           mk  := Kp*ek + Ki*Sek + Kd*dek + Kf*ref
+           if |mk| >= y_sat: Sek := Sek - ek*Ode_dt; mk := clamp(mk, -y_sat, y_sat)
+           ek_1 := ek
+
+    Consequences: Ki acts per Ode_dt (1 ms) of error although the controller runs every 10 ms, i.e. an
+    effective integral gain of Ki*Ode_dt/period per second; Kd sees the change of the error over 10 ms
+    divided by 1 ms; and after each script iteration the motor gets 0 V until the controller's next run
+    (up to period - Ode_dt, depending on the phase of ``ticks``, which counts only while active).
+    Floats are updated with the same operations as SimTwo's doubles, so ``ticks`` drifts as SimTwo's does.
+    """
+
+    __slots__ = ("p", "active", "sek", "ek_1", "ticks", "ref_w", "ref_volts", "runs")
+
+    def __init__(self, params: SimTwoPIDParams):
+        self.p = params
+        self.active = False
+        self.sek = 0.0  # sum of ek * Ode_dt (rad)
+        self.ek_1 = 0.0  # the error at the previous run (rad/s)
+        self.ticks = 0.0  # s since the last run (counts only while active)
+        self.ref_w = 0.0  # rad/s (SetAxisSpeedRef)
+        self.ref_volts = 0.0  # V, the controller's output (or SetAxisVoltageRef)
+        self.runs = 0
+
+    def reset(self) -> None:
+        """Integral, last error and output to 0 (the simulator's ``set_pose``); ``ticks`` keeps its phase."""
+        self.sek = self.ek_1 = self.ref_w = self.ref_volts = 0.0
+
+    def set_state(self, active: bool) -> None:
+        """``SetMotorControllerState``: sets ``active`` and resets the integral (``Sek := 0``)."""
+        self.active = bool(active)
+        self.sek = 0.0
+
+    def set_pars(self, params: SimTwoPIDParams) -> None:
+        """``SetMotorControllerPars``: new gains, ``Sek := 0``."""
+        self.p = params
+        self.sek = 0.0
+
+    def calc(self, ref: float, ek: float) -> float:
+        """``CalcPID(PID, ref, ek)``: the controller's output (V)."""
+        if not self.active:
+            return 0.0
+        p = self.p
+        dt = p.ode_dt
+        dek = (ek - self.ek_1) / dt
+        self.sek = self.sek + ek * dt
+        mk = p.kp * ek + p.ki * self.sek + p.kd * dek + p.kf * ref
+        if abs(mk) >= p.y_sat:
+            self.sek = self.sek - ek * dt
+            mk = max(-p.y_sat, min(p.y_sat, mk))
+        self.ek_1 = ek
+        return mk
+
+    def script_cycle(self, ref_w: float, reset_integral: bool = False, hold_voltage: bool = False) -> None:
+        """A control (script) iteration: SimTwo zeroes ``ref.volts``; the script sets ``ref.w``, with
+        ``reset_integral`` calls ``SetMotorControllerState(.., true)`` (integral to 0) and with
+        ``hold_voltage`` puts the controller's last output back (``SetAxisVoltageRef(GetAxisU)``)."""
+        if not hold_voltage:
+            self.ref_volts = 0.0
+        self.ref_w = ref_w
+        if reset_integral:
+            self.set_state(True)
+
+    def tick(self, w: float) -> float:
+        """One physics step's controller part of ``AxisTorqueModel`` at axis speed ``w`` (rad/s); returns
+        ``ref.volts`` (before the motor's own +-Vmax clamp)."""
+        if self.active:
+            self.ticks = self.ticks + self.p.ode_dt
+            if self.ticks >= self.p.period:
+                self.ticks = self.ticks - self.p.period
+                self.ref_volts = self.calc(self.ref_w, self.ref_w - w)
+                self.runs += 1
+        return self.ref_volts

@@ -6,20 +6,26 @@ x forward, y left, z up).
 
 Geom groups (what renders, what the rays see):
 
-====  ==========================================  ======  ========  ========
-group what                                        camera  LIDAR     magnet
-====  ==========================================  ======  ========  ========
-0     walls, ribs, beacons (static, collide)      yes     yes       no
-1     the robot's visible parts                   yes     no        no
-2     decoration: floor, markers, tags, feet      yes     no        no
-3     parts' bodies (visual)                      yes     yes       no
-4     parts' ferromagnetic plates (visual)        yes     yes       yes
-5     collision-only shapes (floor plane, wheel   no      no        no
+====  ==========================================  ======  ========  ========  =======
+group what                                        camera  LIDAR     magnet    contact
+====  ==========================================  ======  ========  ========  =======
+0     walls, ribs, beacons (static, collide)      yes     yes       no        yes
+1     the robot's wheels (tyres)                  yes     own (*)   no        no
+2     decoration (floor, markers, tags, feet) and yes     no        no        no
+      the parts of the robot's base body
+3     parts' bodies (visual)                      yes     yes       no        yes
+4     parts' ferromagnetic plates (visual)        yes     yes       yes       yes
+5     collision-only shapes (floor plane, wheel   no      no        no        no
       spheres, wheel guard, part boxes)
-====  ==========================================  ======  ========  ========
+====  ==========================================  ======  ========  ========  =======
+
+(*) SimTwo's LIDAR rays are ODE rays attached to the robot's base body: they never hit geoms on that body
+(its shells) but do hit the wheels, separate bodies (Viewer.pas 840-853 ``CreateOneRaySensor``, 2998-3011,
+``nearCallback`` 346-410). The simulator casts the world with ``LIDAR_GROUPS`` and the robot's own wheels
+with ``LIDAR_SELF_GROUPS`` (``SimConfig.lidar_self_hits``, on by default; see ``sensors.Lidar``).
 
 Collision filtering (``contype``/``conaffinity`` bits): the wheel spheres and the caster meet only the floor
-(a 65 mm sphere is wider than the 20 mm tyre); walls and parts meet the robot's base, its magnet housing and
+(a 65 mm sphere is wider than the 6 mm tyre); walls and parts meet the robot's base, its magnet housing and
 a "wheel guard" box around both tyres; parts meet the floor, the walls, each other and the robot;
 decoration meets nothing.
 """
@@ -36,9 +42,11 @@ from . import markers as mk
 from .config import SimConfig
 
 # geom groups
-G_STATIC, G_ROBOT, G_DECOR, G_PART, G_PLATE, G_HIDDEN = range(6)
+G_STATIC, G_WHEEL, G_DECOR, G_PART, G_PLATE, G_HIDDEN = range(6)
+G_ROBOT = G_DECOR  # the robot's base-body parts render and are seen by no ray (as SimTwo's shells)
 RENDER_GROUPS = (1, 1, 1, 1, 1, 0)
 LIDAR_GROUPS = (1, 0, 0, 1, 1, 0)
+LIDAR_SELF_GROUPS = (0, 1, 0, 0, 0, 0)
 MAGNET_GROUPS = (0, 0, 0, 0, 1, 0)
 CONTACT_GROUPS = (1, 0, 0, 1, 1, 0)
 
@@ -338,8 +346,10 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -
     cam.resolution = [c.width, c.height]
     cam.sensor_size = [c.width * 1e-5, c.height * 1e-5]
     cam.focal_pixel = [c.fx, c.fy]
-    # MuJoCo's principal point offset is from the image centre, which OpenCV calls ((W-1)/2, (H-1)/2)
-    cam.principal_pixel = [c.cx - (c.width - 1) / 2, c.cy - (c.height - 1) / 2]
+    # MuJoCo's principal point offset is from the image centre, which OpenCV calls ((W-1)/2, (H-1)/2), with
+    # the opposite sign: principal_pixel +4 puts the principal point 4 px LEFT (and up) of the centre (measured
+    # on rendered markers by raf experiment calibration; docs/calibration.md)
+    cam.principal_pixel = [(c.width - 1) / 2 - c.cx, (c.height - 1) / 2 - c.cy]
 
     r = robot.wheel_radius
     wmass = float(robot.wheel["mass"])
@@ -356,16 +366,18 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -
         j.damping = [float(m["Bv"]) * float(m.get("gear", 1.0)) ** 2, 0.0, 0.0]
         j.frictionloss = float(m["Fc"]) * float(m.get("gear", 1.0))
         g = wb.add_geom(name=f"wheel_{side}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0, 0])
-        # the sphere only rolls on the floor (it is wider than the 2 cm tyre); walls and parts meet the
+        # the sphere only rolls on the floor (it is wider than the 6 mm tyre); walls and parts meet the
         # wheel guard box instead
         g.contype, g.conaffinity, g.group = B_WHEEL, B_FLOOR, G_HIDDEN
         g.condim = 3
         g.friction = list(WHEEL_FRICTION)
         g.solref, g.solimp = list(STIFF_SOLREF), list(STIFF_SOLIMP)
         g.rgba = [0, 0, 0, 0]
+        # the tyre as SimTwo's wheel solid (AGV.xml: a cylinder of WheelDiameter/2 and WheelThickness):
+        # what the camera sees and the LIDAR's rays hit
         g = wb.add_geom(name=f"wheel_{side}_tyre", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[r, wwidth / 2, 0],
                         quat=[math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0], rgba=[0.05, 0.05, 0.05, 1])
-        _visual(g, G_ROBOT)
+        _visual(g, G_WHEEL)
         g = wb.add_geom(name=f"wheel_{side}_hub", type=mujoco.mjtGeom.mjGEOM_BOX,
                         size=[r * 0.8, wwidth / 2 + 0.0005, 0.004], rgba=[0.8, 0.8, 0.8, 1])
         _visual(g, G_ROBOT)

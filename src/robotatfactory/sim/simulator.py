@@ -29,7 +29,7 @@ from ..simtwo import Command, SensorFrame  # noqa: E402
 from . import scene as sc  # noqa: E402
 from .camera import CameraFrame, RenderCadence, Renderer, ScheduledFrame  # noqa: E402
 from .config import SimConfig  # noqa: E402
-from .motor import DCMotor, MotorParams, SpeedControllerParams, SpeedPI  # noqa: E402
+from .motor import DCMotor, MotorParams, SimTwoPID, SimTwoPIDParams, SpeedControllerParams, SpeedPI  # noqa: E402
 from .parts import PartBodies  # noqa: E402
 from .sensors import Encoder, Lidar  # noqa: E402
 
@@ -99,15 +99,34 @@ class Simulator:
         self.motors = (DCMotor(mp, self.dt), DCMotor(mp, self.dt))
         cp = SpeedControllerParams.from_spec(robot.speed_controller)
         self.controller_params = cp
-        self.controllers = (SpeedPI(cp, mp.Vmax), SpeedPI(cp, mp.Vmax))
         self._ctrl_every = max(1, int(round(cp.period / self.dt)))
+        # the wheel speed controllers: SimTwo's CalcPID (default) or the stand-in's own PI (ideal_pi)
+        self.speed_control = config.speed_control
+        if config.speed_control == "ideal_pi":
+            self.pid_params = None
+            self.controllers = (SpeedPI(cp, mp.Vmax), SpeedPI(cp, mp.Vmax))
+        else:
+            if not robot.simtwo_pid:
+                raise ValueError(f"robot {robot.name!r} has no 'simtwo_pid' gains for speed control "
+                                 f"{config.speed_control!r}")
+            self.pid_params = pp = SimTwoPIDParams.from_spec(robot.simtwo_pid, self.dt)
+            self.controllers = (SimTwoPID(pp), SimTwoPID(pp))
+            for c in self.controllers:
+                # enabled (and its gains set) once: by the script's first call, whose physics step is the
+                # first of the first cycle, or by the scene XML, from SimTwo's first physics step, which
+                # is one before the stand-in's first (see sensors.Lidar for the mapping of the clocks)
+                c.set_state(True)
+                c.ticks = -self.dt if config.simtwo_pid_timing == "scene_enabled" else 0.0
+        self._wheel_refs = (0.0, 0.0)  # rad/s, the speed references of the command in force
         self.command = Command.stop()
         self.voltage_override: tuple[float, float] | None = None  # open-loop motor voltages (SetAxisVoltageRef)
         self.magnet_on = False
         self.held: int | None = None
 
         # sensors
-        self._lidar = Lidar(robot.lidar, self.dt, config.seed, config.lidar_noise, sc.LIDAR_GROUPS) \
+        self._lidar = Lidar(robot.lidar, self.dt, config.seed, config.lidar_noise, sc.LIDAR_GROUPS,
+                            update=config.lidar_update,
+                            self_groups=sc.LIDAR_SELF_GROUPS if config.lidar_self_hits else None) \
             if config.lidar else None
         self._ray_gid = np.zeros(1, dtype=np.int32)
         self._magnet_groups = np.asarray(sc.MAGNET_GROUPS, dtype=np.uint8)
@@ -131,6 +150,8 @@ class Simulator:
         d.time = 0.0
         d.qvel[:] = 0.0
         mujoco.mj_forward(m, d)
+        if self._lidar is not None:  # the robot's own wheels as the rays see them (robot frame)
+            self._lidar.measure_self_hits(m, d, mujoco, d.xpos[self._robot_body], d.xmat[self._robot_body])
         self._step = 0
         self.seq = 0
         self.encoders = (Encoder(robot.ticks_per_rev, float(d.qpos[self._wq[0]])),
@@ -188,6 +209,11 @@ class Simulator:
         return float(q[self._wq[0]]), float(q[self._wq[1]])
 
     @property
+    def lidar_sweeps(self) -> int:
+        """LIDAR sweeps published so far (sweep mode; per_ray mode: 0). See :class:`~.sensors.Lidar`."""
+        return self._lidar.sweeps if self._lidar is not None else 0
+
+    @property
     def motor_voltages(self) -> tuple[float, float]:
         return self.motors[0].voltage, self.motors[1].voltage
 
@@ -238,8 +264,10 @@ class Simulator:
         self.command = cmd
         self.voltage_override = None
         wl, wr = self.robot.wheel_speeds(v, w)
-        self.controllers[0].target = wl
-        self.controllers[1].target = wr
+        self._wheel_refs = (wl, wr)
+        if self.pid_params is None:
+            self.controllers[0].target = wl
+            self.controllers[1].target = wr
         if cmd.magnet and not self.magnet_on:
             self.magnet_on = True
         elif not cmd.magnet and self.magnet_on:
@@ -280,6 +308,13 @@ class Simulator:
             self._magnet_check()
             for j in range(MAGNET_CHECK_STEPS - 1, n, MAGNET_CHECK_STEPS):
                 events.setdefault(j, []).append(("magnet", 0))
+        if self.pid_params is not None and self.voltage_override is None:
+            # SimTwo's control (script) iteration: ref.volts := 0, then the script sets the speed refs
+            # (and, for "simtwo_per_cycle", calls SetMotorControllerState, which zeroes the integral)
+            reset = self.speed_control == "simtwo_per_cycle"
+            hold = self.config.simtwo_pid_timing == "script_holds_voltage"
+            for c, ref in zip(self.controllers, self._wheel_refs):
+                c.script_cycle(ref, reset_integral=reset, hold_voltage=hold)
         if self.reference_drive:
             self._run_reference(s0, n, lidar_slot, events)
         else:
@@ -307,15 +342,22 @@ class Simulator:
         il, ir = self._wv
         (ml, mr), (pl, pr) = self.motors, self.controllers
         vo = self.voltage_override
+        simtwo = self.pid_params is not None
         for j in range(n):
             wl, wr = qvel[il], qvel[ir]
             if vo is not None:
-                pl.output, pr.output = vo
-            elif (s0 + j) % self._ctrl_every == 0:
-                pl.update(wl)
-                pr.update(wr)
-            ctrl[self._act[0]] = ml.step(pl.output, wl)
-            ctrl[self._act[1]] = mr.step(pr.output, wr)
+                ul, ur = vo
+                if not simtwo:
+                    pl.output, pr.output = vo
+            elif simtwo:
+                ul, ur = pl.tick(wl), pr.tick(wr)
+            else:
+                if (s0 + j) % self._ctrl_every == 0:
+                    pl.update(wl)
+                    pr.update(wr)
+                ul, ur = pl.output, pr.output
+            ctrl[self._act[0]] = ml.step(ul, wl)
+            ctrl[self._act[1]] = mr.step(ur, wr)
             mujoco.mj_step(m, d)
             if lidar_slot[j] >= 0:
                 self._log_lidar_pose(lidar_slot[j])
@@ -325,6 +367,8 @@ class Simulator:
     def _run_fast(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
         """The same arithmetic as :meth:`_run_reference` inlined on local floats (the hot loop: Python's
         call overhead would otherwise cost more than MuJoCo's step). Tests check both give identical runs."""
+        if self.pid_params is not None:
+            return self._run_fast_simtwo(s0, n, lidar_slot, events)
         m, d = self.model, self.data
         qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
         il, ir = self._wv
@@ -424,6 +468,72 @@ class Simulator:
         pl.output, pr.output = vl, vr
         pl.integral, pr.integral = intl, intr
         pl.ref, pr.ref = refl, refr
+
+    def _run_fast_simtwo(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
+        """:meth:`_run_reference` with SimTwo's controller: the controller's clock and the motors inlined,
+        ``CalcPID`` itself called (every 10 ms) on the :class:`SimTwoPID` objects."""
+        m, d = self.model, self.data
+        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+        il, ir = self._wv
+        al, ar = self._act
+        qa = self._qa
+        step = mujoco.mj_step
+        poses = self._lidar.poses if self._lidar is not None else None
+        ml, mr = self.motors
+        pl, pr = self.controllers
+        mp, pp = self.motor_params, self.pid_params
+        a, b, ke, kt = ml.a, ml.b, ml.ke, ml.kt
+        slew, imax, vmax = mp.slew_A_per_step, mp.Imax, mp.Vmax
+        odt, per = pp.ode_dt, pp.period
+        vo = self.voltage_override
+        run = vo is None and pl.active
+        if vo is not None:
+            vl, vr = vo
+        else:
+            vl, vr = pl.ref_volts, pr.ref_volts
+        tl, tr = pl.ticks, pr.ticks
+        refl, refr = pl.ref_w, pr.ref_w
+        Il, Ir = ml.current, mr.current
+        for j in range(n):
+            wl = qvel[il]
+            wr = qvel[ir]
+            if run:
+                tl = tl + odt
+                if tl >= per:
+                    tl = tl - per
+                    vl = pl.calc(refl, refl - wl)
+                    pl.runs += 1
+                tr = tr + odt
+                if tr >= per:
+                    tr = tr - per
+                    vr = pr.calc(refr, refr - wr)
+                    pr.runs += 1
+            # left motor (DCMotor.step)
+            v = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
+            di = a * Il + b * (v - ke * wl) - Il
+            di = slew if di > slew else (-slew if di < -slew else di)
+            Il += di
+            Il = imax if Il > imax else (-imax if Il < -imax else Il)
+            ctrl[al] = kt * Il
+            # right motor
+            v = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
+            di = a * Ir + b * (v - ke * wr) - Ir
+            di = slew if di > slew else (-slew if di < -slew else di)
+            Ir += di
+            Ir = imax if Ir > imax else (-imax if Ir < -imax else Ir)
+            ctrl[ar] = kt * Ir
+            step(m, d)
+            slot = lidar_slot[j]
+            if slot >= 0:
+                poses[slot] = qpos[qa:qa + 7].tolist()
+            if events and j in events:
+                self._on_events(s0 + j + 1, events[j])
+        ml.current, mr.current = Il, Ir
+        ml.voltage = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
+        mr.voltage = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
+        if vo is None:
+            pl.ref_volts, pr.ref_volts = vl, vr
+            pl.ticks, pr.ticks = tl, tr
 
     def _end_of_cycle(self) -> SensorFrame:
         m, d = self.model, self.data
