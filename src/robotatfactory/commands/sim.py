@@ -82,6 +82,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--beacons", action="store_true", help="put the LIDAR beacons in the team areas")
     g.add_argument("--robot", default="simtwo", help="robot parameters: shipped name or a .json file (default simtwo)")
 
+    g = p.add_argument_group("SimTwo fidelity (defaults behave like SimTwo; the rest are idealisations, docs/simulator.md)")
+    g.add_argument("--lidar-update", choices=("sweep", "per_ray"), default="sweep",
+                   help="sweep: all rays published at once once per period, 0 before the first (SimTwo); per_ray: "
+                        "each ray as soon as measured (default sweep)")
+    g.add_argument("--no-lidar-self-hits", action="store_true",
+                   help="let the LIDAR's rays pass through the robot's own wheels (SimTwo's hit them)")
+    g.add_argument("--speed-control", choices=("simtwo", "simtwo_per_cycle", "ideal_pi"), default="simtwo",
+                   help="simtwo: SimTwo's CalcPID set once (default); simtwo_per_cycle: its integral reset every "
+                        "cycle (SetMotorControllerState each cycle); ideal_pi: the stand-in's own 1 ms PI")
+    g.add_argument("--pid-timing", choices=("script_enabled", "scene_enabled", "script_holds_voltage"),
+                   default="script_enabled",
+                   help="when SimTwo's PID runs against the script calls: script_enabled (0 V for 9 ms after each "
+                        "call, default), scene_enabled or script_holds_voltage (no gap)")
+
     g = p.add_argument_group("output")
     g.add_argument("--status-every", type=float, default=1.0, metavar="S",
                    help="print a status line every S wall seconds (default 1.0; 0 = never)")
@@ -112,7 +126,9 @@ def run(args) -> int:
     config = SimConfig(seed=args.seed, start_pose=start_pose, beacons=args.beacons,
                        camera=not args.no_camera and not snapshot, round_no=args.round_no, parts=args.parts,
                        processing_delay=args.processing_delay, start_after=args.start_after,
-                       camera_timing=args.camera_timing)
+                       camera_timing=args.camera_timing,
+                       lidar_update=args.lidar_update, lidar_self_hits=not args.no_lidar_self_hits,
+                       speed_control=args.speed_control, simtwo_pid_timing=args.pid_timing)
     if args.status_every < 0:
         raise ConfigError(f"--status-every {args.status_every}: must be >= 0")
 
