@@ -105,6 +105,9 @@ def build_harness() -> Path:
     except OSError:
         shutil.rmtree(tmp, ignore_errors=True)
     assert exe.exists()
+    for old in (REPO / "build").glob("pscript-*"):   # builds of earlier sources
+        if old != out and not old.name.startswith("pscript-tmp-"):
+            shutil.rmtree(old, ignore_errors=True)
     return exe
 
 
