@@ -37,14 +37,17 @@ def test_raf_sim_through_the_bridge(ros_master, tmp_path):
     test_node()
     port, sim_port, cam = _ports()
     env = ros_master.env()
-    bridge = raf_process(["bridge", "--port", str(port), "--camera", cam], env, tmp_path / "bridge.log")
+    # the grid idealisation on both sides (raf sim --camera-timing grid, the bridge's grid lock): exact stamps
+    bridge = raf_process(["bridge", "--port", str(port), "--camera", cam, "--set", "camera/bracket=nearest",
+                          "--set", "camera/use_grid=true"], env, tmp_path / "bridge.log")
     sim = None
     try:
         odom, gt = Collector("/odom", Odometry), Collector("/ground_truth", Odometry)
         img, scan = Collector("/camera/image_raw", Image), Collector("/scan", LaserScan)
         pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
         wait_until(lambda: pub.get_num_connections() > 0, 30, what="the bridge subscribing to cmd_vel")
-        sim = _sim(env, port, sim_port, cam, tmp_path / "sim.log", "--start-pose=-0.7,0.35,0")
+        sim = _sim(env, port, sim_port, cam, tmp_path / "sim.log", "--start-pose=-0.7,0.35,0",
+                   "--camera-timing", "grid")
         img.wait(45, timeout=60)
         scan.wait(3, timeout=10)
         # camera stamps: the render ticks of the simulator's camera clock (k/15 s), once the phase is learned

@@ -11,9 +11,10 @@ Each control cycle (40 ms of simulation time):
    ``control.pas`` does (``COMMAND_TIMEOUT_MS``);
 2. ``Simulator.step_cycle`` with that command;
 3. publish the camera frames rendered during the cycle (ZMQ PUB, raw B G R A bottom-up, SNDHWM 2) --
-   before step 4, which is the frame ordering rule of docs/dev/interfaces.md; ``realtime`` publishes each
-   one when its simulation time has come on the wall clock, as SimTwo's GUI loop sends a frame as soon as
-   it is rendered (``fast`` publishes them at once);
+   before step 4, which is the frame ordering rule of docs/dev/interfaces.md; ``realtime`` with the
+   default ``camera_timing="simtwo"`` publishes each one when its simulation time has come on the wall
+   clock, as SimTwo's GUI loop sends a frame as soon as it is rendered (``fast``, and the ``"grid"``
+   idealisation, publish them together just before the SensorFrame);
 4. send the cycle's :class:`SensorFrame` to the bridge, from the command socket (so the bridge replies to
    the frame's source address) -- ``realtime``: when its simulation time has come, as SimTwo's script
    sends it, so a reply is read in the next cycle, as in SimTwo;
@@ -425,10 +426,14 @@ class SimRunner:
         if not frames:
             return
         bottom_up = self.sim.robot.camera.bottom_up
+        paced = getattr(self.sim.config, "camera_timing", "grid") == "simtwo"
+        if not paced:  # realtime: together, just before the SensorFrame (at its time)
+            self._pace(self.sim.time)
         for f in frames:
             if self._pub is None:
                 continue
-            self._pace(f.time)  # realtime: sent when rendered, as SimTwo's GUI does
+            if paced:  # realtime: sent when rendered, as SimTwo's GUI does (grid: just before the SensorFrame)
+                self._pace(f.time)
             try:
                 import zmq
 
