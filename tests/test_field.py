@@ -149,12 +149,133 @@ def test_simtwo2022_differences(field):
     assert {m.size for m in f22.wall_markers()} == {0.055}
     assert {m.size for m in f22.floor_markers()} == {0.06}
     for a, b in [(56, 61), (54, 59)]:
-        np.testing.assert_allclose(f22.marker(a).position, field.marker(b).position)
+        np.testing.assert_allclose(f22.marker(a).position[1], field.marker(b).position[1])
         np.testing.assert_allclose(f22.marker(b).normal, field.marker(a).normal)
     for a, b in zip([62, 63, 64, 65], [65, 64, 63, 62]):
-        np.testing.assert_allclose(f22.marker(a).position, field.marker(b).position)
-    for i in range(0, 27):
-        np.testing.assert_allclose(f22.marker(i).pose, field.marker(i).pose)
+        np.testing.assert_allclose(f22.marker(a).position[0], field.marker(b).position[0])
+    for m in field.wall_markers():  # same facings and in-plane rotations as the rules' marker of that pose
+        np.testing.assert_allclose(np.abs(f22.marker(m.id).normal), np.abs(m.normal), atol=1e-12)
+
+
+# SimTwo's RobotFactoryPro2022 scene (P33a/SimTwo): scene.xml places the incoming warehouse at (-0.47, 0.54),
+# the outgoing one at (0.47, -0.54) turned 180 degrees, machine A at (-0.695/2, -0.075) and B at
+# (0.695/2, 0.075) turned -90 degrees; wharehouse*.xml and machines*.xml build them from these constants.
+# The map's z = 0 is the surface the robot drives on: the top of field_pro.xml's 1 mm field cuboid.
+XML = dict(base_height=0.002, cell_x=0.15, cell_y=0.08, wall_height=0.065, wall_thickness=0.02,
+           marker_thickness=0.001, field_height=0.001, wh_y=0.54, machine_x=0.695 / 2)
+
+
+def test_simtwo2022_wall_markers_where_simtwos_scene_puts_them():
+    """Warehouse markers on the back wall's field side (cell_y/2 - wall_thickness/2 out, minus the 1 mm
+    marker plate): |y| = 0.569 (the 1 mm plate's centre is SimTwo's 0.5695); machine markers 1 mm off the
+    machine wall's faces; all at base_height + 1.5 wall_height above the floor cuboid (world 0.0995)."""
+    x = XML
+    f22 = load_field("simtwo2022")
+    face_y = x["wh_y"] + x["cell_y"] / 2 - x["wall_thickness"] / 2 - x["marker_thickness"]
+    z = x["base_height"] + 1.5 * x["wall_height"] - x["field_height"]
+    assert face_y == pytest.approx(0.569) and z == pytest.approx(0.0985)
+    for m in f22.wall_markers():
+        p, n = m.position, m.normal
+        assert p[2] == pytest.approx(z)
+        if m.id in range(50, 54) or m.id in range(62, 66):
+            assert abs(p[1]) == pytest.approx(face_y) and n[1] == pytest.approx(-np.sign(p[1]))
+        else:
+            off = x["wall_thickness"] / 2 + x["marker_thickness"]
+            assert abs(p[0]) == pytest.approx(x["machine_x"] + (off if abs(p[0]) > x["machine_x"] else -off))
+            assert n[0] == pytest.approx(np.sign(abs(p[0]) - x["machine_x"]) * np.sign(p[0]))
+        # the marker plate (1 mm) stands on a wall face; in front of it 5 cm are free
+        assert any(_inside_box(p - n * 0.0015, b) for b in f22.boxes), m.id
+        assert not any(_inside_box(p - n * 0.0005, b) for b in f22.boxes), m.id
+        for d in np.linspace(0.001, 0.05, 25):
+            assert not any(_inside_box(p + n * d, b) for b in f22.boxes), (m.id, d)
+    # IDs by position as in SimTwo's textures (wharehouseOut.xml: 62 at local x -0.225, turned 180 degrees)
+    assert f22.marker(62).position[0] == pytest.approx(0.695)
+    assert f22.marker(56).position[:2] == pytest.approx([-0.3365, -0.15])  # machinesA.xml BR
+    assert f22.marker(54).position[:2] == pytest.approx([0.3585, 0.0])  # machinesB.xml BR
+
+
+def test_simtwo2022_walls_and_ribs():
+    """Warehouse back walls 5 mm further out (centre |y| 0.58) and 0.13 m tall from 1 mm above the floor;
+    warehouse ribs 0.08 m deep reaching into the back wall; machine ribs 0.18 m long (rules: 0.16)."""
+    f22, rules = load_field("simtwo2022"), load_field("rules2026")
+    b = {x.name: x for x in f22.boxes}
+    r = {x.name: x for x in rules.boxes}
+    assert set(b) == set(r)
+    for side, s in (("incoming", 1), ("outgoing", -1)):
+        w = b[f"{side}_wh_back_wall"]
+        assert w.center[1] == pytest.approx(0.58 * s) and w.size == pytest.approx((0.62, 0.02, 0.13))
+        assert w.center[2] - w.size[2] / 2 == pytest.approx(0.001)
+        for i in range(5):
+            rib = b[f"{side}_wh_rib{i}"]
+            assert rib.center[0] == pytest.approx(r[f"{side}_wh_rib{i}"].center[0])
+            assert rib.center[1] == pytest.approx(0.54 * s) and rib.size[:2] == pytest.approx((0.02, 0.08))
+            assert rib.center[2] + rib.size[2] / 2 == pytest.approx(0.064)
+    for mach in ("A", "B"):
+        for i in range(3):
+            rib, rr = b[f"machine_{mach}_rib{i}"], r[f"machine_{mach}_rib{i}"]
+            assert rib.size[:2] == pytest.approx((0.18, 0.02)) and rib.center[:2] == pytest.approx(rr.center[:2])
+        cw = b[f"machine_{mach}_center_wall"]
+        assert cw.size == pytest.approx((0.02, 0.32, 0.13)) and cw.center[:2] == pytest.approx(
+            r[f"machine_{mach}_center_wall"].center[:2])
+    assert f22.floor.x == (-0.84, 0.84) and f22.floor.y == (-0.59, 0.59)  # field_pro.xml: 1.68 x 1.18 m
+
+
+def test_simtwo2022_floor_markers_shifted_as_printed_in_the_field_texture(field):
+    """field_pro.jpg as SimTwo maps it puts every floor marker 6.75 mm towards -y of the rules' map, x and
+    rotation unchanged; side 0.06 m (measured 0.0598-0.0600 m)."""
+    f22 = load_field("simtwo2022")
+    assert len(f22.floor_markers()) == len(field.floor_markers()) == 33
+    for m in field.floor_markers():
+        g = f22.marker(m.id)
+        np.testing.assert_allclose(g.position, m.position + [0.0, -0.00675, 0.0], atol=1e-12)
+        np.testing.assert_allclose(g.rotation, m.rotation, atol=1e-12)
+        assert g.size == m.size == 0.06
+
+
+def test_overlay_errors_name_what_is_wrong(tmp_path):
+    base = {"name": "x", "base": "rules2026"}
+    for extra, msg in [({"marker_overrides": {"99": {"y": 0.1}}}, "overrides marker 99"),
+                       ({"marker_overrides": {"50": {"colour": 1}}}, "unknown keys"),
+                       ({"box_overrides": {"no_such_wall": {"size": [1, 1, 1]}}}, "overrides box 'no_such_wall'"),
+                       ({"box_overrides": {"machine_A_rib0": {"height": 1}}}, "unknown keys")]:
+        p = tmp_path / "f.json"
+        p.write_text(json.dumps({**base, **extra}))
+        with pytest.raises(FieldError, match=msg):
+            load_field(str(p))
+
+
+@pytest.mark.render
+def test_stand_in_builds_simtwo2022_and_its_camera_sees_the_shifted_markers(robot):
+    """raf --field simtwo2022: the stand-in's scene has SimTwo's ribs and walls, and a floor marker seen by
+    the robot camera lies where the simtwo2022 map says (within 1 px), 6.75 mm off the rules' position."""
+    import cv2
+
+    from robotatfactory.sim import SimConfig, Simulator
+
+    f22, rules = load_field("simtwo2022"), load_field("rules2026")
+    s = Simulator(f22, robot, SimConfig(competition=False, lidar=False))
+    try:
+        m = s.model
+        assert m.geom("machine_A_rib0").size == pytest.approx([0.09, 0.01, 0.0325])
+        assert m.geom("incoming_wh_back_wall").pos[1] == pytest.approx(0.58)
+        pose = (-0.60, -0.20, 0.3)
+        s.set_pose(*pose)
+        img = s.render_camera()
+        T = np.linalg.inv(s.camera_pose())
+    finally:
+        s.close()
+    det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_5X5_100),
+                                  cv2.aruco.DetectorParameters())
+    corners, ids, _ = det.detectMarkers(img)
+    found = {int(i): c.reshape(4, 2) for c, i in zip(corners, ids.ravel())}
+    rvec, _ = cv2.Rodrigues(T[:3, :3])
+    assert 18 in found
+
+    def err(fld):
+        uv, _ = cv2.projectPoints(fld.marker(18).corners, rvec, T[:3, 3], robot.camera.K, np.zeros(5))
+        return np.abs(uv.reshape(4, 2) - found[18]).max()
+
+    assert err(f22) < 1.0 < err(rules)
 
 
 def test_bad_field_files_raise_field_error(tmp_path):

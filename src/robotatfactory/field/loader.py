@@ -67,6 +67,31 @@ def _apply_overlay(base: dict, overlay: dict) -> dict:
         _permute(by_id, group, list(reversed(group)))
     for group in overlay.get("reverse_ids", []):
         _permute(by_id, group, list(reversed(group)))
+    # geometry that differs from the base: the floor's extent, a uniform shift of the floor markers (the
+    # print's offset), per-marker coordinates (applied after the permutations: keyed by the final id) and
+    # per-box centre/size (by name)
+    if "floor" in overlay:
+        raw["floor"] = overlay["floor"]
+    dx, dy = overlay.get("floor_marker_offset", (0.0, 0.0))
+    for m in raw["markers"]:
+        if m["kind"] == "floor":
+            m["x"], m["y"] = m["x"] + dx, m["y"] + dy
+    for mid, values in overlay.get("marker_overrides", {}).items():
+        m = by_id.get(int(mid))
+        if m is None:
+            raise FieldError(f"field overlay overrides marker {mid}, which the base field lacks")
+        bad = set(values) - {"x", "y", "z", "rx", "ry", "rz", "size"}
+        if bad:
+            raise FieldError(f"field overlay: marker {mid}: unknown keys {sorted(bad)}")
+        m.update(values)
+    boxes = {b["name"]: b for b in raw["static_boxes"]}
+    for name, values in overlay.get("box_overrides", {}).items():
+        if name not in boxes:
+            raise FieldError(f"field overlay overrides box {name!r}, which the base field lacks")
+        bad = set(values) - {"center", "size", "yaw"}
+        if bad:
+            raise FieldError(f"field overlay: box {name!r}: unknown keys {sorted(bad)}")
+        boxes[name].update(values)
     return raw
 
 
