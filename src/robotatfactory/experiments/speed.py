@@ -14,6 +14,12 @@ compared with the reference at the middle of that interval, r(T - P/2).
 
 Figures: RMS and maximum error over the run, and the lag (the time shift of the reference that best
 matches the measurement, found on a 1 ms grid). Target: RMS error <= 0.01 m/s.
+
+Mode. By default the simulator runs its SimTwo-like drive: SimTwo's own speed controller (CalcPID with the
+robot's ``simtwo_pid`` gains, set once, switched on by the script: 0 V for 9 ms after each script call);
+``--speed-control`` and ``--pid-timing`` select the others (``raf sim`` options of the same names). The
+result ``speed_mode`` names the mode. ``--lockstep`` (the runner waits for each reply, deterministic
+timing: an idealisation SimTwo cannot do) is on by default; ``--no-lockstep`` runs the simulator free.
 """
 from __future__ import annotations
 
@@ -48,6 +54,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--settle", type=float, default=0.5,
                         help="simulation seconds at rest before the reference starts (default 0.5)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed")
+    parser.add_argument("--speed-control", choices=("simtwo", "simtwo_per_cycle", "ideal_pi"), default="simtwo",
+                        help="the simulator's wheel speed controller (raf sim --speed-control; default simtwo)")
+    parser.add_argument("--pid-timing", choices=("script_enabled", "scene_enabled", "script_holds_voltage"),
+                        default="script_enabled", help="raf sim --pid-timing (default script_enabled)")
+    parser.add_argument("--no-lockstep", dest="lockstep", action="store_false",
+                        help="run the simulator free instead of waiting for each reply")
 
 
 def analyse(t: np.ndarray, v: np.ndarray, v_max: float, rise: float) -> dict:
@@ -113,7 +125,9 @@ def run(args, out_dir: Path | None) -> dict:
         _wait(lambda: pub.get_num_connections() > 0, 30, "the bridge subscribing to cmd_vel")
         sim = subprocess.Popen([sys.executable, "-m", "robotatfactory", "--field", args.field, "sim", "--port",
                                 str(sim_port), "--bridge", f"127.0.0.1:{port}", "--no-camera", "--no-server",
-                                "--lockstep", "--realtime", "--lockstep-timeout", "2.0", "--start-pose=-0.7,0.35,0",
+                                *(["--lockstep", "--lockstep-timeout", "2.0"] if args.lockstep else []),
+                                "--realtime", "--start-pose=-0.7,0.35,0",
+                                "--speed-control", args.speed_control, "--pid-timing", args.pid_timing,
                                 "--seed", str(args.seed), "--duration", f"{duration + 0.2:.2f}",
                                 "--status-every", "1"], env=env, stdout=open(tmp / "sim.log", "wb"),
                                stderr=subprocess.STDOUT, start_new_session=True)
@@ -135,7 +149,8 @@ def run(args, out_dir: Path | None) -> dict:
     keep = (t >= 0) & (t <= rise + hold)
     t, v, g = t[keep], arr[keep, 1], arr[keep, 2]
     res = analyse(t, v, v_max, rise)
-    res.update({"speed_samples": int(len(t)), "speed_reference_max_mps": v_max, "speed_rise_s": rise,
+    res.update({"speed_mode": f"{args.speed_control}/{args.pid_timing}/{'lockstep' if args.lockstep else 'free'}",
+                "speed_samples": int(len(t)), "speed_reference_max_mps": v_max, "speed_rise_s": rise,
                 "speed_rmse_target_met": res["speed_rmse_mps"] <= 0.01})
     ok = np.isfinite(g)
     if ok.any():
