@@ -5,8 +5,9 @@ Threads of this process (none of them ever blocks another):
 * **UDP** (the control path): receive a datagram (with the kernel's arrival time), check its source, decode
   it, classify it (stream bookkeeping), answer it at once with one ``Command`` (``Seq`` echoed, watchdog
   applied) to its source, then publish ``odom`` (written synchronously), ``/clock``, TF, ``ground_truth``,
-  ``joint_states``, ``contact``, ``electromagnet/state`` and ``scan`` stamped with the frame's ``Tms``, and
-  pass ``Tms`` and the arrival time to the camera process.
+  ``joint_states``, ``contact``, ``electromagnet/state`` stamped with the frame's ``Tms``, ``scan`` when a
+  LIDAR sweep is complete (stamped with its first ray's time, self-hits as NaN), and pass ``Tms`` and the
+  arrival time to the camera process.
 * **diagnostics**: every ``~diagnostics/period`` wall seconds (so it keeps reporting when the simulator, and
   with it simulation time, stops).
 
@@ -14,6 +15,7 @@ The camera (ZMQ -> ``camera/image_raw``, ``camera/camera_info``) runs in a child
 ``<name>_camera`` (:mod:`.camera_node`), so that 1.2 MB frames never hold this process's GIL.
 
 The algorithms are in ``robotatfactory.simtwo.stream``, ``robotatfactory.simtwo.timing``,
+``robotatfactory.simtwo.scan`` (LIDAR sweeps), ``robotatfactory.simtwo.selfhits``,
 ``robotatfactory.simtwo.watchdog`` and
 ``robotatfactory.localization.odometry``; this module is wiring. See docs/bridge.md.
 """
