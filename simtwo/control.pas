@@ -62,7 +62,8 @@ const
   // ---- LIDAR range noise, sigma = A * exp(B * d) metres (A = 0: SimTwo's ranges unchanged) ----
   LIDAR_NOISE_A = 0.001524;
   LIDAR_NOISE_B = 1.3103;
-  LIDAR_NOISE_EVERY = 5;       // a ray gets a new noise sample every 5 cycles (one 0.2 s sweep)
+  LIDAR_NOISE_EVERY = 5;       // cycles per SimTwo sweep (ranger period 0.2 s / script period 40 ms)
+  MAX_RAY = 1023;              // rays 0..MAX_RAY keep their noise for a sweep (more: drawn each cycle)
 
   // ---- protocol -----------------------------------------------------------------------------
   PROTOCOL_VERSION = 1;
@@ -102,8 +103,9 @@ var
   RepV, RepW: double;
   RepError: string;
 
-  // LIDAR noise per ray: the raw value it was drawn for, the noisy value sent
-  LidarRaw, LidarNoisy: array[0..1023] of double;
+  // LIDAR noise per ray: the clean value it was drawn for, the noisy value sent, this cycle's value
+  LidarRaw, LidarNoisy, LidarCur: array[0..1023] of double;
+  LidarDrawSeq: integer;       // FrameSeq of the last noise draw
 
 
 // ---------------------------------------------------------------------------------------------
@@ -448,52 +450,68 @@ end;
 // Sensors
 // ---------------------------------------------------------------------------------------------
 
-// One LIDAR range as sent: -1 for no return (SimTwo's -1, or anything not >= 0), else the range
-// plus noise of sigma A * exp(B * d), redrawn when the ray changes or every LIDAR_NOISE_EVERY cycles
-function NoisyRange(i: integer; d: double): double;
-var r: double;
-    ok, redraw: boolean;
+// A range as sent: -1 for no return (SimTwo's -1, or anything that is not a finite range >= 0)
+function CleanRange(d: double): double;
+var ok: boolean;
 begin
   // written so that NaN fails the test whatever a compiler does with `not (d >= 0)`
   ok := false;
   if d >= 0 then begin
     if d < 1.0e9 then ok := true;
   end;
-  if not ok then begin
-    result := -1;
-    exit;
-  end;
-  if CfgLidarNoiseA <= 0 then begin
+  if ok then result := d else result := -1;
+end;
+
+// A clean range plus noise of sigma A * exp(B * d), never below 0; -1 stays -1
+function AddNoise(d: double): double;
+var r: double;
+begin
+  if (d < 0) or (CfgLidarNoiseA <= 0) then begin
     result := d;
     exit;
   end;
-  if i <= 1023 then begin
-    redraw := (d <> LidarRaw[i]) or ((FrameSeq mod LIDAR_NOISE_EVERY) = 0);
-    if redraw then begin
-      LidarRaw[i] := d;
-      LidarNoisy[i] := d + RandG(0, CfgLidarNoiseA * Exp(CfgLidarNoiseB * d));
-    end;
-    r := LidarNoisy[i];
-  end else
-    r := d + RandG(0, CfgLidarNoiseA * Exp(CfgLidarNoiseB * d));
+  r := d + RandG(0, CfgLidarNoiseA * Exp(CfgLidarNoiseB * d));
   if r < 0 then r := 0;
   result := r;
 end;
 
-// The Lidar value line ('' without a LIDAR) and the number of rays in it
+// The Lidar value line ('' without a LIDAR) and the number of rays in it.
+// SimTwo delivers a whole new sweep once per ranger period (5 cycles) and returns the same values in
+// between. The noise is drawn once per sweep: for every ray when the values change (a new sweep),
+// or, while they repeat exactly (a robot standing still), LIDAR_NOISE_EVERY cycles after the last
+// draw, which keeps to SimTwo's sweep schedule. New noise between SimTwo's sweeps would look like a
+// sweep SimTwo never made.
 function LidarLine(var n: integer): string;
 var M: Matrix;
     i: integer;
     d: double;
     s: string;
+    fresh: boolean;
 begin
   s := '';
   n := 0;
   if iLidar >= 0 then begin
     M := GetSensorValues(iRobot, iLidar);
     n := MNumRows(M);
+    fresh := false;
     for i := 0 to n - 1 do begin
-      d := NoisyRange(i, Mgetv(M, i, 0));
+      d := CleanRange(Mgetv(M, i, 0));
+      if i <= MAX_RAY then begin
+        LidarCur[i] := d;
+        if d <> LidarRaw[i] then fresh := true;
+      end;
+    end;
+    if fresh then LidarDrawSeq := FrameSeq
+    else if (FrameSeq - LidarDrawSeq) mod LIDAR_NOISE_EVERY = 0 then fresh := true;
+    for i := 0 to n - 1 do begin
+      if i <= MAX_RAY then begin
+        if fresh then begin
+          LidarRaw[i] := LidarCur[i];
+          LidarNoisy[i] := AddNoise(LidarCur[i]);
+        end;
+        d := LidarNoisy[i];
+      end else
+        d := AddNoise(CleanRange(Mgetv(M, i, 0)));
       if i > 0 then s := s + ';';
       if d < 0 then s := s + '-1' else s := s + FmtReal(d);
     end;
@@ -664,8 +682,9 @@ begin
   NRejected := 0;
   NTimeouts := 0;
   RCount := 0;
-  for i := 0 to 1023 do begin
-    LidarRaw[i] := -1;
+  LidarDrawSeq := 0;
+  for i := 0 to MAX_RAY do begin
+    LidarRaw[i] := -2;         // no range: the first sweep (SimTwo's zeros) is new
     LidarNoisy[i] := -1;
   end;
 

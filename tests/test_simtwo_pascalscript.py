@@ -431,6 +431,37 @@ def test_defaults_and_geometry_match_the_project(main_run):
     assert all(line.split()[3] == run.cfg["BridgePort"] for line in run.record if line.startswith("SEND "))
 
 
+def _draws(run: Run) -> dict[int, int]:
+    """Noise draws (RandG calls) per cycle."""
+    out: dict[int, int] = {}
+    for line in run.record:
+        if line.startswith("DRAW "):
+            k = int(line.split()[1])
+            out[k] = out.get(k, 0) + 1
+    return out
+
+
+@pytest.mark.parametrize("still", [0, 1])
+def test_lidar_noise_is_drawn_once_per_simtwo_sweep(harness_exe, tmp_path, still):
+    """SimTwo delivers a whole sweep every 5 cycles and repeats it in between (zeros before the first):
+    the script draws new noise for all rays when a new sweep appears and never between SimTwo's sweeps;
+    a sweep that repeats exactly (a robot standing still) gets new noise on the same 5-cycle schedule."""
+    phase, n = 3, 19
+    run = run_harness(harness_exe, tmp_path, n, lambda k, raw: [], noise_z=0.5, sweep=5, sweep_phase=phase,
+                      still=still)
+    draws = _draws(run)
+    for k, count in draws.items():       # all rays with a return at once (none for a -1)
+        assert count == sum(1 for r in run.cycles[k].get["SensorValues"][8] if r >= 0), f"cycle {k}"
+    # cycle 0: SimTwo's zeros (new); then the sweeps at phase, phase + 5, ...
+    assert sorted(draws) == [0] + list(range(phase, n, 5))
+    ranges = [SensorFrame.decode(raw).ranges for raw in run.frames]
+    for k in range(1, n):
+        # the stand-in's noise is deterministic (z = 0.5): frames change exactly when the sweep does
+        new_sweep = k == phase or (not still and k in draws)
+        assert (ranges[k] == ranges[k - 1]).all() != new_sweep, f"cycle {k}"
+    assert (ranges[0] < 0.02).all(), "before the first sweep: SimTwo's zeros plus noise"
+
+
 # ---- 2. the reader's rules, case by case ----------------------------------------------------------------
 
 def test_first_occurrence_wins_and_bad_replies_keep_the_last_command(harness_exe, tmp_path):

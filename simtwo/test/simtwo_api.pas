@@ -22,7 +22,11 @@ unit simtwo_api;
   The harness waits for a datagram 'HARNESS-TICK' on its own UDP socket before each cycle (these
   never reach the script), so the test drives the cycles. Options are key=value arguments:
     record=FILE cycles=N bridge_ip=A bridge_port=N timeout_ms=N noise_z=F noise_a=F
-    missing=ID,ID,... tick_timeout_ms=N }
+    missing=ID,ID,... tick_timeout_ms=N
+    sweep=N sweep_phase=P still=0|1   the LIDAR as SimTwo delivers it: a whole new sweep every N
+                                      cycles from cycle P on, all zeros before (still=1: every sweep
+                                      the same, a robot standing still); without sweep, new values
+                                      every cycle (and odd ones in cycle 2) to exercise the sender }
 
 {$mode delphi}{$H+}
 
@@ -99,6 +103,9 @@ var
   HTicks: integer = 0;
   HNoiseZ: double = 0;
   HTickTimeoutMs: QWord = 20000;
+  HSweep: integer = 0;
+  HSweepPhase: integer = 0;
+  HStill: boolean = false;
   HGenData: string = '';
   HGenPackets: TStringList;
   HBuf: array[0..65535] of byte;
@@ -320,8 +327,11 @@ begin
   result.cols := 1;
   s := '';
   for j := 0 to n - 1 do begin
-    if SENSOR_IDS[i] = 'ranger2d' then result.data[j] := RayValue(j, HCycle)
-    else result.data[j] := -1;
+    if SENSOR_IDS[i] <> 'ranger2d' then result.data[j] := -1
+    else if HSweep <= 0 then result.data[j] := RayValue(j, HCycle)
+    else if HCycle < HSweepPhase then result.data[j] := 0       // SimTwo: 0 before the first sweep
+    else if HStill then result.data[j] := RayValue(j, 100)
+    else result.data[j] := RayValue(j, 100 + (HCycle - HSweepPhase) div HSweep);
     if j > 0 then s := s + ';';
     s := s + HarnessReal(result.data[j]);
   end;
@@ -358,6 +368,7 @@ end;
 function RandG(Mean, StdDev: Extended): Extended;
 begin
   result := Mean + StdDev * HNoiseZ;             // deterministic "noise": the test knows z
+  HarnessRec(Format('DRAW %d', [HCycle]));
 end;
 
 procedure WriteLn(S: string);
@@ -410,6 +421,9 @@ begin
   HGenPackets := TStringList.Create;
   HNoiseZ := HarnessOptReal('noise_z', 0);
   HTickTimeoutMs := StrToInt(HarnessOpt('tick_timeout_ms', '20000'));
+  HSweep := StrToInt(HarnessOpt('sweep', '0'));
+  HSweepPhase := StrToInt(HarnessOpt('sweep_phase', '0'));
+  HStill := HarnessOpt('still', '0') = '1';
 
   AssignFile(HRec, HarnessOpt('record', 'record.txt'));
   Rewrite(HRec);
