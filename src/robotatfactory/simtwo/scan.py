@@ -7,13 +7,14 @@ control cycle, period ``D`` = 40 ms) and seconds; ``P`` is the ranger's sweep pe
 **What SimTwo does** (source references to ``P33a/SimTwo``; docs/bridge.md has the details). Every physics
 step (1 ms) ``TSensor.PreProcess`` (``ODERobots.pas`` 1593-1624, called at ``Viewer.pas`` 5414-5417) enables
 the few rays whose turn it is, ``first_active_ray = round(N * TimeFromLastMeasure / P)``, and ODE measures
-them in that step's ``dSpaceCollide`` (``Viewer.pas`` 4370-4373, ``nearCallback`` 374-410): the rays are
+them in that step's ``dSpaceCollide`` (``Viewer.pas`` 4370-4373, ``nearCallback`` 346-410): the rays are
 *measured* in turn over the period. But what a script reads (``GetSensorValues``,
 ``ODERobotsPublished.pas`` 1107-1117) is ``Measures[]``, which ``UpdateMeasures`` (``ODERobots.pas``
 1842-1846) copies from all rays at once when ``TimeFromLastMeasure`` exceeds ``P`` (``Viewer.pas``
 5446-5452): the values are *delivered* a whole sweep at once, once per period, and are 0 before the first
-delivery. Ray ``i`` of the sweep delivered at ``t_u`` was measured at ``t_u - P + i * P / N`` (within one
-physics step: ``rolling`` ray timing, the default). A stand-in that measures every ray at the delivery
+delivery (the ``TSensorMeasure`` objects start zeroed: ``ODERobots.pas`` 1553-1560, 2239-2242). Ray ``i`` of
+the sweep delivered at ``t_u`` was measured at ``t_u - P + i * P / N`` (within 1.5 ms: ``rolling`` ray
+timing, the default). A stand-in that measures every ray at the delivery
 instant is ``ray_timing="instant"`` (``t0 = t_u``, ``time_increment = 0``).
 
 **Whole-sweep mode** (:class:`WholeSweepAssembler`, the default):

@@ -3,8 +3,9 @@
 Plain Python, no ROS. Frames: ``base_link`` (on the floor between the wheels, x forward, y left) and the
 ``laser`` frame (at ``xyz`` in ``base_link``, not rotated: SimTwo's ranger2d of simtwo/AGV_lidar.xml).
 
-SimTwo's ranger rays are ODE rays in the scene's one space (``Viewer.pas`` ~858, ~4274; ``nearCallback``
-``Viewer.pas`` 347-410): ODE never collides two geoms of one body, so the ranger's own body (the base plate
+SimTwo's ranger rays are ODE rays in the scene's one space, each attached to the ranger's body (``Viewer.pas``
+853-863 ``CreateOneRaySensor``, 4274 the space; ``nearCallback`` ``Viewer.pas`` 346-410 keeps each ray's
+nearest hit): ODE never collides two geoms of one body, so the ranger's own body (the base plate
 and the shells attached to it) is not hit, but every other body is, the robot's wheels included (separate
 bodies, ``AGV.xml``: radius 0.0325 m, 6 mm thick, centres at y = +/-0.0675 m). With the scan plane at 0.05 m
 (the wheels' tops are at 0.065 m) the rays within about +/-23 degrees of +/-90 degrees end on the wheels'
