@@ -48,7 +48,9 @@ CONTROL = SIMTWO / "control.pas"
 API = SIMTWO / "test" / "simtwo_api.pas"
 PSDIR = SIMTWO / "test" / "pscript"
 HARNESS = PSDIR / "pscript_harness.pas"
-PASCALSCRIPT = Path("/usr/lib/lazarus/2.2.6/components/PascalScript/Source")
+# Debian's lazarus-src-2.2 (2.2.6 on Debian 12); any Lazarus version's copy will do
+PASCALSCRIPT = max(Path("/usr/lib/lazarus").glob("*/components/PascalScript/Source"),
+                   default=Path("/usr/lib/lazarus/2.2.6/components/PascalScript/Source"))
 ROBOT_JSON = REPO / "src" / "robotatfactory" / "data" / "robot_simtwo.json"
 FRAME_LABELS = ["RAF", "Seq", "Tms", "Enc1", "Enc2", "Odo1", "Odo2", "X", "Y", "Theta", "Contact", "Magnet",
                 "LidarN", "Lidar"]
