@@ -16,8 +16,8 @@ datagram each), decodes every datagram the script sent with the Python codec
 (robotatfactory.simtwo.SensorFrame) and answers with Python-encoded Commands, then checks what the script
 applied against the protocol's rules (docs/protocol.md, docs/simtwo.md).
 
-The harness binary is built once into build/pscript-<hash of its sources and of fpc's version>/ (about
-1 s with fpc 3.2.2) and reused until those sources change.
+The harness binary is built once into build/pscript-<hash of its sources, fpc's version and PascalScript's
+path>/ (about 2.4 s with fpc 3.2.2) and reused until those change.
 """
 from __future__ import annotations
 
@@ -89,7 +89,7 @@ def build_harness() -> Path:
         pytest.fail(f"PascalScript's sources are not in {PASCALSCRIPT}: install Debian's lazarus-src-2.2 "
                     "(scripts/bootstrap.sh does)")
     version = subprocess.run([fpc, "-iV"], capture_output=True, text=True).stdout.strip()
-    h = hashlib.sha256(version.encode())
+    h = hashlib.sha256(version.encode() + str(PASCALSCRIPT).encode())   # the path names Lazarus' version
     for p in harness_sources():
         h.update(p.name.encode() + b"\0" + p.read_bytes())
     out = REPO / "build" / f"pscript-{h.hexdigest()[:16]}"
