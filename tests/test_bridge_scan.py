@@ -364,28 +364,36 @@ def _best_shift(sw, ranges, poses, field, robot):
     return float(shifts[int(np.argmin(cost))]), float(min(cost))
 
 
-def test_stand_in_scans_are_stamped_within_a_cycle_and_free_of_wheel_hits():
+def _turn_on_the_spot(lidar_update, cycles=75):
+    """The stand-in turning on the spot at up to 2 rad/s for 2.4 s: its frames and true poses."""
     from robotatfactory.field import load_field
     from robotatfactory.sim.config import SimConfig
     from robotatfactory.sim.simulator import Simulator
     from robotatfactory.simtwo import Command
 
     field, robot = load_field("rules2026"), load_robot()
-    cfg = SimConfig(camera=False, competition=False, lidar_update="sweep", lidar_self_hits=True,
+    cfg = SimConfig(camera=False, competition=False, lidar_update=lidar_update, lidar_self_hits=True,
                     start_pose=(0.0, 0.0, 0.0))  # between the machines, clear of everything
     sim = Simulator(field, robot, cfg)
+    frames, poses = [], [(0.0, 0.0, 0.0, 0.0)]
+    for k in range(cycles):  # a stamp 0.1 s off turns a scan by 0.2 rad
+        f = sim.step_cycle(Command(0.0, 2.0 if k < 60 else 0.0, False, k))
+        frames.append(f)
+        poses.append((f.time_ms / 1000, f.x, f.y, f.theta))
+    del sim
+    return field, robot, frames, np.array(poses)
+
+
+def test_stand_in_scans_are_stamped_within_a_cycle_and_free_of_wheel_hits():
+    field, robot, frames, poses = _turn_on_the_spot("sweep")
     whole = WholeSweepAssembler(N, P, D)
     old = PerRayAssembler(N, P, robot.physics_step)
     filt = SelfFilter(Footprint.from_robot(robot), robot.lidar.angles(), robot.lidar.xyz[:2])
-    poses, new_sweeps, old_sweeps, raw_self_hits = [(0.0, 0.0, 0.0, 0.0)], [], [], []
-    for k in range(75):  # 3 s turning on the spot at up to 2 rad/s: a stamp 0.1 s off turns a scan 0.2 rad
-        f = sim.step_cycle(Command(0.0, 2.0 if k < 60 else 0.0, False, k))
-        poses.append((f.time_ms / 1000, f.x, f.y, f.theta))
+    new_sweeps, old_sweeps, raw_self_hits = [], [], []
+    for f in frames:
         raw_self_hits.append(int(filt.mask(f.ranges).sum()))
         new_sweeps += whole.add(f.time_ms, f.ranges)
         old_sweeps += old.add(f.time_ms, f.ranges)
-    del sim
-    poses = np.array(poses)
     assert whole.counters.pre_sweep >= 4  # the stand-in reads 0 before its first sweep, as SimTwo does
     assert len(new_sweeps) >= 12 and whole.locked
     assert max(raw_self_hits) >= 40  # the stand-in's rays hit its own wheels, as SimTwo's do
@@ -405,3 +413,13 @@ def test_stand_in_scans_are_stamped_within_a_cycle_and_free_of_wheel_hits():
     old_shifts = [_best_shift(sw, filt.apply(np.nan_to_num(sw.ranges, nan=-1.0))[0], poses, field, robot)[0]
                   for sw in old_sweeps[3:]]
     assert np.median(old_shifts) <= -0.15, old_shifts
+
+
+def test_per_ray_mode_matches_the_stand_ins_per_ray_idealisation():
+    field, robot, frames, poses = _turn_on_the_spot("per_ray")
+    asm = make_assembler("per_ray", N, P, D, robot.physics_step)
+    filt = SelfFilter(Footprint.from_robot(robot), robot.lidar.angles(), robot.lidar.xyz[:2])
+    sweeps = [sw for f in frames for sw in asm.add(f.time_ms, f.ranges)]
+    shifts = [_best_shift(sw, filt.apply(sw.ranges)[0], poses, field, robot)[0]
+              for sw in sweeps if sw.t0 + P <= 60 * D and sw.missing == 0]
+    assert len(shifts) >= 8 and max(abs(s) for s in shifts) <= 0.005, shifts
