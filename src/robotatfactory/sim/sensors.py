@@ -146,26 +146,31 @@ class Lidar:
         returns their cycle-relative indexes (0..nsteps-1), ascending."""
         items: list[tuple[int, list[int], bool]] = []  # (offset, rays measured there, sweep published first)
         if self.sweep:
-            dt, period = self._dt, self._period
+            dt, period, n, active = self._dt, self._period, self.n, self._active
+            last = n - 1
+            # SimTwo's counter over this cycle's steps and one more (a ray's last measurement counts):
+            # first enabled ray and whether the sweep is published first, per step
             t = self._t
-            for j in range(nsteps):
-                s = first_step + j + 1
+            firsts, latches = [], []
+            for j in range(nsteps + 1):
                 latch = False
-                if s >= 2:  # stand-in step s is SimTwo's step s - 1: its counter starts one step later
+                if first_step + j + 1 >= 2:  # stand-in step s is SimTwo's s - 1: its counter starts later
                     t = t + dt
                     if t > period:
                         t = t - period
                         latch = True
-                win = self._window(t)
-                tn = t + dt  # the next step's window: a ray's last measurement is the one that counts
-                if tn > period:
-                    final = list(win)
-                else:
-                    nxt = self._window(tn)
-                    final = [i for i in win if i not in nxt]
-                if final or latch:
-                    items.append((j, final, latch))
-            self._t = t
+                if j == nsteps - 1:
+                    t_end = t
+                firsts.append(round(n * t / period))
+                latches.append(latch)
+            self._t = t_end
+            for j in range(nsteps):
+                f = firsts[j]
+                hi = f + active if f + active < last else last
+                if not latches[j + 1] and firsts[j + 1] - 1 < hi:
+                    hi = firsts[j + 1] - 1  # rays enabled again next step are measured again there
+                if f <= hi or latches[j]:
+                    items.append((j, list(range(f, hi + 1)), latches[j]))
         else:
             n, dtn, pn = self.n, self._dt_ns, self._period_ns
             prev = (first_step * n * dtn) // pn
