@@ -252,7 +252,7 @@ def _write_bag(path, images, odom=()):
 def _calibrate_args(bag, out, **kw):
     a = dict(bag=str(bag), live=False, duration=60.0, image_topic="camera/image_raw", odom_topic="odom",
              out=str(out), json=None, robot="simtwo", initial=None, every=1, max_frames=1500, fit_distortion=False,
-             no_forward=False, field="rules2026")
+             no_forward=False, field="rules2026", corner_refinement="apriltag")
     a.update(kw)
     return argparse.Namespace(**a)
 
@@ -321,3 +321,25 @@ def test_standin_renders_the_principal_point_it_is_given(field, robot):
     e = np.concatenate(errs)
     assert len(e) >= 20
     assert np.all(np.abs(e.mean(axis=0)) < 0.3), e.mean(axis=0)
+
+
+@pytest.mark.render
+def test_apriltag_corners_follow_opencvs_pixel_convention(field, robot):
+    """OpenCV's AprilTag refinement puts pixel centres at +0.5; the detector shifts its corners back, so both
+    refinements agree with the exact projection on average (synthetic renders, exact geometry)."""
+    from robotatfactory.localization.detect import DetectorConfig, MarkerDetector
+    from robotatfactory.localization.synth import SceneRenderer
+
+    ren = SceneRenderer(field, robot.camera, supersample=4)
+    v = cal.camera_vector(robot.camera)
+    shifts = {}
+    for ref in ("apriltag", "subpix"):
+        det = MarkerDetector(DetectorConfig(dictionary=field.dictionary, corner_refinement=ref))
+        e = []
+        for pose in random_poses(field, 12, seed=8):
+            for d in det.detect(ren.render(pose, blur_sigma=0.5)):
+                uv, _ = cal.project_corners(v, np.array([pose]), field.marker(d.id).corners, np.zeros(4, int))
+                e.append(d.corners - uv)
+        shifts[ref] = np.concatenate(e).mean(axis=0)
+    assert np.all(np.abs(shifts["apriltag"]) < 0.15), shifts
+    assert np.all(np.abs(shifts["subpix"]) < 0.15), shifts

@@ -52,10 +52,16 @@ def add_arguments(parser) -> None:
     parser.add_argument("--forward-mm", type=float, default=0.0, help="true forward offset against the nominal, mm")
     parser.add_argument("--no-odometry", action="store_true", help="fit without the odometry prior")
     parser.add_argument("--fit-distortion", action="store_true", help="also fit k1, k2")
+    parser.add_argument("--fit-corner-bias", action="store_true",
+                        help="also fit a constant detector corner bias (px; docs/calibration.md: off by default)")
+    parser.add_argument("--corner-refinement", default="apriltag", choices=("subpix", "contour", "apriltag", "none"),
+                        help="ArUco corner refinement of the detector (default apriltag, raf calibrate's; "
+                             "docs/calibration.md)")
 
 
 def record(fld, true_robot, nominal_robot, route: str = "reference", laps: int = 1, speed: float = 0.2,
-           every: int = 2, seed: int = 0, odometry: bool = True, timeout_s: float = 600.0):
+           every: int = 2, seed: int = 0, odometry: bool = True, timeout_s: float = 600.0,
+           corner_refinement: str = "apriltag"):
     """Drive the route in the stand-in simulator (camera = ``true_robot``'s), detect markers in every
     ``every``-th frame. Returns (frames, info): :class:`FrameData` list (odometry from the encoders with
     ``nominal_robot``'s wheels, stamps at the end of the frame's control cycle) and counts."""
@@ -68,7 +74,7 @@ def record(fld, true_robot, nominal_robot, route: str = "reference", laps: int =
 
     r = make_route(route, laps)
     pp = PurePursuit.for_route(r, speed=speed)
-    det = MarkerDetector(DetectorConfig(dictionary=fld.dictionary))
+    det = MarkerDetector(DetectorConfig(dictionary=fld.dictionary, corner_refinement=corner_refinement))
     cfg = SimConfig(seed=seed, start_pose=r.start, competition=False, lidar=False)
     sim = Simulator(fld, true_robot, cfg)
     odo = DiffDriveOdometry(nominal_robot)
@@ -161,9 +167,9 @@ def run(args, out_dir: Path | None) -> dict:
                                  cy_px=args.cy_px, pitch_deg=args.pitch_deg, roll_deg=args.roll_deg,
                                  height_m=args.height_mm / 1000, forward_m=args.forward_mm / 1000)
     frames, info = record(fld, true_robot, nominal, args.route, args.laps, args.speed, args.every, args.seed,
-                          odometry=not args.no_odometry)
+                          odometry=not args.no_odometry, corner_refinement=args.corner_refinement)
     t0 = time.perf_counter()
-    cfg = CalibrationConfig(fit_distortion=args.fit_distortion)
+    cfg = CalibrationConfig(fit_distortion=args.fit_distortion, fit_corner_bias=args.fit_corner_bias)
     result = calibrate(frames, fld, nominal, cfg)
     fit_s = time.perf_counter() - t0
     nominal_fit = calibrate(frames, fld, nominal, CalibrationConfig(free=(), fit_forward=False))

@@ -53,11 +53,12 @@ from .detect import Detection
 from .geometry import between2, wrap_angle
 
 #: The camera parameters of the model, in the order of the parameter vector (units in docs above).
-PARAMS = ("fx", "fy", "cx", "cy", "x", "y", "z", "pitch_down_deg", "roll_deg", "k1", "k2", "p1", "p2", "k3")
+PARAMS = ("fx", "fy", "cx", "cy", "x", "y", "z", "pitch_down_deg", "roll_deg", "k1", "k2", "p1", "p2", "k3",
+          "corner_bias_px")
 DEFAULT_FREE = ("fx", "fy", "cx", "cy", "z", "pitch_down_deg", "roll_deg")
 DISTORTION = ("k1", "k2", "p1", "p2", "k3")
 UNITS = {"fx": "px", "fy": "px", "cx": "px", "cy": "px", "x": "m", "y": "m", "z": "m", "pitch_down_deg": "deg",
-         "roll_deg": "deg", "k1": "", "k2": "", "p1": "", "p2": "", "k3": ""}
+         "roll_deg": "deg", "k1": "", "k2": "", "p1": "", "p2": "", "k3": "", "corner_bias_px": "px"}
 
 
 @dataclass
@@ -71,6 +72,10 @@ class CalibrationConfig:
     free: tuple[str, ...] = DEFAULT_FREE
     fit_forward: bool = True
     fit_distortion: bool = False
+    # the detector's corners sit a fraction of a pixel inside the printed square's (measured on the stand-in's
+    # frames: 0.2-0.4 px); unmodelled, that shrinks every marker and biases focal length and pitch. One
+    # parameter, an outward shift of each corner along the marker's diagonal in pixels, absorbs it.
+    fit_corner_bias: bool = False
     distortion_terms: tuple[str, ...] = ("k1", "k2")
     sigma_px: float = 0.5  # corner noise, 1 sigma per coordinate (scales the residuals)
     huber_sigmas: float = 3.0  # residuals beyond this many sigmas count linearly (Huber)
@@ -90,7 +95,7 @@ class CalibrationConfig:
     prior_sigma: dict = field(default_factory=lambda: {
         "fx": 0.2, "fy": 0.2, "cx": 0.1, "cy": 0.1,  # relative to fx (cx, cy: fraction of the width)
         "x": 0.05, "y": 0.05, "z": 0.05, "pitch_down_deg": 10.0, "roll_deg": 10.0,
-        "k1": 0.5, "k2": 0.5, "p1": 0.05, "p2": 0.05, "k3": 0.5})
+        "k1": 0.5, "k2": 0.5, "p1": 0.05, "p2": 0.05, "k3": 0.5, "corner_bias_px": 1.0})
     degenerate_ratio: float = 0.3  # a parameter whose sigma exceeds this share of its prior's is "degenerate"
     min_frames: int = 10
     min_detections: int = 40
@@ -122,8 +127,8 @@ class FrameData:
 
 def camera_vector(cam: CameraSpec) -> np.ndarray:
     """The :data:`PARAMS` vector of a camera."""
-    return np.array([cam.fx, cam.fy, cam.cx, cam.cy, *cam.xyz, cam.pitch_down_deg, cam.roll_deg, *cam.distortion],
-                    dtype=float)
+    return np.array([cam.fx, cam.fy, cam.cx, cam.cy, *cam.xyz, cam.pitch_down_deg, cam.roll_deg, *cam.distortion,
+                     0.0], dtype=float)
 
 
 def camera_from_vector(base: CameraSpec, v: Sequence[float]) -> CameraSpec:
@@ -171,6 +176,19 @@ def project_corners(v: np.ndarray, poses: np.ndarray, P: np.ndarray, fi: np.ndar
     return np.stack([v[0] * xd + v[2], v[1] * yd + v[3]], axis=1), Z
 
 
+def predict_corners(v: np.ndarray, poses: np.ndarray, P: np.ndarray, fi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`project_corners` plus the detector's corner bias ``v[14]`` (pixels, outward along each corner's
+    direction from the marker's centre). ``P`` holds whole markers: 4 consecutive corners each."""
+    uv, Z = project_corners(v, poses, P, fi)
+    b = float(v[14]) if len(v) > 14 else 0.0
+    if b:
+        q = uv.reshape(-1, 4, 2)
+        d = q - q.mean(axis=1, keepdims=True)
+        d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-9)
+        uv = (q + b * d).reshape(-1, 2)
+    return uv, Z
+
+
 # -------------------------------------------------------------------------------------------- the result
 
 
@@ -200,12 +218,14 @@ class CalibrationResult:
     cost: float = float("nan")
     nfev: int = 0
     notes: tuple[str, ...] = ()
+    corner_bias_px: float = 0.0  # fitted detector corner bias (outward +), pixels
 
     def summary(self) -> dict:
         """Flat dictionary of the fit (for YAML ``fit:`` and the experiments)."""
         return {
             "residual_px_rms": round(self.residual_px_rms, 4),
             "residual_px_median": round(self.residual_px_median, 4),
+            "corner_bias_px": round(self.corner_bias_px, 4),
             "frames": self.frames, "detections": self.detections, "rejected": self.rejected,
             "frames_dropped": self.frames_dropped, "wall_detections": self.wall_detections,
             "floor_detections": self.floor_detections, "odometry_links": self.odometry_links,
@@ -321,6 +341,8 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
     free = list(dict.fromkeys(cfg.free))
     if cfg.fit_distortion:
         free += [t for t in cfg.distortion_terms if t not in free]
+    if cfg.fit_corner_bias and "corner_bias_px" not in free:
+        free.append("corner_bias_px")
     if cfg.fit_forward and links and "x" not in free:
         free.append("x")
     if ("x" in free or cfg.fit_forward) and not links:
@@ -349,7 +371,7 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
 
         def fun(z):
             v, ps = unpack(z)
-            pred, Z = project_corners(v, ps, Pa, fia)
+            pred, Z = predict_corners(v, ps, Pa, fia)
             r = ((pred - uva) / cfg.sigma_px).ravel()
             r = np.where(np.repeat(Z, 2) > 1e-3, r, 1e3)
             out = [r]
@@ -398,7 +420,7 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
         z = res.x
         # re-decide every detection of the seeded frames with the new camera and poses
         v, ps = unpack(z)
-        pred, Z = project_corners(v, ps, P, fi)
+        pred, Z = predict_corners(v, ps, P, fi)
         e = pred - uv
         per_det = np.sqrt(np.bincount(di, weights=np.sum(e ** 2, axis=1), minlength=n_det_all) / 4)
         behind = np.bincount(di, weights=(Z <= 1e-3).astype(float), minlength=n_det_all) > 0
@@ -415,7 +437,7 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
     if not np.array_equal(fun(z).shape, (S.shape[0],)):
         raise AssertionError("residual count and sparsity disagree")
     v, ps = unpack(z)
-    pred, _ = project_corners(v, ps, P[active_corners], fi[active_corners])
+    pred, _ = predict_corners(v, ps, P[active_corners], fi[active_corners])
     resid = pred - uv[active_corners]
     cov_c = _camera_covariance(res, nC, n_rows=S.shape[0], n_params=len(z))
     sig = {k: float(math.sqrt(max(cov_c[i, i], 0.0))) for i, k in enumerate(free)}
@@ -442,7 +464,8 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
         frames_dropped=int(len(frames) - frame_has.sum()), wall_detections=int(walls),
         floor_detections=int(used - walls), odometry_links=len(links), degenerate=degenerate, correlation=corr,
         poses=ps[frame_has].copy(), stamps=stamps[frame_has].copy(), residuals=resid,
-        points_px=uv[active_corners].copy(), cost=float(res.cost), nfev=int(res.nfev), notes=tuple(notes))
+        points_px=uv[active_corners].copy(), cost=float(res.cost), nfev=int(res.nfev), notes=tuple(notes),
+        corner_bias_px=float(v[14]))
 
 
 def _prior_sigma(name: str, cam: CameraSpec, cfg: CalibrationConfig) -> float:
@@ -455,8 +478,9 @@ def _prior_sigma(name: str, cam: CameraSpec, cfg: CalibrationConfig) -> float:
 
 
 def _camera_covariance(res, nC: int, n_rows: int, n_params: int) -> np.ndarray:
-    """Covariance of the camera block: inverse of J^T J (Huber-weighted) by the Schur complement over the
-    pose blocks, scaled by the a-posteriori variance factor 2*cost/(m - n)."""
+    """Covariance of the camera block: the camera rows and columns of the inverse of J^T J (Huber-weighted,
+    camera and poses together, so the poses' uncertainty is accounted for), scaled by the a-posteriori variance
+    factor 2*cost/(m - n)."""
     J = res.jac.tocsc() if hasattr(res.jac, "tocsc") else np.asarray(res.jac)
     H = (J.T @ J)
     H = H.toarray() if hasattr(H, "toarray") else np.asarray(H)

@@ -41,6 +41,8 @@ class DetectorConfig:
         return cls(**known, extra=extra)
 
 
+APRILTAG_OFFSET_PX = 0.5  # see MarkerDetector.detect
+
 _REFINE = {"none": "CORNER_REFINE_NONE", "subpix": "CORNER_REFINE_SUBPIX",
            "contour": "CORNER_REFINE_CONTOUR", "apriltag": "CORNER_REFINE_APRILTAG"}
 
@@ -117,7 +119,11 @@ class MarkerDetector:
         corners, ids, _ = self._detector.detectMarkers(grey)
         if ids is None:
             return []
-        out = [Detection(int(i), np.asarray(c, dtype=np.float64).reshape(4, 2))
+        # OpenCV's AprilTag refinement (a port of AprilTag's quad fit) puts pixel centres at +0.5, not at
+        # integers like the rest of OpenCV (AprilRobotics/apriltag issue 121); measured on the stand-in's and
+        # the synthetic frames: corners +0.43..+0.45 px in u and v. Back to OpenCV's convention:
+        shift = APRILTAG_OFFSET_PX if self.cfg.corner_refinement == "apriltag" else 0.0
+        out = [Detection(int(i), np.asarray(c, dtype=np.float64).reshape(4, 2) - shift)
                for i, c in zip(ids.ravel(), corners)]
         return sorted(out, key=lambda d: d.id)
 
