@@ -25,11 +25,13 @@ class SimTwoRanger:
 
     ``scene(i, t_ms)``: the range ray ``i`` measures at Tms-time ``t_ms`` (the time of the state it sees).
     ``sensor_offset`` steps run before the script starts counting (the script may be started at any moment;
-    Tms counts the script's own calls, 40 ms each). ``noise_every``: control.pas's noise, redrawn for every
-    ray every that many frames (and when a ray's raw value changes), 0 = none.
+    Tms counts the script's own calls, 40 ms each). ``noise_every``: control.pas's noise before 58a4e75,
+    redrawn for every ray every that many frames (and when a ray's raw value changes), 0 = none;
+    ``noise="sweep"``: control.pas since then, every ray redrawn when any raw value changed (a delivery) and,
+    while they repeat, every 5 frames after the last change.
     """
 
-    def __init__(self, scene, sensor_offset=0, noise_every=0, seed=0):
+    def __init__(self, scene, sensor_offset=0, noise_every=0, seed=0, noise=None):
         self.scene = scene
         self.dt = 0.001
         self.T = 0.0  # TimeFromLastMeasure
@@ -45,6 +47,8 @@ class SimTwoRanger:
         # script starts, and sees the state after 39 of them
         self.offset_ms = 1 - sensor_offset
         self.noise_every = noise_every
+        self.noise = noise
+        self.draw_call = 0
         self.rng = np.random.default_rng(seed)
         self.raw = np.full(N, np.nan)
         self.noisy = np.zeros(N)
@@ -82,7 +86,17 @@ class SimTwoRanger:
                 self.calls += 1
                 assert 40 * self.calls == self._tms(self._phys_ms())
                 out = self.values.copy()
-                if self.noise_every:  # control.pas NoisyRange: redraw when the ray changes or every k frames
+                if self.noise == "sweep":  # control.pas LidarLine since 58a4e75
+                    fresh = not np.array_equal(out, self.raw)
+                    if fresh:
+                        self.draw_call = self.calls
+                    elif (self.calls - self.draw_call) % 5 == 0:
+                        fresh = True
+                    if fresh:
+                        self.raw = out.copy()
+                        self.noisy = out + self.rng.normal(0, 0.0015, N)
+                    out = np.where(out >= 0, np.maximum(self.noisy, 0), -1.0)
+                elif self.noise_every:  # control.pas NoisyRange: redraw when the ray changes or every k frames
                     redraw = (out != self.raw) | ((self.calls - 1) % self.noise_every == 0)
                     self.raw[redraw] = out[redraw]
                     self.noisy[redraw] = out[redraw] + self.rng.normal(0, 0.0015, redraw.sum())
@@ -230,11 +244,27 @@ def test_joining_a_running_simulation_publishes_nothing_unstampable():
 
 
 def test_noise_redrawn_between_deliveries_is_no_sweep_once_locked():
-    # control.pas today redraws every ray's noise every 5th frame, out of phase with the deliveries
+    # control.pas before 58a4e75 redrew every ray's noise every 5th frame, out of phase with the deliveries
     asm, out = run(100, noise_every=5, sensor_offset=80)
     assert asm.counters.off_phase > 0
     assert len(out) == 19
     _check_stamps(out)
+
+
+def test_control_pas_noise_on_the_sweep_schedule_lets_a_late_bridge_lock_on_a_still_robot():
+    # a bridge started while SimTwo runs, robot still: only control.pas's noise redraws change the array,
+    # on the delivery schedule, so the bridge locks onto the right phase
+    sim = SimTwoRanger(static, noise="sweep")
+    for _ in range(23):
+        sim.frame()
+    asm, out = WholeSweepAssembler(N, P, D), []
+    for _ in range(60):
+        t, arr = sim.frame()
+        truth = sim.values_at.copy() / 1000
+        out += [(sw, truth, t) for sw in asm.add(t, arr)]
+    assert asm.locked and asm.counters.off_phase == 0 and len(out) >= 10
+    _check_stamps(out[1:], exact=True)  # once locked (the first one, unlocked, is within its bracket)
+    _check_stamps(out[:1])
 
 
 def test_per_ray_mode_is_the_old_assembler():
