@@ -172,7 +172,7 @@ class SimTwoPIDParams:
     """The gains and timing of SimTwo's motor controller (``TMotController``, ODERobots.pas 47-54).
 
     ``kp``, ``ki``, ``kd``, ``kf`` as ``SetMotorControllerPars(R, i, Ki, Kd, Kp, Kf)`` sets them
-    (ODERobotsPublished.pas 1784-1793); ``period`` (s) is the scene XML's ``<controller period='10'/>``
+    (ODERobotsPublished.pas 1785-1794); ``period`` (s) is the scene XML's ``<controller period='10'/>``
     (in ms there, Viewer.pas 3095; no script call changes it); ``y_sat`` (V) is the motor's ``vmax``
     (Viewer.pas 3065); ``ode_dt`` (s) is SimTwo's physics step ``Ode_dt := 1/1000`` (Viewer.pas 4240), which
     CalcPID uses for its integral and derivative whatever ``period`` is.
@@ -200,7 +200,7 @@ class SimTwoPID:
     1. at a control (script) iteration, SimTwo first sets every axis' ``ref.volts := 0`` and ``ref.w := 0``
        (Viewer.pas 5255-5260), then runs the script, which sets ``ref.w`` (``SetAxisSpeedRef``) and may call
        ``SetMotorControllerState`` / ``SetMotorControllerPars`` (both set ``Sek := 0``,
-       ODERobotsPublished.pas 1784-1793, 1814-1820): :meth:`script_cycle`;
+       ODERobotsPublished.pas 1785-1794, 1814-1820): :meth:`script_cycle`;
     2. ``AxisTorqueModel`` (Viewer.pas 4568-4603): if the controller is active, ``ticks += Ode_dt`` and when
        ``ticks >= ControlPeriod``: ``ticks -= ControlPeriod`` and ``ref.volts := CalcPID(ref.w, ref.w - w)``;
        the motor then gets ``clamp(ref.volts, -Vmax, Vmax)`` this step (held between controller runs):

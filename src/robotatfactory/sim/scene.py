@@ -20,7 +20,7 @@ group what                                        camera  LIDAR     magnet    co
 ====  ==========================================  ======  ========  ========  =======
 
 (*) SimTwo's LIDAR rays are ODE rays attached to the robot's base body: they never hit geoms on that body
-(its shells) but do hit the wheels, separate bodies (Viewer.pas 840-853 ``CreateOneRaySensor``, 2998-3011,
+(its shells) but do hit the wheels, separate bodies (Viewer.pas 853-862 ``CreateOneRaySensor``, 2998-3011,
 ``nearCallback`` 346-410). The simulator casts the world with ``LIDAR_GROUPS`` and the robot's own wheels
 with ``LIDAR_SELF_GROUPS`` (``SimConfig.lidar_self_hits``, on by default; see ``sensors.Lidar``).
 

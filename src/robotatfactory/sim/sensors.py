@@ -69,7 +69,7 @@ class Lidar:
     applies the sweep updates that fell in the cycle, in order. ``ranges`` is what SimTwo's
     ``GetSensorValues`` returns at the end of the cycle.
 
-    **SimTwo's schedule** (``update="sweep"``, the default; Viewer.pas 5436-5452, ODERobots.pas 1593-1624
+    **SimTwo's schedule** (``update="sweep"``, the default; Viewer.pas 5416-5455, ODERobots.pas 1593-1624
     and 1842-1846). Each physics iteration SimTwo (1) enables a few rays (:func:`simtwo_ray_steps`), which
     are reset to -1 and measured by that iteration's collision (``dSpaceCollide`` before ``dWorldStep``,
     Viewer.pas 4370-4383), i.e. from the pose at the start of the step; (2) steps the physics; (3) adds dt to
