@@ -107,8 +107,10 @@ class Simulator:
             self.controllers = (SpeedPI(cp, mp.Vmax), SpeedPI(cp, mp.Vmax))
         else:
             if not robot.simtwo_pid:
-                raise ValueError(f"robot {robot.name!r} has no 'simtwo_pid' gains for speed control "
-                                 f"{config.speed_control!r}")
+                from ..errors import ConfigError
+
+                raise ConfigError(f"robot {robot.name!r} has no 'simtwo_pid' gains for speed control "
+                                  f"{config.speed_control!r} (add them, or use --speed-control ideal_pi)")
             self.pid_params = pp = SimTwoPIDParams.from_spec(robot.simtwo_pid, self.dt)
             self.controllers = (SimTwoPID(pp), SimTwoPID(pp))
             for c in self.controllers:
