@@ -169,7 +169,7 @@ def test_lidar_per_ray_option_refreshes_rays_in_turn(field, robot):
 
 
 def simtwo_ranger_loop(n_rays, period, dt, steps):
-    """A transcription of SimTwo's physics loop for one ranger2d (Viewer.pas 5436-5452, ODERobots.pas
+    """A transcription of SimTwo's physics loop for one ranger2d (Viewer.pas 5416-5455, ODERobots.pas
     1593-1624 and 1842-1846) on SimTwo's own step count k: before step k the rays round(N*t/P) ..
     +round(N*dt/P)+1 are enabled and measured (we record k); after it t += dt and, when t > P, t -= P and
     the values are copied. Returns the list of (k of the copy, the k each copied value was measured at)."""
