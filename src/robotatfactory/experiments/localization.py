@@ -78,6 +78,7 @@ IDEAL_SIM_OPTIONS = (
 #: bridge settings for --ideal (``--set KEY=VALUE``), each applied when the bridge has the setting
 IDEAL_BRIDGE_SETS = (
     ("camera/use_grid", "true", "camera stamps on the render grid"),
+    ("camera/bracket", "nearest", "camera frame assigned to the nearer SensorFrame (with the grid: exact stamps)"),
     ("lidar/update", "per_ray", "LIDAR rays assembled one by one"),
 )
 #: options for the SimTwo-like mode that are not ``raf sim``'s defaults (none: its defaults are SimTwo's)
