@@ -527,9 +527,13 @@ def test_elapsed_rule_follows_the_stream_rate_and_clamps_to_the_cycle():
     est = st.stamp(a_last + 0.04, now=a_last + 0.04)
     assert est.method == "elapsed" and est.stamp == pytest.approx((P * 30 + 20) / 1000)
     assert (est.lo, est.hi) == pytest.approx((P * 30 / 1000, P * 31 / 1000))
-    late = st.stamp(a_last + 0.5, now=a_last + 0.5)  # long after: clamped to the cycle's end
-    assert late.stamp == pytest.approx(P * 31 / 1000) and st.counters.clamped == 1
-    again = st.stamp(a_last + 0.6, now=a_last + 0.6)  # the same bound again: nudged to stay increasing
+    # long after: the next SensorFrame is overdue, so first wait for it (up to wait_overdue); none came:
+    # clamped to the cycle's end
+    wait = st.stamp(a_last + 0.5, now=a_last + 0.5)
+    assert isinstance(wait, Pending) and wait.deadline == pytest.approx(a_last + 0.5 + st.wait_overdue)
+    late = st.stamp(a_last + 0.5, now=wait.deadline)
+    assert late.stamp == pytest.approx(P * 31 / 1000) and st.counters.clamped == 1 and st.counters.waited == 1
+    again = st.stamp(a_last + 0.6, now=a_last + 0.8)  # the same bound again: nudged to stay increasing
     assert again.stamp == pytest.approx(P * 31 / 1000 + 0.001) and st.counters.conflicts == 1
     with pytest.raises(ValueError):
         CameraStamper(P, 60, 4, rule="grid")
@@ -563,3 +567,22 @@ def test_default_stamps_against_the_stand_in_simulator(field, robot):
     assert len(new) == len(frames) and max(abs(e) for e, _ in new) <= P
     old = errors_ms(bridge_stamper(**OLD_DEFAULTS), events)
     assert max(abs(e) for e, _ in old) > P
+
+
+def test_elapsed_rule_waits_for_an_overdue_sensor_frame():
+    """A loaded bridge process passes a SensorFrame's timing on late: a frame arriving more than 1.5 cycles
+    after the last SensorFrame known waits for it (never longer than wait_overdue) and is then stamped after
+    it, not a cycle early; frames in the normal rhythm never wait."""
+    st = CameraStamper(P, 60, 4, use_grid=False, rule="elapsed", latency=0.0)
+    for j in range(10):
+        st.on_sensor_frame(P * (j + 1), 1.0 + 0.04 * j)
+    a9 = 1.0 + 0.04 * 9
+    on_time = st.stamp(a9 + 0.03, now=a9 + 0.03)
+    assert on_time.stamp == pytest.approx((P * 10 + 30) / 1000) and st.counters.waited == 0
+    # the frame rendered after Tms 440 arrives at a9 + 0.085; the SensorFrame of Tms 440 (kernel arrival
+    # a9 + 0.08) reaches the stamper only at a9 + 0.1
+    early = st.stamp(a9 + 0.085, now=a9 + 0.085)
+    assert isinstance(early, Pending)
+    st.on_sensor_frame(P * 11, a9 + 0.08)
+    est = st.stamp(a9 + 0.085, now=a9 + 0.1)
+    assert est.stamp == pytest.approx((P * 11 + 5) / 1000, abs=1e-3) and st.counters.waited == 1  # after 440

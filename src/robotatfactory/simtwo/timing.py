@@ -74,7 +74,10 @@ P)``. No waiting, no grid, no phase to learn. A frame that leaves just before it
 (``raf sim``) and is overtaken by it lands on ``T_i`` itself (it was rendered in the cycle ending there);
 one that is not lands at most a cycle after ``T_i``; either way within one cycle of its render time.
 Frames delayed on their way by more than the time to the next SensorFrame are stamped later by about their
-delay. Stamps count as ``elapsed``; clamped ones (the frame came later than a cycle after ``T_i``, by load
+delay. A frame arriving more than 1.5 cycles (of the stream's wall time) after the last SensorFrame known
+waits up to ``wait_overdue`` (0.1 s) for the next one (counted as ``waited``): on a loaded machine the
+bridge may pass a SensorFrame on after the frame that followed it, which would otherwise be stamped a cycle
+early. Stamps count as ``elapsed``; clamped ones (the frame came later than a cycle after ``T_i``, by load
 or a slow simulator) also as ``clamped``.
 
 Stamps are kept strictly increasing; a frame that would break that is nudged 1 ms after the previous one
@@ -148,15 +151,18 @@ class CameraStamper:
     def __init__(self, period_ms: int = 40, render_fps: float = 60.0, decimation: int = 4,
                  max_wait: float = 0.02, window: int = 16, min_frames: int = 8, history: int = 512,
                  use_grid: bool = True, rule: str = "nearest", max_disagree: int = 5,
-                 max_delay: float = 0.15, latency: float = 0.004, rate_window: float = 1.0):
+                 max_delay: float = 0.15, latency: float = 0.004, rate_window: float = 1.0,
+                 wait_overdue: float = 0.1):
         if period_ms <= 0 or render_fps <= 0 or decimation < 1:
             raise ValueError(f"period_ms {period_ms}, render_fps {render_fps} must be > 0, decimation >= 1")
         if max_wait < 0:
             raise ValueError("max_wait must be >= 0")
         if rule not in RULES:
             raise ValueError(f"rule {rule!r}: one of {', '.join(RULES)}")
-        if latency < 0 or rate_window <= 0:
-            raise ValueError(f"latency {latency} must be >= 0, rate_window {rate_window} > 0")
+        if latency < 0 or rate_window <= 0 or wait_overdue < 0:
+            raise ValueError(f"latency {latency} and wait_overdue {wait_overdue} must be >= 0, rate_window "
+                             f"{rate_window} > 0")
+        self.wait_overdue = float(wait_overdue)
         self.latency = float(latency)
         self.rate_window = float(rate_window)
         if max_disagree < 1 or max_delay <= 0:
@@ -271,10 +277,15 @@ class CameraStamper:
         arrival = now if arrival is None else arrival
         with self._lock:
             if self.rule == "elapsed":
+                overdue = self._overdue(arrival, now)
+                if overdue is not None:
+                    return overdue
                 est = self._from_elapsed(arrival)
                 if est is None:
                     self.counters.no_clock += 1
                     return None
+                if now > arrival:
+                    self.counters.waited += 1
                 return self._monotonic(est)
             br = self.bracket(arrival, now)
             c = self.counters
@@ -323,6 +334,17 @@ class CameraStamper:
             j = max(0, i - 1)
         span = a[i] - a[j]
         return (T[i] - T[j]) / 1000 / span if span > 0 else 1.0
+
+    def _overdue(self, arrival: float, now: float) -> Pending | None:
+        """Elapsed rule: the next SensorFrame is overdue at the frame's arrival (more than 1.5 cycles of the
+        stream's wall time after the last one known): it may have reached the bridge but not yet this stamper
+        (a loaded bridge process). Wait for it up to ``wait_overdue`` wall seconds."""
+        a = self._arrivals
+        if not a or arrival <= a[-1] or now >= arrival + self.wait_overdue:
+            return None
+        if (arrival - a[-1]) * self.rate() * 1000 > 1.5 * self.period_ms:
+            return Pending(arrival + self.wait_overdue)
+        return None
 
     def _from_elapsed(self, arrival: float) -> StampEstimate | None:
         """The elapsed-time rule (module docstring): after the last SensorFrame received before the frame."""
