@@ -102,6 +102,23 @@ class ScheduledFrame:
     wall: float  # s: when the frame is sent, on the model's wall clock (grid: = tick_time)
 
 
+@dataclass(frozen=True)
+class GuiIteration:
+    """One turn of SimTwo's GUI loop that advanced physics (``mode="simtwo"``), on the model's wall clock.
+
+    Physics steps ``first_step + 1 .. first_step + steps`` ran from ``start`` on (``physics_per_step`` each;
+    the script call for ``Tms = 40 k`` runs before the step after it, so in the iteration with ``first_step <=
+    40 k < first_step + steps``), then one render showing step ``first_step + steps`` finished at ``sent``;
+    ``frame`` is the published frame when this render was a ``decimation``-th one.
+    """
+
+    start: float
+    first_step: int
+    steps: int
+    sent: float
+    frame: ScheduledFrame | None
+
+
 class RenderCadence:
     """When the stand-in renders and publishes camera frames (deterministic for a seed).
 
@@ -113,7 +130,8 @@ class RenderCadence:
     passed since the cadencer's last tick, ``n`` chunks of ``chunk_steps`` physics steps are run (``chunk_steps``
     is the smallest step count whose time reaches ``1/fps``: 17 at 1 ms), then one render shows the state
     after the last chunk, and every ``decimation``-th render is published. ``frames()`` yields the published
-    frames in order; nothing here depends on simulation results, only on the seed.
+    frames in order, ``iterations()`` the GUI turns (for the emission times of a SimTwo-like stream); both
+    depend on the seed only, never on simulation results.
     """
 
     def __init__(self, mode: str, dt: float, fps: float = 60.0, decimation: int = 4, seed: int = 0,
@@ -125,18 +143,17 @@ class RenderCadence:
         if not (dt > 0 and fps > 0 and decimation >= 1):
             raise ConfigError(f"camera cadence: dt {dt}, fps {fps} must be > 0 and decimation {decimation} >= 1")
         self.mode, self.dt, self.fps, self.decimation = mode, float(dt), float(fps), int(decimation)
+        self.seed = int(seed)
         self.gui = gui or GuiLoopModel()
         self.tick_period = 1.0 / self.fps
         # SimTwo: `while physTime < physTime0 + FixedDeltaTime do step` (Viewer.pas 5211-5212)
         self.chunk_steps = max(1, math.ceil(self.tick_period / self.dt - 1e-9))
-        import numpy as np
-
-        self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xCA3E7A]))
-        self._it = self._simtwo() if mode == "simtwo" else self._grid()
 
     def frames(self):
-        """The published frames, in order (an endless iterator)."""
-        return self._it
+        """The published frames, in order (a fresh endless iterator)."""
+        if self.mode == "grid":
+            return self._grid()
+        return (it.frame for it in self.iterations() if it.frame is not None)
 
     def _grid(self):
         j = 0
@@ -146,27 +163,36 @@ class RenderCadence:
             yield ScheduledFrame(j, j * self.decimation, t, math.ceil(t / self.dt - 1e-6), t)
             j += 1
 
-    def _simtwo(self):
-        g, rng, tick = self.gui, self._rng, self.tick_period
+    def iterations(self):
+        """The GUI turns that ran physics, in order (a fresh endless iterator; ``mode="simtwo"`` only)."""
+        import numpy as np
+
+        if self.mode != "simtwo":
+            raise ValueError("iterations() models SimTwo's GUI loop: mode='simtwo' only")
+        g, tick = self.gui, self.tick_period
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0xCA3E7A]))
         wall = 0.0  # the model's wall clock (s since the cadencer was enabled)
         last = 0.0  # TGLCadencer's lastTime: advances by whole ticks
-        chunks = renders = published = 0
+        steps = renders = published = 0
         while True:
             wall += g.poll + rng.exponential(g.poll_jitter)
             n = math.floor((wall - last) / tick + 1e-12)
             if n < 1:
                 continue
             last += n * tick
-            chunks += n
-            wall += n * self.chunk_steps * g.physics_per_step
+            start, first, k = wall, steps, n * self.chunk_steps
+            steps += k
+            wall += k * g.physics_per_step
             wall += g.render * math.exp(g.render_sigma * rng.standard_normal())
             sent = wall
             if rng.random() < g.hiccup_prob:
                 wall += rng.uniform(0.0, g.hiccup_max)
             renders += 1
+            frame = None
             if renders % self.decimation == 0:
-                yield ScheduledFrame(published, renders, sent, chunks * self.chunk_steps, sent)
+                frame = ScheduledFrame(published, renders, sent, steps, sent)
                 published += 1
+            yield GuiIteration(start, first, k, sent, frame)
 
 
 class Renderer:
