@@ -11,7 +11,8 @@ ORDER = 20
 DESCRIPTION = """\
 The RobotAtFactory 4.0 scene in MuJoCo, talking to the outside world as SimTwo does: one SensorFrame
 datagram per 40 ms control cycle to the bridge, Commands received on --port, camera frames on a ZMQ PUB
-socket (raw B G R A, bottom-up, 15 frames per simulation second), the factory-state server on UDP 44832.
+socket (raw B G R A, bottom-up, about 15 frames/s, rendered when SimTwo's GUI loop would render them:
+--camera-timing), the factory-state server on UDP 44832.
 
 examples:
   raf sim                                  # real time, round 1, camera and server on
