@@ -128,7 +128,8 @@ def figure(result, result_nominal, errors: dict, path: Path) -> None:
     for a, res, title in ((ax[0], result_nominal, "nominal camera (poses fitted)"),
                           (ax[1], result, "calibrated camera")):
         p, r = res.points_px, res.residuals
-        scale = 20.0
+        p95 = float(np.percentile(np.linalg.norm(r, axis=1), 95)) if len(r) else 1.0
+        scale = float(f"{25.0 / max(p95, 1e-3):.2g}")  # the 95th percentile arrow is ~25 px long
         a.quiver(p[:, 0], p[:, 1], r[:, 0] * scale, r[:, 1] * scale, angles="xy", scale_units="xy", scale=1,
                  width=0.002, color="tab:red" if res is result_nominal else "tab:blue")
         a.set_xlim(0, cam.width)

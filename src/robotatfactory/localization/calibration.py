@@ -13,8 +13,12 @@ least-squares problem over all frames (:func:`calibrate`) estimates
 by minimising the reprojection error of every detected corner (pixels), with odometry (relative motion
 between consecutive frames) as an optional prior on the poses and a weak prior on the camera towards its
 initial values (it only decides directions the data leave free, and :class:`CalibrationResult.degenerate`
-names them). ``scipy.optimize.least_squares`` (trust region, Huber loss) with the Jacobian's sparsity
-pattern given: each corner depends on the camera and on its own frame's pose only.
+names them). ``scipy.optimize.least_squares`` (trust region reflective, LSMR on a sparse Jacobian, Huber
+loss): each corner depends on the camera and on its own frame's pose only, so the Jacobian is the camera's
+dense columns plus one 3-column block per frame (central differences: one projection of all corners per
+camera parameter, one per pose coordinate for all frames at once), the odometry rows analytic. Huber's
+threshold starts at three robust standard deviations of the first residuals (a camera several pixels off
+makes every residual look like an outlier) and comes down to ``huber_sigmas`` over the rounds.
 
 Robustness: each frame is seeded by the planar pose fit (:func:`~.estimators.planar_fit`, lenient settings)
 with the initial camera; detections whose RMS residual is far above the fit's robust scale are rejected
@@ -81,7 +85,7 @@ class CalibrationConfig:
     huber_sigmas: float = 3.0  # residuals beyond this many sigmas count linearly (Huber)
     outlier_px: float = 3.0  # a marker whose RMS residual exceeds max(this, outlier_scales * robust scale)
     outlier_scales: float = 6.0  # is rejected (readmitted when it fits again)
-    rounds: int = 4  # fit / reject rounds at most
+    rounds: int = 6  # fit / reject rounds at most
     # odometry prior between consecutive frames: sigma = base + per metre (or per radian) of motion
     odom_sigma_xy_m: float = 0.002
     odom_sigma_xy_per_m: float = 0.02
@@ -403,6 +407,60 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
         c_i.append(np.arange(nC))
         S = coo_matrix((np.ones(sum(len(a) for a in r_i), dtype=np.int8), (np.concatenate(r_i), np.concatenate(c_i))),
                        shape=(n_rows, nC + 3 * nF))
+        rows_c = np.concatenate(r_i[:1])  # corner rows x camera columns, in the order of the blocks below
+        cols_c = np.concatenate(c_i[:1])
+
+        def corner_residuals(v, ps):
+            pred, _ = predict_corners(v, ps, Pa, fia)
+            return ((pred - uva) / cfg.sigma_px).ravel()
+
+        def jac(z):
+            """Camera columns by central differences (one projection of all corners each), pose columns by
+            central differences of every frame's pose at once (a corner depends on its own frame only),
+            odometry and prior rows analytically."""
+            v, ps = unpack(z)
+            data = []
+            Jc = np.empty((2 * M, nC))
+            for k, idx in enumerate(fidx):
+                h = 1e-6 * max(1.0, abs(v[idx]))
+                vp, vm = v.copy(), v.copy()
+                vp[idx] += h
+                vm[idx] -= h
+                Jc[:, k] = (corner_residuals(vp, ps) - corner_residuals(vm, ps)) / (2 * h)
+            data.append(Jc.ravel())
+            for k in range(3):
+                h = 1e-7
+                pp, pm = ps.copy(), ps.copy()
+                pp[:, k] += h
+                pm[:, k] -= h
+                data.append((corner_residuals(v, pp) - corner_residuals(v, pm)) / (2 * h))
+            if links:
+                a, b = ps[LI], ps[LJ]
+                c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+                dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+                r0, r1 = c * dx + s * dy, -s * dx + c * dy
+                L = len(links)
+                blk = np.zeros((L, 3, 6))  # rows r0, r1, r2; columns xa, ya, tha, xb, yb, thb
+                blk[:, 0, 0], blk[:, 0, 1], blk[:, 0, 2], blk[:, 0, 3], blk[:, 0, 4] = -c, -s, r1, c, s
+                blk[:, 1, 0], blk[:, 1, 1], blk[:, 1, 2], blk[:, 1, 3], blk[:, 1, 4] = s, -c, -r0, -s, c
+                blk[:, 2, 2], blk[:, 2, 5] = -1.0, 1.0
+                blk /= LS[:, :, None]
+                data.append(blk.ravel())
+            data.append(1.0 / prior_sig)
+            return coo_matrix((np.concatenate(data), (J_rows, J_cols)), shape=(n_rows, nC + 3 * nF)).tocsr()
+
+        # the coordinates of ``jac``'s values, in the same order
+        jr, jc = [rows_c], [cols_c]
+        for k in range(3):
+            jr.append(rows)
+            jc.append(pose_col + k)
+        for q, (i, j, _, _) in enumerate(links):
+            jr.append(np.repeat(2 * M + 3 * q + np.arange(3), 6))
+            jc.append(np.tile(np.concatenate([nC + 3 * i + np.arange(3), nC + 3 * j + np.arange(3)]), 3))
+        jr.append(2 * M + 3 * len(links) + np.arange(nC))
+        jc.append(np.arange(nC))
+        J_rows, J_cols = np.concatenate(jr), np.concatenate(jc)
+        fun.jac = jac
         return fun, S.tocsr(), M
 
     z = np.concatenate([v0[fidx], poses.ravel()])
@@ -414,9 +472,13 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
         frame_has[[dets[j][0] for j in np.flatnonzero(inlier)]] = True
         active_corners = inlier[di] & frame_has[fi]
         fun, S, M = build(active_corners)
-        res = least_squares(fun, z, jac_sparsity=S, method="trf", loss="huber", f_scale=cfg.huber_sigmas,
+        # Huber's threshold follows the residuals down: far from the solution (a camera several pixels off)
+        # every residual would be "an outlier" and the robust model stalls the trust region
+        r_now = fun(z)[:2 * M]
+        f_scale = max(cfg.huber_sigmas, 3.0 * 1.4826 * float(np.median(np.abs(r_now)))) if M else cfg.huber_sigmas
+        res = least_squares(fun, z, jac=fun.jac, method="trf", loss="huber", f_scale=f_scale,
                             x_scale="jac", max_nfev=cfg.max_nfev, xtol=1e-10, ftol=1e-10,
-                            tr_options={"atol": 1e-12, "btol": 1e-12, "maxiter": 2000}, verbose=0)
+                            tr_options={"atol": 1e-12, "btol": 1e-12, "maxiter": 4000}, verbose=0)
         z = res.x
         # re-decide every detection of the seeded frames with the new camera and poses
         v, ps = unpack(z)
@@ -427,7 +489,7 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
         scale = 1.4826 * float(np.median(np.abs(e[inlier[di]]))) if inlier.any() else cfg.sigma_px
         limit = max(cfg.outlier_px, cfg.outlier_scales * scale)
         new = (per_det <= limit) & ~behind
-        if np.array_equal(new, inlier):
+        if np.array_equal(new, inlier) and f_scale <= cfg.huber_sigmas:
             break
         inlier = new
     frame_has = np.zeros(nF, dtype=bool)
