@@ -84,7 +84,8 @@ def default_params(robot: RobotSpec | None = None) -> dict:
         },
         "camera": {
             "enabled": True, "endpoint": "tcp://127.0.0.1:9899",
-            "xyz": list(cam.xyz), "pitch_down_deg": cam.pitch_down_deg,
+            "xyz": list(cam.xyz), "pitch_down_deg": cam.pitch_down_deg, "roll_deg": cam.roll_deg,
+            "distortion": list(cam.distortion),
             "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
             "bottom_up": cam.bottom_up, "render_fps": cam.render_fps, "decimation": cam.decimation,
             "use_grid": False, "bracket": "elapsed", "max_wait": 0.02, "latency": 0.004,
@@ -175,6 +176,15 @@ def _xyz(d: dict, path: tuple[str, ...]) -> tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
+def _distortion(d: dict, path: tuple[str, ...]) -> tuple[float, ...]:
+    v = _get(d, path)
+    if not isinstance(v, (list, tuple)) or not 1 <= len(v) <= 5 or not all(
+            isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v):
+        raise ConfigError(f"parameter {_name(path)} must be a list of up to five numbers [k1, k2, p1, p2, k3] "
+                          f"(OpenCV, ROS plumb_bob), got {v!r}")
+    return tuple(float(c) for c in v) + (0.0,) * (5 - len(v))
+
+
 def _get(d: dict, path: tuple[str, ...]) -> Any:
     for k in path:
         d = d[k]
@@ -251,6 +261,8 @@ class BridgeConfig:
     camera_endpoint: str
     camera_xyz: tuple[float, float, float]
     camera_pitch_down_deg: float
+    camera_roll_deg: float  # about the optical axis (CameraSpec)
+    distortion: tuple[float, ...]  # OpenCV (k1, k2, p1, p2, k3): CameraInfo.D
     width: int
     height: int
     fx: float
@@ -291,7 +303,8 @@ class BridgeConfig:
     def camera(self) -> CameraSpec:
         """The camera's mount and intrinsics as set by the parameters."""
         return CameraSpec(self.camera_xyz, self.camera_pitch_down_deg, self.width, self.height, self.fx, self.fy,
-                          self.cx, self.cy, self.bottom_up, self.render_fps, self.decimation)
+                          self.cx, self.cy, self.bottom_up, self.render_fps, self.decimation,
+                          roll_deg=self.camera_roll_deg, distortion=self.distortion)
 
     @property
     def control_period_ms(self) -> int:
@@ -378,6 +391,8 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
                              "a ZMQ endpoint such as tcp://192.168.1.20:9899"),
         camera_xyz=_xyz(p, ("camera", "xyz")),
         camera_pitch_down_deg=_real(p, ("camera", "pitch_down_deg"), -90.0, 90.0),
+        camera_roll_deg=_real(p, ("camera", "roll_deg"), -90.0, 90.0),
+        distortion=_distortion(p, ("camera", "distortion")),
         width=_int(p, ("camera", "width"), 1, 16384),
         height=_int(p, ("camera", "height"), 1, 16384),
         fx=_real(p, ("camera", "fx"), 0.0, lo_open=True),
