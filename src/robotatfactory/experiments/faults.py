@@ -64,10 +64,11 @@ TARGETS = {
     "restart_sim_clock_back_s": "<= 1 s",
     "restart_sim_image_back_s": "<= 1 s",
     "restart_sim_odometry_resets": "1",
-    "restart_bridge_stop_s": "<= 0.5 s (simulation) from the last command",
+    "restart_bridge_stop_s": "<= 0.5 s (simulation) from the last command to V = W = 0 (the simulator's log)",
     "restart_bridge_resume_s": "<= 1 s",
     "restart_roscore_nodes_clear": "every node exits with a clear message (or reconnects)",
     "soak_rss_growth_max_pct": "< 5 % after warm-up",
+    "soak_queue_lag_late_s": "<= 1 s (simulation): odom and images keep up, no growing queue",
 }
 EXIT_STATUS_FROM_TARGETS = True  # raf experiment faults exits 1 when a target is missed
 LOCAL = "127.0.0.1"
@@ -206,6 +207,7 @@ class Proxy:
                        "reply_errors": 0}
         self._held = {0: None, 1: None}  # a datagram held back per direction (reordering)
         self.inject_queue: deque = deque()
+        self.forge_ticks_every = 0  # > 0: after every n-th frame, a copy of the next one with impossible ticks
         self._running = True
         self.thread = threading.Thread(target=self._loop, name="raf-faults-proxy", daemon=True)
         self.thread.start()
@@ -279,6 +281,21 @@ class Proxy:
                     self.frames.append((now, f.seq, f.time_ms, f.enc_total[0], f.enc_total[1], f.x, f.y, f.theta))
                     self.template = data
                 self._out(0, data, self.bridge)
+                if self.forge_ticks_every and self.counts["frames"] % self.forge_ticks_every == 0:
+                    self._forge_ticks(f)
+
+    def _forge_ticks(self, f) -> None:
+        """The next frame before it comes, with encoder totals the wheels cannot reach in one cycle."""
+        import dataclasses
+
+        jump = 40 * (1 + self.counts["frames"] % 50)
+        forged = dataclasses.replace(f, seq=f.seq + 1, time_ms=f.time_ms + 40,
+                                     enc_total=(f.enc_total[0] + jump * 10, f.enc_total[1] - jump * 10))
+        try:
+            self.sock.sendto(forged.encode(), self.bridge)
+            self.counts["forged_ticks"] = self.counts.get("forged_ticks", 0) + 1
+        except OSError:
+            pass
 
     def truth(self) -> np.ndarray:
         with self.lock:
@@ -615,6 +632,7 @@ def part_fuzz(args, log_dir: Path, robot) -> dict:
         with px.lock:
             template = px.template
         pool = fuzz_pool(template, rng)
+        px.forge_ticks_every = 2
         n_inband = int(args.fuzz_datagrams * args.fuzz_inband)
         n_out = args.fuzz_datagrams - n_inband
         ctx = mp.get_context("spawn")
@@ -633,6 +651,7 @@ def part_fuzz(args, log_dir: Path, robot) -> dict:
             rig.check()
             time.sleep(0.02)
         sent = q.get(timeout=args.fuzz_seconds * 4 + 120)
+        px.forge_ticks_every = 0
         fz.join(10)
         _wait(lambda: not px.inject_queue, 30, "the in-band fuzz to be sent")
         fuzz_wall = time.monotonic() - t_fuzz0
@@ -656,8 +675,9 @@ def part_fuzz(args, log_dir: Path, robot) -> dict:
         time.sleep(1.2)
         d = w.stream_diag()
         out = {
-            "fuzz_datagrams_sent": int(sent["total"]) + px.counts["injected"],
-            "fuzz_inband_sent": px.counts["injected"], "fuzz_wall_s": round(fuzz_wall, 1),
+            "fuzz_datagrams_sent": int(sent["total"]) + px.counts["injected"] + px.counts.get("forged_ticks", 0),
+            "fuzz_inband_sent": px.counts["injected"], "fuzz_impossible_ticks_sent": px.counts.get("forged_ticks", 0),
+            "fuzz_wall_s": round(fuzz_wall, 1),
             "fuzz_second_sender_frames": sent["second_sender"], "fuzz_send_errors": sent["errors"],
             "fuzz_crashes": crashed,
             "fuzz_odom_messages": len(odom), "fuzz_frames_sent_by_sim": len(truth),
@@ -785,6 +805,11 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
         time.sleep(2.0)
         truth = px.truth()
         out.update(_stop_after_last_command(truth, px, t_kill))
+        import re
+
+        ages = re.findall(r"no valid command for ([0-9.]+) s", rig.procs.log("sim"))
+        # the simulator's own record: the age of its last command when its timeout replaced it by V = W = 0
+        out["restart_bridge_stop_s"] = float(ages[-1]) if ages else float("nan")
         rig.start_bridge()
         n_rep = len(px.replies)
         _wait(lambda: len(px.replies) > n_rep, 90, "the restarted bridge's first reply", rig.check)
@@ -841,7 +866,7 @@ def _stop_after_last_command(truth: np.ndarray, px: Proxy, t_kill: float) -> dic
             rest_t = r[2] / 1000 - t_cmd
         prev = r
     # the policy's decision is the first cycle the wheels decelerate to rest from: at rest minus the ramp
-    return {"restart_bridge_at_rest_s": rest_t, "restart_bridge_stop_s": _policy_stop(after, before, t_cmd)}
+    return {"restart_bridge_at_rest_s": rest_t, "restart_bridge_wheels_slowing_s": _policy_stop(after, before, t_cmd)}
 
 
 def _policy_stop(after, before, t_cmd) -> float:
@@ -885,6 +910,7 @@ def part_soak(args, log_dir: Path, robot) -> dict:
     rig = Rig(args, log_dir / "soak", camera=True, localize=True, fast=True, lockstep=True).up()
     w, px = rig.watch, rig.proxy
     samples: list[tuple] = []  # (sim s, {name: rss KiB})
+    lags: list[tuple] = []  # (sim s, odom lag s, image lag s)
     try:
         w.drive(circles())
         wall0 = time.monotonic()
@@ -905,6 +931,10 @@ def part_soak(args, log_dir: Path, robot) -> dict:
             rig.check()
             with px.lock:
                 t_sim = px.frames[-1][2] / 1000 if px.frames else 0.0
+            with w.lock:  # how far behind the simulator the odom and image subscribers are (queues)
+                odom_ms = w.odom[-1][1] if w.odom else 0
+                img_ms = w.images[-1][1] if w.images else 0
+            lags.append((t_sim, t_sim - odom_ms / 1000, t_sim - img_ms / 1000))
             samples.append((t_sim, {n: rss_kib(p) for n, p in pids.items()}))
             if t_sim >= sim_s:
                 break
@@ -932,7 +962,16 @@ def part_soak(args, log_dir: Path, robot) -> dict:
         out[f"soak_rss_{n}_growth_pct"] = round(g, 2)
         worst = max(worst, g)
     out["soak_rss_growth_max_pct"] = round(worst, 2)
-    out["soak_rss_growth_target_met"] = worst < 5.0
+    out["soak_rss_growth_max_target_met"] = worst < 5.0
+    late = [x for x in lags if x[0] >= 0.2 * lags[-1][0]]
+    if late:
+        half = len(late) // 2
+        for i, n in ((1, "odom"), (2, "image")):
+            a = float(np.median([x[i] for x in late[:max(1, half)]]))
+            b = float(np.median([x[i] for x in late[half:]]))
+            out[f"soak_{n}_lag_early_s"], out[f"soak_{n}_lag_late_s"] = round(a, 3), round(b, 3)
+        out["soak_queue_lag_late_s"] = max(out["soak_odom_lag_late_s"], out["soak_image_lag_late_s"])
+        out["soak_queue_lag_late_target_met"] = out["soak_queue_lag_late_s"] <= 1.0
     for k in ("accepted", "lost", "duplicates", "stale", "held", "restarts", "rejected_foreign_source"):
         if k in d:
             out[f"soak_bridge_{k}"] = int(float(d[k]))
@@ -946,6 +985,59 @@ def part_soak(args, log_dir: Path, robot) -> dict:
 
 
 PARTS = {"fuzz": part_fuzz, "loss": part_loss, "restarts": part_restarts, "soak": part_soak}
+
+
+def _part_child(name: str, opts: dict, log_dir: str, q) -> None:
+    """A part in a fresh interpreter: rospy binds a process to one master for good, and each part (and the
+    roscore restart) has its own."""
+    import argparse
+
+    def on_term(*_):
+        raise SystemExit("terminated")
+
+    signal.signal(signal.SIGTERM, on_term)
+    from ..robot import load_robot
+
+    try:
+        q.put({"ok": PARTS[name](argparse.Namespace(**opts), Path(log_dir), load_robot())})
+    except BaseException as e:  # noqa: BLE001 - reported to the parent, which decides
+        q.put({"error": f"{type(e).__name__}: {e}"})
+        raise SystemExit(1)
+
+
+def part_timeout(name: str, args) -> float:
+    """Wall seconds a part may take before it is stopped (generous: a loaded machine is slow)."""
+    sim_s = args.soak_sim_seconds if args.soak_sim_seconds is not None else args.soak_minutes * 60
+    return 240 + {"fuzz": 3 * args.fuzz_seconds + args.fuzz_datagrams / 2000, "loss": 3 * args.loss_seconds,
+                  "restarts": 120, "soak": 2 * sim_s}[name]
+
+
+def run_part(name: str, args, log_dir: Path) -> dict:
+    """Run one part in a child process; RuntimeError with the reason when it fails or overruns."""
+    import multiprocessing as mp
+    import queue as queue_mod
+
+    opts = {k: v for k, v in vars(args).items() if isinstance(v, (int, float, str, bool, type(None)))}
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=_part_child, args=(name, opts, str(log_dir), q), name=f"raf-faults-{name}")
+    p.start()
+    limit = part_timeout(name, args)
+    try:
+        msg = q.get(timeout=limit)
+    except queue_mod.Empty:
+        msg = {"error": f"no result within {limit:.0f} s"}
+    finally:
+        p.join(30)
+        if p.is_alive():
+            p.terminate()  # SIGTERM: the part's clean-up (its processes, its roscore) still runs
+            p.join(30)
+        if p.is_alive():
+            p.kill()
+            p.join(5)
+    if "error" in msg:
+        raise RuntimeError(f"{name}: {msg['error']}")
+    return msg["ok"]
 
 
 def table(res: dict) -> str:
@@ -989,7 +1081,7 @@ def run(args, out_dir: Path | None) -> dict:
         t0 = time.monotonic()
         print(f"faults: {p} ...", flush=True)
         try:
-            res.update(PARTS[p](args, log_dir, robot))
+            res.update(run_part(p, args, log_dir))
         except RuntimeError as e:
             notes.append(f"{p}: {e}")
             res[f"{p}_completed_target_met"] = False
