@@ -277,3 +277,24 @@ def test_final_outcomes_of_fixes_are_reported_once_they_leave_the_history():
     n_left = len([s for s in good + bad if s >= t_last - 1.0])
     ekf.initialise(t_last, run.pose_at(t_last), R_CAM)
     assert len(ekf.pop_finished_fixes()) == n_left
+
+
+def test_fixes_too_uncertain_to_bound_their_error_are_not_used():
+    run = Run(seed=6)
+    t = run.step(1)
+    R_loose = np.diag([0.03 ** 2, 0.01 ** 2, math.radians(2.0) ** 2])  # 3 cm sigma: may be 5 cm off
+    for limit, expect in ((EkfConfig().max_fix_sigma_xy_m, False), (0.0, True)):
+        ekf = Ekf(EkfConfig(max_fix_sigma_xy_m=limit))
+        ekf.odometry_wheels(t, 0.0, 0.0)
+        ekf.pose_fix(t, run.pose_at(t), R_CAM)
+        k = 2
+        t2 = run.step(k)
+        ekf.odometry_wheels(t2, *run.odo[-1][1:])
+        z = np.array(run.pose_at(t2)) + [0.045, 0.0, 0.0]  # 4.5 cm off: within the gate of a 3 cm fix
+        r = ekf.pose_fix(t2, z, R_loose)
+        assert r.accepted is expect
+        if not expect:
+            assert r.reason == reasons.UNCERTAIN and ekf.counts[reasons.UNCERTAIN] == 1
+        run = Run(seed=6)
+        t = run.step(1)
+    assert EkfConfig().max_fix_sigma_xy_m == pytest.approx(0.05 / 3, abs=1e-3)

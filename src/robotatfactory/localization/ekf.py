@@ -11,6 +11,8 @@
   measurement stamped t is applied at t: the filter goes back to the state before t, splits the odometry
   increment that spans t (constant twist), applies the measurement, and replays the later inputs. A
   measurement newer than the latest odometry waits until odometry reaches its stamp.
+- **Uncertain fixes**: a pose fix whose own position sigma exceeds ``max_fix_sigma_xy_m`` (5 cm / 3) is
+  not used: the gate alone would let such a fix through although it may be more than 5 cm off.
 - **Gating**: squared Mahalanobis distance of the innovation against chi-square gates; gated measurements are
   counted and ignored. The camera stamp's uncertainty (``stamp_sigma_s``) inflates the measurement
   covariance by the motion during that time.
@@ -58,6 +60,9 @@ class EkfConfig:
     reinit_after_gated: int = 6
     confident_sigma_xy_m: float = 0.02  # a fix this certain may re-initialise the filter
     confident_sigma_theta_deg: float = 3.0
+    # a pose fix whose position sigma (largest of its xy covariance) exceeds this is not used ("uncertain"):
+    # such a fix can be more than 5 cm off and still pass the gate; 5 cm / 3
+    max_fix_sigma_xy_m: float = 0.0165
     max_sigma_xy_m: float = 3.0  # covariance bounds (after a long outage the covariance stops growing)
     max_sigma_theta_rad: float = math.pi
     min_variance: float = 1e-12
@@ -415,6 +420,8 @@ class Ekf:
 
     def _update_pose(self, s: FilterState, m: _Pose) -> tuple[FilterState, UpdateResult]:
         c = self.cfg
+        if c.max_fix_sigma_xy_m > 0 and math.sqrt(max(np.linalg.eigvalsh(m.R[:2, :2]))) > c.max_fix_sigma_xy_m:
+            return s, UpdateResult(False, reasons.UNCERTAIN)
         if s.x is None:
             if not self._confident(m.R):
                 return s, UpdateResult(False, "waiting_for_confident_fix")
