@@ -267,3 +267,22 @@ def test_sim_takes_commands_from_one_controller(field, robot):
     assert c["command_timeouts"] == 1  # stopped 0.5 s (simulation) after the last command
     assert runner.command.v == 0.0 and not runner.command.magnet
     assert runner.controller == controller
+
+
+def test_nodes_listen_on_loopback_when_the_master_is_local(monkeypatch):
+    from robotatfactory.ros.cli import loopback_ros_default
+
+    for uri, ros_ip, expect in (("http://127.0.0.1:11311/", None, "127.0.0.1"),
+                                ("http://localhost:11311/", None, "127.0.0.1"),
+                                ("http://192.168.1.20:11311/", None, None),  # a master elsewhere: untouched
+                                ("http://127.0.0.1:11311/", "10.0.0.5", "10.0.0.5")):  # the user's choice wins
+        monkeypatch.setenv("ROS_MASTER_URI", uri)
+        monkeypatch.delenv("ROS_HOSTNAME", raising=False)
+        if ros_ip is None:
+            monkeypatch.delenv("ROS_IP", raising=False)
+        else:
+            monkeypatch.setenv("ROS_IP", ros_ip)
+        loopback_ros_default()
+        import os
+
+        assert os.environ.get("ROS_IP") == expect

@@ -34,6 +34,19 @@ def read_private_params() -> dict:
     return p if isinstance(p, dict) else {}
 
 
+def loopback_ros_default() -> None:
+    """With the master on this machine and neither ROS_IP nor ROS_HOSTNAME set, let this node's XML-RPC and
+    TCPROS servers listen on 127.0.0.1 (rospy binds every interface otherwise). Before ``init_node``."""
+    import os
+    from urllib.parse import urlparse
+
+    if os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME"):
+        return
+    host = urlparse(os.environ.get("ROS_MASTER_URI", "http://localhost:11311/")).hostname or ""
+    if host == "localhost" or host.startswith("127."):
+        os.environ["ROS_IP"] = "127.0.0.1"
+
+
 MASTER_RESTARTED = 4  # exit code of a node whose ROS master restarted under it
 
 
@@ -100,6 +113,7 @@ def run_node(args, who: str, params: dict, make_node: Callable[[], object], star
         m.setParam("/use_sim_time", True)
     for key, value in params.items():
         m.setParam(f"{path}/{key}" if key else path, list(value) if isinstance(value, tuple) else value)
+    loopback_ros_default()
     rospy.init_node(args.name, argv=[sys.argv[0]] + ([f"__ns:=/{ns}"] if ns else []))
     node = make_node()
     print(f"raf {who}: {started(node)}", flush=True)
@@ -122,6 +136,7 @@ def spin_node(name: str, make_node: Callable[[], object], argv: list[str] | None
 
     from ..errors import ConfigError
 
+    loopback_ros_default()
     rospy.init_node(name, argv=argv if argv is not None else sys.argv)
     try:
         node = make_node()
