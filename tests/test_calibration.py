@@ -369,3 +369,71 @@ def test_fit_converges_on_standin_detections_from_the_nominal_camera(field, robo
     assert res.residual_px_rms < 0.4
     assert abs(e["fx_error_pct"]) < 0.3 and abs(e["fy_error_pct"]) < 0.3
     assert abs(e["cx_error_px"]) < 0.5 and abs(e["cy_error_px"]) < 0.5 and abs(e["pitch_error_deg"]) < 0.1
+
+
+@pytest.mark.ros
+@pytest.mark.render
+def test_raf_calibrate_live_records_the_topics(tmp_path, field, robot):
+    """raf calibrate --live (a child process) records camera/image_raw and odom from a private roscore, where
+    this test publishes synthetic renders of a perturbed camera with their odometry, and finds the camera."""
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    import rospy
+    import yaml
+    from nav_msgs.msg import Odometry
+    from rosutil import master, test_node
+    from sensor_msgs.msg import Image
+
+    from robotatfactory.localization.synth import SceneRenderer
+
+    m = master()
+    test_node()
+    true_cam = cal.perturbed_robot(robot).camera
+    r = SceneRenderer(field, true_cam)
+    rng = np.random.default_rng(1)
+    poses = random_poses(field, 40, seed=12)
+    images = [r.render(p, blur_sigma=0.5, noise_sigma=1.0, rng=rng) for p in poses]
+    pub_img = rospy.Publisher("/camera/image_raw", Image, queue_size=50)
+    pub_odom = rospy.Publisher("/odom", Odometry, queue_size=50)
+    stop = threading.Event()
+
+    def publish():
+        k = 0
+        while not stop.is_set():
+            t = rospy.Time.from_sec(1000.0 + 0.1 * k)
+            p = poses[k % len(poses)]
+            o = Odometry()
+            o.header.stamp = t
+            o.pose.pose.position.x, o.pose.pose.position.y = p[0], p[1]
+            o.pose.pose.orientation.z, o.pose.pose.orientation.w = math.sin(p[2] / 2), math.cos(p[2] / 2)
+            pub_odom.publish(o)
+            img = images[k % len(images)]
+            msg = Image()
+            msg.header.stamp = t
+            msg.height, msg.width = img.shape[:2]
+            msg.encoding, msg.step = "bgr8", img.shape[1] * 3
+            msg.data = img.tobytes()
+            pub_img.publish(msg)
+            k += 1
+            time.sleep(0.05)
+
+    out = tmp_path / "calib.yaml"
+    proc = subprocess.Popen([sys.executable, "-m", "robotatfactory", "calibrate", "--live", "--duration", "6",
+                             "--odom-topic", "", "--out", str(out)], env=m.env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    th = threading.Thread(target=publish, daemon=True)
+    th.start()
+    try:
+        log, _ = proc.communicate(timeout=120)
+    finally:
+        stop.set()
+        th.join(5)
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, log
+    assert "from live topics" in log
+    c = yaml.safe_load(out.read_text())["camera"]
+    assert abs(c["fx"] / true_cam.fx - 1) < 0.005 and abs(c["cx"] - true_cam.cx) < 0.5, c
