@@ -418,10 +418,10 @@ def test_raf_calibrate_live_records_the_topics(tmp_path, field, robot):
             msg.data = img.tobytes()
             pub_img.publish(msg)
             k += 1
-            time.sleep(0.05)
+            time.sleep(0.1)
 
     out = tmp_path / "calib.yaml"
-    proc = subprocess.Popen([sys.executable, "-m", "robotatfactory", "calibrate", "--live", "--duration", "6",
+    proc = subprocess.Popen([sys.executable, "-m", "robotatfactory", "calibrate", "--live", "--duration", "5",
                              "--odom-topic", "", "--out", str(out)], env=m.env(), stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     th = threading.Thread(target=publish, daemon=True)
