@@ -437,3 +437,12 @@ def test_raf_calibrate_live_records_the_topics(tmp_path, field, robot):
     assert "from live topics" in log
     c = yaml.safe_load(out.read_text())["camera"]
     assert abs(c["fx"] / true_cam.fx - 1) < 0.005 and abs(c["cx"] - true_cam.cx) < 0.5, c
+
+
+def test_images_of_another_size_are_a_config_error(tmp_path):
+    from robotatfactory.commands import calibrate
+
+    bag = tmp_path / "small.bag"
+    _write_bag(bag, [(0.1 * k, np.full((240, 320, 3), 128, np.uint8)) for k in range(3)])
+    with pytest.raises(ConfigError, match="320x240"):
+        calibrate.run(_calibrate_args(bag, tmp_path / "c.yaml"))

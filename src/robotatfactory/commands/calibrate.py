@@ -51,8 +51,7 @@ def run(args) -> int:
 
     from ..errors import ConfigError
     from ..field import load_field
-    from ..localization.calibration import (CalibrationConfig, calibrate, compare, frames_from_images,
-                                            load_calibration, write_calibration)
+    from ..localization.calibration import CalibrationConfig, calibrate, compare, load_calibration, write_calibration
     from ..robot import load_robot
 
     if args.every < 1 or args.max_frames < 1:
@@ -65,26 +64,42 @@ def run(args) -> int:
     if args.initial:
         robot = replace(robot, camera=load_calibration(args.initial).apply(robot.camera))
     odom_topic = args.odom_topic or None
+    from ..localization.calibration import FrameData, interpolate_odometry
+    from ..localization.detect import DetectorConfig, MarkerDetector
+
+    det = MarkerDetector(DetectorConfig(dictionary=fld.dictionary, corner_refinement=args.corner_refinement))
+    size = (robot.camera.height, robot.camera.width)
+    kept: list[tuple[float, list]] = []
+    wrong: dict[tuple[int, int], int] = {}
+
+    def sink(stamp: float, img) -> None:  # detect as the images come: only the corners are kept
+        if img.shape[:2] != size:
+            wrong[img.shape[:2]] = wrong.get(img.shape[:2], 0) + 1
+            return
+        dets = [d for d in det.detect(img) if fld.has_marker(d.id)]
+        if dets:
+            kept.append((float(stamp), dets))
+
     if args.bag:
         if not Path(args.bag).is_file():
             raise ConfigError(f"--bag {args.bag}: no such file")
         from ..ros.calibration_source import read_bag
 
-        images, odom = read_bag(args.bag, args.image_topic, odom_topic, args.every, args.max_frames)
+        n_images, odom = read_bag(args.bag, args.image_topic, odom_topic, sink, args.every, args.max_frames)
         source = f"bag {args.bag}"
     else:
         from ..ros.calibration_source import record_live
 
-        images, odom = record_live(args.image_topic, odom_topic, args.duration, args.every, args.max_frames)
+        n_images, odom = record_live(args.image_topic, odom_topic, args.duration, sink, args.every, args.max_frames)
         source = f"live topics, {args.duration:g} s"
-    shapes = {img.shape[:2] for _, img in images}
-    if shapes != {(robot.camera.height, robot.camera.width)}:
-        raise ConfigError(f"images are {sorted(shapes)} (rows, columns) but the camera of --robot is "
-                          f"{robot.camera.width}x{robot.camera.height}")
-    from ..localization.detect import DetectorConfig, MarkerDetector
-
-    det = MarkerDetector(DetectorConfig(dictionary=fld.dictionary, corner_refinement=args.corner_refinement))
-    frames, n_images = frames_from_images(images, fld, odom, det)
+    if wrong:
+        sizes = ", ".join(f"{w}x{h} ({n})" for (h, w), n in sorted(wrong.items()))
+        msg = f"images of another size than the camera of --robot ({size[1]}x{size[0]}): {sizes}"
+        if sum(wrong.values()) == n_images:
+            raise ConfigError(msg)
+        print(f"raf calibrate: ignored {msg}", flush=True)
+    kept.sort(key=lambda a: a[0])
+    frames = [FrameData(s, d, o) for (s, d), o in zip(kept, interpolate_odometry(odom, [s for s, _ in kept]))]
     print(f"raf calibrate: {n_images} images from {source}, {len(frames)} with markers of field {fld.name}, "
           f"{len(odom)} odometry messages", flush=True)
     cfg = CalibrationConfig(fit_distortion=args.fit_distortion, fit_forward=not args.no_forward)

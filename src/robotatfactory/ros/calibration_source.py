@@ -1,8 +1,10 @@
 """Camera images and odometry for ``raf calibrate``: read from a rosbag or recorded live (thin ROS wiring).
 
-Both return ``(images, odometry)``: images as a list of ``(stamp_s, BGR uint8 array)`` and odometry as a list
-of ``(stamp_s, x, y, theta)`` (``base_link`` in ``odom``), oldest first. Everything else (detection,
-interpolation, the fit) is plain Python in :mod:`robotatfactory.localization.calibration` and the command.
+Both hand every kept image to ``sink(stamp_s, BGR uint8 array)`` as it is read (so a long recording is never
+held in memory: the command detects the markers there and keeps only the corners) and return
+``(images_kept, odometry)`` with odometry as a list of ``(stamp_s, x, y, theta)`` (``base_link`` in ``odom``),
+oldest first. Everything else (detection, interpolation, the fit) is plain Python in
+:mod:`robotatfactory.localization.calibration` and the command.
 """
 from __future__ import annotations
 
@@ -48,8 +50,8 @@ def _match(topic: str, wanted: str) -> bool:
     return t == w or t.endswith("/" + w)
 
 
-def read_bag(path: str, image_topic: str, odom_topic: str | None, every: int = 1, max_images: int = 0):
-    """Images (every ``every``-th, at most ``max_images`` if > 0) and odometry from a bag file."""
+def read_bag(path: str, image_topic: str, odom_topic: str | None, sink, every: int = 1, max_images: int = 0):
+    """Images (every ``every``-th, at most ``max_images`` if > 0) to ``sink`` and odometry from a bag file."""
     import rosbag
 
     try:
@@ -70,25 +72,26 @@ def read_bag(path: str, image_topic: str, odom_topic: str | None, every: int = 1
         od_topics = [t for t in topics if odom_topic and _match(t, odom_topic)
                      and topics[t].msg_type == "nav_msgs/Odometry"]
         wanted = img_topics + od_topics[:1]
-        images, odom = [], []
-        k = 0
+        odom = []
+        k = kept = 0
         for topic, msg, t in bag.read_messages(topics=wanted):
             if topic == img_topics[0]:
-                if k % max(1, every) == 0 and (max_images <= 0 or len(images) < max_images):
-                    stamp = msg.header.stamp.to_sec() or t.to_sec()
-                    images.append((stamp, image_to_bgr(msg)))
+                if k % max(1, every) == 0 and (max_images <= 0 or kept < max_images):
+                    sink(msg.header.stamp.to_sec() or t.to_sec(), image_to_bgr(msg))
+                    kept += 1
                 k += 1
             else:
                 odom.append(odom_pose(msg))
-    if not images:
+    if not kept:
         raise ConfigError(f"bag {path}: no images on {img_topics[0]}")
-    images.sort(key=lambda a: a[0])
     odom.sort(key=lambda a: a[0])
-    return images, odom
+    return kept, odom
 
 
-def record_live(image_topic: str, odom_topic: str | None, duration: float, every: int = 1, max_images: int = 0):
-    """Subscribe for ``duration`` wall seconds (needs a ROS master) and return what arrived."""
+def record_live(image_topic: str, odom_topic: str | None, duration: float, sink, every: int = 1,
+                max_images: int = 0):
+    """Subscribe for ``duration`` wall seconds (needs a ROS master); images to ``sink`` (from the
+    subscriber's thread, one at a time), odometry returned."""
     import threading
 
     import rosgraph
@@ -102,20 +105,21 @@ def record_live(image_topic: str, odom_topic: str | None, duration: float, every
         raise ConfigError(f"--duration must be a positive number of seconds, got {duration!r}")
     rospy.init_node("raf_calibrate", anonymous=True, disable_signals=True)
     lock = threading.Lock()
-    images, odom, count = [], [], [0]
+    odom, count, kept, bad = [], [0], [0], [0]
 
     def on_image(msg):
         with lock:
             k = count[0]
             count[0] += 1
-            if k % max(1, every) or (max_images > 0 and len(images) >= max_images):
+            if k % max(1, every) or (max_images > 0 and kept[0] >= max_images):
                 return
-        try:
-            img = image_to_bgr(msg)
-        except ConfigError:
-            return
-        with lock:
-            images.append((msg.header.stamp.to_sec(), img))
+            try:
+                img = image_to_bgr(msg)
+            except ConfigError:
+                bad[0] += 1
+                return
+            sink(msg.header.stamp.to_sec(), img)
+            kept[0] += 1
 
     def on_odom(msg):
         with lock:
@@ -131,7 +135,8 @@ def record_live(image_topic: str, odom_topic: str | None, duration: float, every
         s.unregister()
     rospy.signal_shutdown("raf calibrate: recording done")
     with lock:
-        if not images:
-            raise ConfigError(f"no images arrived on {rospy.resolve_name(image_topic)} in {duration:g} s "
+        if not kept[0]:
+            extra = f" ({bad[0]} in an unsupported encoding)" if bad[0] else ""
+            raise ConfigError(f"no images arrived on {rospy.resolve_name(image_topic)} in {duration:g} s{extra} "
                               f"(is the bridge running and the robot's camera on?)")
-        return sorted(images, key=lambda a: a[0]), sorted(odom, key=lambda a: a[0])
+        return kept[0], sorted(odom, key=lambda a: a[0])
