@@ -526,17 +526,25 @@ def _prior_sigma(name: str, cam: CameraSpec, cfg: CalibrationConfig) -> float:
 def _camera_covariance(res, nC: int, n_rows: int, n_params: int) -> np.ndarray:
     """Covariance of the camera block: the camera rows and columns of the inverse of J^T J (Huber-weighted,
     camera and poses together, so the poses' uncertainty is accounted for), scaled by the a-posteriori variance
-    factor 2*cost/(m - n)."""
-    J = res.jac.tocsc() if hasattr(res.jac, "tocsc") else np.asarray(res.jac)
-    H = (J.T @ J)
-    H = H.toarray() if hasattr(H, "toarray") else np.asarray(H)
-    try:
-        Hinv = np.linalg.inv(H)
-    except np.linalg.LinAlgError:
-        Hinv = np.linalg.pinv(H)
+    factor 2*cost/(m - n). J^T J is sparse (the camera's rows and columns, 3x3 pose blocks, odometry between
+    neighbours): a sparse LU solves for the camera's columns only."""
+    from scipy.sparse import csc_matrix, identity
+    from scipy.sparse.linalg import splu
+
     dof = max(1, n_rows - n_params)
     s2 = max(2.0 * float(res.cost) / dof, 1e-12)
-    C = Hinv[:nC, :nC] * s2
+    if nC == 0:
+        return np.zeros((0, 0))
+    J = csc_matrix(res.jac)
+    H = (J.T @ J).tocsc()
+    n = H.shape[0]
+    E = np.zeros((n, nC))
+    E[np.arange(nC), np.arange(nC)] = 1.0
+    try:
+        X = splu(H).solve(E)
+    except RuntimeError:  # singular: a tiny ridge (the prior rows normally prevent this)
+        X = splu((H + 1e-9 * identity(n, format="csc")).tocsc()).solve(E)
+    C = X[:nC] * s2
     return 0.5 * (C + C.T)
 
 
