@@ -347,15 +347,19 @@ class SimRunner:
         return False
 
     def _check_command_age(self) -> None:
-        """No valid command for ``command_timeout`` simulation seconds: stop the wheels (magnet kept)."""
+        """No valid command for ``command_timeout`` simulation seconds: stop the wheels (magnet kept). Checked
+        before each cycle, for the cycle's end: a command never drives the robot beyond its timeout."""
         t = self.config.command_timeout
-        if t is None or self._command_sim_time is None or self.sim.time - self._command_sim_time < t - 1e-9:
+        if t is None or self._command_sim_time is None:
+            return
+        age_at_end = self.sim.time + self.sim.robot.control_period - self._command_sim_time
+        if age_at_end <= t + 1e-9:
             return
         if self.command.v or self.command.w:
             self.counters.command_timeouts += 1
             self._rlog.warn("command-timeout", f"no valid command for {self.sim.time - self._command_sim_time:.2f} "
-                                               f"s of simulation time (> {t:g} s): stopping the robot (V = W = 0, "
-                                               "magnet kept)")
+                                               f"s of simulation time (> {t:g} s by the end of this cycle): "
+                                               "stopping the robot (V = W = 0, magnet kept)")
             self.command = Command(0.0, 0.0, self.command.magnet, -1)
 
     def _drain(self, expect_seq: int | None = None) -> bool:
