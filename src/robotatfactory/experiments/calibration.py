@@ -4,8 +4,10 @@ The stand-in simulator (in this process, its default SimTwo-like mode) renders t
 perturbed calibration -- by default the issue's case: fx and fy +3 %, cx +4 px, cy -3 px, pitch +1 degree
 against the nominal values of the robot file -- while the robot drives a lap of the reference route
 (pure pursuit on the ground truth) that sees floor and wall markers. Every ``--every``-th camera frame is
-detected; odometry comes from the simulated encoders with the nominal wheel geometry; a frame's stamp is the
-end of the control cycle it was rendered in (what a receiver of SimTwo's frames can know). The calibration
+detected; odometry comes from the simulated encoders with the nominal wheel geometry while the simulated
+robot's track is 1 % wider and its wheels 0.5 % smaller (``--wheel-error``, as in ``raf experiment
+localization``); a frame's stamp is the end of the control cycle it was rendered in (what a receiver of
+SimTwo's frames can know). The calibration
 (:func:`robotatfactory.localization.calibration.calibrate`) starts from the NOMINAL camera and is compared
 with the true one.
 
@@ -17,7 +19,6 @@ robot, for ``raf sim --robot``), ``calibration_residuals.png`` and ``results.jso
 """
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 
@@ -51,6 +52,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--height-mm", type=float, default=0.0, help="true mount height against the nominal, mm")
     parser.add_argument("--forward-mm", type=float, default=0.0, help="true forward offset against the nominal, mm")
     parser.add_argument("--no-odometry", action="store_true", help="fit without the odometry prior")
+    parser.add_argument("--wheel-error", default="0.01,-0.005", metavar="TRACK,RADIUS",
+                        help="relative errors of the simulated robot's track and wheel radius against the nominal "
+                             "ones the odometry uses (default 0.01,-0.005, as raf experiment localization)")
     parser.add_argument("--fit-distortion", action="store_true", help="also fit k1, k2")
     parser.add_argument("--fit-corner-bias", action="store_true",
                         help="also fit a constant detector corner bias (px; docs/calibration.md: off by default)")
@@ -83,15 +87,12 @@ def record(fld, true_robot, nominal_robot, route: str = "reference", laps: int =
     frames_seen = 0
     t_wall = time.perf_counter()
     try:
-        first = True
         n_cycles = 0
         while not pp.done and time.perf_counter() - t_wall < timeout_s and n_cycles < 20000:
             v, w = pp.command(sim.pose)
             f = sim.step_cycle(Command(v, w, False))
             n_cycles += 1
             st = odo.update(f.enc_total[0], f.enc_total[1], f.time)
-            if first:
-                first = False
             odo_t.append(f.time)
             odo_p.append((st.x, st.y, st.theta))
             for cf in sim.take_frames():
@@ -162,11 +163,21 @@ def run(args, out_dir: Path | None) -> dict:
                                             write_calibration, write_robot_json)
     from ..robot import load_robot
 
+    from dataclasses import replace
+
+    from ..errors import ConfigError
+
     fld = load_field(args.field)
     nominal = load_robot("simtwo")
+    try:
+        track_err, radius_err = (float(v) for v in args.wheel_error.split(","))
+    except ValueError:
+        raise ConfigError(f"--wheel-error {args.wheel_error!r}: expected TRACK,RADIUS, e.g. 0.01,-0.005") from None
     true_robot = perturbed_robot(nominal, fx_pct=args.fx_pct, fy_pct=args.fy_pct, cx_px=args.cx_px,
                                  cy_px=args.cy_px, pitch_deg=args.pitch_deg, roll_deg=args.roll_deg,
                                  height_m=args.height_mm / 1000, forward_m=args.forward_mm / 1000)
+    true_robot = replace(true_robot, track=nominal.track * (1 + track_err),
+                         wheel_radius=nominal.wheel_radius * (1 + radius_err))
     frames, info = record(fld, true_robot, nominal, args.route, args.laps, args.speed, args.every, args.seed,
                           odometry=not args.no_odometry, corner_refinement=args.corner_refinement)
     t0 = time.perf_counter()
@@ -191,6 +202,7 @@ def run(args, out_dir: Path | None) -> dict:
         "rejected_detections": result.rejected, "odometry_links": result.odometry_links,
         "degenerate_params": ",".join(result.degenerate) or "none",
         "fit_s": round(fit_s, 2), "route": args.route, "laps": args.laps, "mode": "default (SimTwo-like)",
+        "wheel_error": args.wheel_error,
         **{k: (round(v, 3) if isinstance(v, float) else v) for k, v in info.items()},
     })
     for k, v in result.sigma.items():

@@ -54,7 +54,7 @@ from ..errors import ConfigError
 from ..field.model import Field
 from ..robot import CameraSpec, RobotSpec
 from .detect import Detection
-from .geometry import between2, wrap_angle
+from .geometry import between2, compose2, wrap_angle
 
 #: The camera parameters of the model, in the order of the parameter vector (units in docs above).
 PARAMS = ("fx", "fy", "cx", "cy", "x", "y", "z", "pitch_down_deg", "roll_deg", "k1", "k2", "p1", "p2", "k3",
@@ -746,8 +746,6 @@ def synthetic_frames(fld: Field, camera: CameraSpec, poses: Sequence[tuple[float
             d = np.array(between2(prev, p))
             if odom_noise > 0:
                 d = d * (1 + rng.normal(0, odom_noise, 3))
-            from .geometry import compose2
-
             odo = compose2(odo, tuple(d))
         prev = tuple(p)
         out.append(FrameData(float(k), dets, odo))
