@@ -95,6 +95,13 @@ def test_source_gate_binds_the_first_consistent_sender_only():
     assert g.foreign_total == 3 and g.foreign["127.0.0.1:50001"] == 1
 
 
+def test_a_sender_with_another_control_period_is_named_not_bound():
+    g = SourceGate(confirm=3, period_ms=40)
+    for s in range(5):
+        assert g.candidate(SIM, s, (s + 1) * 20, s, 0.02 * s) is None  # a 20 ms script period
+    assert g.bound is None and g.period_mismatch == (SIM, 20.0)
+
+
 def test_a_configured_source_never_changes():
     g = SourceGate(source=SIM)
     assert not g.open_to(OTHER, 100.0)

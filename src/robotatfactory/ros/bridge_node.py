@@ -274,6 +274,11 @@ class Bridge:
         if chain is None:
             if previous is None:  # nothing bound yet (bridge starting): answer with a stop, nothing published
                 self._reply(Command(0.0, 0.0, self.watchdog.magnet, frame.seq), addr, arrival)
+                mm = gate.period_mismatch
+                if mm is not None and mm[0] == (addr[0], addr[1]):
+                    self._warn("period", f"bridge: frames from {source_key(addr)} advance Tms by {mm[1]:.0f} ms per "
+                                         f"Seq, not ~geometry/control_period = {cfg.control_period_ms} ms: the "
+                                         "stream cannot bind until they agree (the script's period?)")
             else:
                 self._foreign(addr)
             return

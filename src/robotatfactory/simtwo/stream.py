@@ -28,7 +28,7 @@ one had ``last`` (and ``Tms`` ``last_t``):
   (``max_ticks_per_s``) are rejected (``IMPLAUSIBLE``), state unchanged.
 
 A *consistent chain*: each frame's ``Seq`` is 1..``reorder_window`` past the previous one and its ``Tms`` moved
-by the same number of control periods (within half a period). A simulator's stream always is one; random or
+by the same number of control periods (within a quarter of a period). A simulator's stream always is one; random or
 forged datagrams practically never are.
 
 Every frame from the bound source (accepted or not) is answered by the bridge, so a lockstep simulator
@@ -63,9 +63,10 @@ REJECT_KINDS = ("malformed", "foreign_source", "foreign_protocol", "oversized")
 
 def chain_consistent(prev: tuple[int, int], cur: tuple[int, int], period_ms: int, window: int) -> bool:
     """True when frame ``cur`` = (seq, tms) can follow ``prev`` in one simulator's stream: Seq 1..window
-    ahead and Tms ahead by as many control periods (within half a period)."""
+    ahead and Tms ahead by as many control periods (within a quarter of a period: SimTwo's script and
+    ``raf sim`` add exactly one period per cycle)."""
     ds, dt = cur[0] - prev[0], cur[1] - prev[1]
-    return 1 <= ds <= window and abs(dt - ds * period_ms) <= period_ms / 2
+    return 1 <= ds <= window and abs(dt - ds * period_ms) <= max(1.0, period_ms / 4)
 
 
 @dataclass(frozen=True)
@@ -260,6 +261,9 @@ class SourceGate:
         self.takeovers = 0
         self.binds = 0
         self._cand: dict[tuple, list] = {}  # source -> chain [(seq, tms, payload)]
+        #: (source, ms per Seq) of the last candidate whose Seq ran on but whose Tms did not follow the control
+        #: period: a simulator whose script period differs from ~geometry/control_period never binds
+        self.period_mismatch: tuple[tuple, float] | None = None
 
     def is_bound(self, addr) -> bool:
         return self.bound is not None and (addr[0], addr[1]) == self.bound
@@ -302,6 +306,8 @@ class SourceGate:
         if chain and chain_consistent(chain[-1][:2], (seq, time_ms), self.period_ms, self.window):
             chain.append((seq, time_ms, payload))
         else:
+            if chain and 1 <= seq - chain[-1][0] <= self.window and time_ms > chain[-1][1]:
+                self.period_mismatch = (key, (time_ms - chain[-1][1]) / (seq - chain[-1][0]))
             if len(self._cand) >= self.MAX_SOURCES:  # a flood of sources: forget the oldest candidates
                 self._cand.pop(next(iter(self._cand)))
             chain = self._cand[key] = [(seq, time_ms, payload)]
