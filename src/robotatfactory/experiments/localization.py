@@ -899,7 +899,7 @@ def calibration_drive(args, plan: Plan, master, log_dir: Path, work: Path, robot
     if not _has_command("calibrate"):
         notes.append("calibration: raf calibrate is not available: the drives use the robot file's nominal camera")
         return None, {"calibration_source": "none (raf calibrate not available)"}
-    bag = (out_dir or work) / "calibration.bag"
+    bag = work / "calibration.bag"  # ~130 MB: deleted with the work directory (the YAML is kept)
     route = make_route("calibration", 1)
     with Session(args, plan, master, log_dir, "calibration", route, robot_file, None, localize=False, bag=bag,
                  speed=args.calibration_speed) as ses:
@@ -918,9 +918,6 @@ def calibration_drive(args, plan: Plan, master, log_dir: Path, work: Path, robot
         tail = (log_dir / "calibrate.log").read_text(errors="replace").splitlines()[-15:]
         raise RuntimeError(f"raf calibrate failed (exit {r.returncode}):\n" + "\n".join(tail))
     out["calibration_source"] = "raf calibrate on the calibration drive"
-    if out_dir is None:
-        keep = work / "calibration.yaml"
-        out["calibration_file"] = str(keep)
     return calib, out
 
 
@@ -1051,7 +1048,7 @@ def run(args, out_dir: Path | None) -> dict:
         ok = True
     finally:
         master.cleanup()
-        if ok and out_dir is not None:
+        if ok:
             shutil.rmtree(work, ignore_errors=True)  # logs live in out_dir/logs when --out is given
         elif not ok:
             print(f"logs: {log_dir}", file=sys.stderr)
