@@ -46,7 +46,8 @@ class CameraBridge:
             timing_sock.setblocking(False)
         self.rate = RateMeter()
         self.log = LogLimiter(cfg.log_period)
-        self.counts = {"received": 0, "skipped": 0, "wrong_size": 0, "published": 0, "timing_messages": 0}
+        self.counts = {"received": 0, "skipped": 0, "wrong_size": 0, "published": 0, "timing_messages": 0,
+                       "publisher_restarts": 0}
         self._mail = None
         self._cv = threading.Condition()
         self._timing_cv = threading.Condition()  # notified on every SensorFrame timing message
@@ -143,10 +144,19 @@ class CameraBridge:
         sock.setsockopt(zmq.RCVHWM, RCVHWM)
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.SUBSCRIBE, b"")
+        # connection events tell a restarted publisher (ZMQ reconnects by itself; frames carry no sequence)
+        monitor = sock.get_monitor_socket(zmq.EVENT_CONNECTED)
+        poller = zmq.Poller()
+        poller.register(sock, zmq.POLLIN)
+        poller.register(monitor, zmq.POLLIN)
+        connected = False
         sock.connect(self.cfg.camera_endpoint)
         try:
             while self._running:
-                if not sock.poll(200):
+                ready = dict(poller.poll(200))
+                if monitor in ready:
+                    connected = self._on_connect_events(monitor, connected)
+                if sock not in ready:
                     continue
                 msg = sock.recv(copy=False)
                 arrival = time.monotonic()
@@ -168,7 +178,27 @@ class CameraBridge:
                 with self._timing_cv:  # a stamp waiting for its SensorFrame can decide now
                     self._timing_cv.notify_all()
         finally:
+            sock.disable_monitor()
+            monitor.close(0)
             sock.close(0)
+
+    def _on_connect_events(self, monitor, connected: bool) -> bool:
+        """Count a reconnection to the camera endpoint as a publisher restart and re-synchronise the stamper's
+        frame counting (the SensorFrames it knows stay valid). Returns whether a connection was ever made."""
+        import zmq
+        from zmq.utils.monitor import recv_monitor_message
+
+        while monitor.poll(0):
+            event = recv_monitor_message(monitor)
+            if event["event"] != zmq.EVENT_CONNECTED:
+                continue
+            if connected:
+                self.counts["publisher_restarts"] += 1
+                self.stamper.resync_frames()
+                self._warn("restart", f"camera: the publisher at {self.cfg.camera_endpoint} restarted "
+                                      f"(reconnected); frame stamping re-synchronised")
+            connected = True
+        return connected
 
     def _publish(self) -> None:
         import numpy as np
@@ -257,7 +287,8 @@ class CameraBridge:
         phase = self.stamper.locked_phase
         vals = {"frame_rate_hz": self.rate.rate(now), "staleness_s": -1.0 if age is None else age,
                 "received": c["received"], "published": c["published"], "skipped": c["skipped"],
-                "rejected_wrong_size": c["wrong_size"], "locked_render_phase": -1 if phase is None else phase,
+                "rejected_wrong_size": c["wrong_size"], "publisher_restarts": c["publisher_restarts"],
+                "locked_render_phase": -1 if phase is None else phase,
                 "timing_messages": c["timing_messages"]}
         vals.update({f"stamps_{k}": v for k, v in self.stamper.counters.as_dict().items()})
         arr = DiagnosticArray()

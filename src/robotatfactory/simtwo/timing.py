@@ -201,6 +201,15 @@ class CameraStamper:
             self._tick = None
             self._disagree = 0
 
+    def resync_frames(self) -> None:
+        """Forget what was learned from the frames (render phase, tick count, monotonicity) but keep the
+        SensorFrames: the camera publisher restarted while the simulator's stream went on."""
+        with self._lock:
+            self._phases.clear()
+            self._prev = None
+            self._tick = None
+            self._disagree = 0
+
     def on_sensor_frame(self, time_ms: int, arrival: float) -> None:
         """Record an accepted SensorFrame (``Tms``) and its arrival (monotonic seconds)."""
         with self._lock:

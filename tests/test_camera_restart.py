@@ -1,0 +1,71 @@
+"""The camera node notices a restarted camera publisher (frames carry no sequence number) by ZMQ's connection
+events: it counts the restart and re-synchronises the stamper's frame counting, keeping the SensorFrames."""
+import socket
+import threading
+import time
+from types import SimpleNamespace
+
+import zmq
+
+from robotatfactory.ros.camera_node import CameraBridge
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _cfg(endpoint: str):
+    return SimpleNamespace(control_period_ms=40, render_fps=60.0, decimation=4, max_wait=0.02, use_grid=False,
+                           camera_bracket="elapsed", camera_latency=0.004, log_period=5.0,
+                           camera_endpoint=endpoint)
+
+
+def _publish_until(pub, cam, received: int, timeout: float = 10.0) -> None:
+    end = time.monotonic() + timeout
+    while cam.counts["received"] < received and time.monotonic() < end:
+        pub.send(b"\0" * 16)
+        time.sleep(0.02)
+    assert cam.counts["received"] >= received, cam.counts
+
+
+def _until(cond, timeout: float = 5.0) -> bool:
+    end = time.monotonic() + timeout
+    while not cond() and time.monotonic() < end:
+        time.sleep(0.02)
+    return cond()
+
+
+def test_a_restarted_publisher_is_counted_and_resynchronises_the_stamper():
+    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+    cam = CameraBridge(_cfg(endpoint))
+    cam.stamper.on_sensor_frame(40, time.monotonic())
+    resyncs = []
+    original = cam.stamper.resync_frames
+    cam.stamper.resync_frames = lambda: (resyncs.append(1), original())
+    cam._running = True
+    rx = threading.Thread(target=cam._rx, daemon=True)
+    ctx = zmq.Context.instance()
+    pub = ctx.socket(zmq.PUB)
+    pub.setsockopt(zmq.LINGER, 0)
+    pub.bind(endpoint)
+    rx.start()
+    try:
+        _publish_until(pub, cam, 3)
+        assert cam.counts["publisher_restarts"] == 0  # the first connection is no restart
+        pub.close(0)
+        time.sleep(0.3)
+        pub = ctx.socket(zmq.PUB)
+        pub.setsockopt(zmq.LINGER, 0)
+        pub.bind(endpoint)
+        n = cam.counts["received"]
+        _publish_until(pub, cam, n + 3)
+        assert _until(lambda: cam.counts["publisher_restarts"] == 1), cam.counts
+        assert resyncs == [1]
+        assert len(cam.stamper._tms) == 1  # the SensorFrames are kept
+    finally:
+        cam._running = False
+        rx.join(2.0)
+        pub.close(0)
+    assert not rx.is_alive()
