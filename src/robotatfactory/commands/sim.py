@@ -43,6 +43,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help=f"UDP port of the factory-state server (default {SERVER_UDP_PORT}, on --host)")
     srv.add_argument("--no-server", action="store_true", help="no factory-state server")
 
+    ctl = g.add_mutually_exclusive_group()
+    ctl.add_argument("--control-port", type=int, default=None, metavar="PORT",
+                     help="UDP port of the control channel (reset, pause, resume, step, set_robot_pose, "
+                          "place_part, remove_part, get_state: JSON requests, docs/protocol.md) on --host "
+                          "(default: --port + 4, i.e. 9812)")
+    ctl.add_argument("--no-control", action="store_true", help="no control channel")
     g.add_argument("--controller", default=None, metavar="HOST:PORT",
                    help="accept commands from this source only (default: the first that sends a valid command; "
                         "another takes over after it has been silent for --takeover-after seconds)")
@@ -56,6 +62,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="pace simulation time to the wall clock (default)")
     mode.add_argument("--fast", dest="mode", action="store_const", const="fast", help="run as fast as possible")
     p.set_defaults(mode="realtime")
+    g.add_argument("--paused", action="store_true",
+                   help="start paused: the control channel's step and resume requests run it")
     g.add_argument("--lockstep", action="store_true",
                    help="wait each cycle for the controller's reply to the frame just sent")
     g.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="S",
@@ -115,6 +123,7 @@ def run(args) -> int:
     from ..field import load_field
     from ..robot import load_robot
     from ..sim import SimConfig, parse_pose
+    from ..sim.control import control_port_for
     from ..sim.runner import RunnerConfig, parse_address
 
     if not logging.getLogger().handlers:
@@ -158,7 +167,10 @@ def run(args) -> int:
         mode=args.mode, lockstep=args.lockstep, lockstep_timeout=args.lockstep_timeout,
         on_timeout=args.on_timeout, duration=args.duration, status_every=args.status_every, quiet=args.quiet,
         controller=parse_address(args.controller) if args.controller else None, takeover_after=args.takeover_after,
-        command_timeout=args.command_timeout or None)
+        command_timeout=args.command_timeout or None,
+        control_port=None if args.no_control else (args.control_port if args.control_port is not None
+                                                    else control_port_for(args.port)),
+        start_paused=args.paused)
     from ..sim.runner import SimRunner
 
     sim = Simulator(field, robot, config)
@@ -169,6 +181,8 @@ def run(args) -> int:
         c = runner_config
         host, port = runner.address
         extras = []
+        if runner.control_address is not None:
+            extras.append("control udp %s:%d%s" % (*runner.control_address, " (paused)" if c.start_paused else ""))
         if c.camera_bind:
             extras.append(f"camera {c.camera_bind}")
         if runner.server is not None:

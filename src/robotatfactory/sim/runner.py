@@ -75,6 +75,8 @@ class RunnerConfig:
     controller: tuple[str, int] | None = None  # the only source of commands; None: the first valid sender
     takeover_after: float = 2.0  # wall s the controller must be silent before another source may take over
     command_timeout: float | None = None  # simulation s without a valid command: stop (raf sim: 0.5); None: keep
+    control_port: int | None = None  # the control channel's UDP port on host (sim/control.py); None: none
+    start_paused: bool = False  # start paused (the control channel's step/resume run it)
 
     def __post_init__(self):
         if self.mode not in MODES:
@@ -91,6 +93,7 @@ class RunnerConfig:
         if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
             raise ConfigError(f"--duration {self.duration}: must be a positive number of simulation seconds")
         for name, port in (("--port", self.port), ("--bridge port", self.bridge[1]),
+                           ("--control-port", self.control_port if self.control_port is not None else 0),
                            ("--server-port", self.server_port if self.server_port is not None else 0)):
             if not (isinstance(port, int) and 0 <= port <= 65535):
                 raise ConfigError(f"{name} {port!r}: must be an integer 0..65535")
@@ -228,6 +231,11 @@ class SimRunner:
         self.controller: tuple[str, int] | None = self.config.controller
         self._controller_seen: float | None = None  # wall (monotonic) time of its last valid command
         self._command_sim_time: float | None = None  # simulation time of the last valid command
+        from .control import SimControl
+
+        self.control = SimControl(self)  # reset/pause/step/... requests (sim/control.py)
+        self.control.paused = self.config.start_paused
+        self._ctl_sock: socket.socket | None = None
 
     # ------------------------------------------------------------------------------------------ setup
     def open(self) -> "SimRunner":
@@ -240,6 +248,11 @@ class SimRunner:
         sock.setblocking(False)
         self._sock = sock
         try:
+            if c.control_port is not None:
+                ctl = bind_udp(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), c.host, c.control_port,
+                               "the control channel", "another simulator running? choose --control-port")
+                ctl.setblocking(False)
+                self._ctl_sock = ctl
             if c.camera_bind:
                 import zmq
 
@@ -271,7 +284,15 @@ class SimRunner:
         """(host, port) the command socket is bound to (the real port when configured with 0)."""
         return self._sock.getsockname()[:2] if self._sock is not None else (self.config.host, self.config.port)
 
+    @property
+    def control_address(self) -> tuple[str, int] | None:
+        """(host, port) of the control channel, None without one."""
+        return self._ctl_sock.getsockname()[:2] if self._ctl_sock is not None else None
+
     def close(self) -> None:
+        if self._ctl_sock is not None:
+            self._ctl_sock.close()
+            self._ctl_sock = None
         if self.server is not None:
             self.server.stop()
             self.server = None
@@ -291,6 +312,68 @@ class SimRunner:
 
     def __exit__(self, *exc):
         self.close()
+
+    # ------------------------------------------------------------------------------------------ control
+    def replace_sim(self, new_sim) -> None:
+        """A reset (sim/control.py): run ``new_sim`` from the next cycle on, as a fresh start would (the
+        command in force, its age, the frame encoder, the pacing and the factory server follow)."""
+        old, self.sim = self.sim, new_sim
+        old.close()
+        self.command = Command.stop()
+        self._command_sim_time = None
+        self._encoder = CachedFrameEncoder()
+        self._pace0 = (time.monotonic(), new_sim.time)
+        if self.server is not None and new_sim.factory is not None:
+            self.server.factory = new_sim.factory
+            self.server.clock = lambda: self.sim.time
+
+    def on_resume(self) -> None:
+        """Pacing counts from now on (a paused run is not behind the wall clock)."""
+        self._pace0 = (time.monotonic(), self.sim.time)
+
+    def _ctl_reply(self, reply: dict, addr) -> None:
+        from .control import encode_reply
+
+        try:
+            self._ctl_sock.sendto(encode_reply(reply), addr)
+        except (OSError, ValueError) as e:
+            self._rlog.warn("ctl-tx", f"control reply to {addr} not sent: {e}")
+
+    def _poll_control(self) -> None:
+        """Apply every queued control request (between cycles: never during one)."""
+        sock = self._ctl_sock
+        if sock is None:
+            return
+        while True:
+            try:
+                data, addr = sock.recvfrom(RECV_BUFFER)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as e:
+                self._rlog.warn("ctl-rx", f"control socket receive error: {e}")
+                return
+            try:
+                reply = self.control.handle(data, addr)
+            except Exception as e:  # noqa: BLE001 - a request must never end the run
+                log.exception("control request failed")
+                from .control import error_reply
+
+                reply = error_reply(None, None, "internal", repr(e))
+            if reply is not None:
+                if not reply["ok"]:
+                    self._rlog.warn(f"ctl-{reply['error']}", f"control request from {addr[0]}:{addr[1]} "
+                                                             f"rejected: {reply['error']}: {reply['message']}")
+                self._ctl_reply(reply, addr)
+
+    def _wait_paused(self) -> None:
+        """Paused: wait (<= 0.1 s) for a control request, keeping the command socket drained."""
+        socks = [s for s in (self._ctl_sock, self._sock) if s is not None]
+        try:
+            select.select(socks, [], [], 0.1)
+        except (InterruptedError, ValueError):
+            pass
+        if not self.config.lockstep:
+            self._drain()
 
     def request_stop(self, *_args) -> None:
         """Ask the loop to end after the present cycle (signal-handler safe)."""
@@ -416,7 +499,7 @@ class SimRunner:
     def _pace(self, t: float) -> None:
         """``realtime``: wait until simulation time ``t`` (s) is due on the wall clock; re-anchor the pacing
         when more than ``MAX_BEHIND`` late (lockstep waits, a slow machine). ``fast``: return at once."""
-        if self.config.mode != "realtime":
+        if self.config.mode != "realtime" or self.control.paused:  # steps of a paused run: at once
             return
         w0, s0 = self._pace0
         now = time.monotonic()
@@ -474,18 +557,22 @@ class SimRunner:
     def run(self) -> RunResult:
         """Run until the duration, a stop request or a lockstep ``exit``. Opens and closes the endpoints."""
         c = self.config
-        sim = self.sim
         self.open()
         reason, code = "stopped", 0
         wall0 = time.monotonic()
-        sim0 = sim.time
+        sim0 = self.sim.time
         self._pace0 = (wall0, sim0)  # wall and simulation time that pacing counts from
         next_status = wall0 + c.status_every
         try:
             while not self._stop.is_set():
+                self._poll_control()
+                sim = self.sim  # (a reset replaces it)
                 if c.duration is not None and sim.time - sim0 >= c.duration - 1e-9:
                     reason = "duration"
                     break
+                if not self.control.may_run:
+                    self._wait_paused()
+                    continue
                 if not c.lockstep:
                     self._drain()
                 self._check_command_age()
@@ -494,12 +581,15 @@ class SimRunner:
                 self._publish(sim.take_frames())
                 self._pace(sim.time)  # realtime: the SensorFrame at its own time, after the cycle's frames
                 self._send(frame)
+                done = self.control.cycle_done()
                 if c.lockstep and not self._wait_reply(frame.seq):
                     if self._stop.is_set():
                         break
                     if not self._on_timeout(frame.seq):
                         reason, code = "timeout-exit", 3
                         break
+                if done is not None:  # a step request has run its cycles (replied after the lockstep reply)
+                    self._ctl_reply(*done)
                 now = time.monotonic()
                 if not c.quiet and c.status_every > 0 and now >= next_status:
                     print(self.status_line(now - wall0), file=self.out, flush=True)
@@ -507,5 +597,6 @@ class SimRunner:
         finally:
             wall = time.monotonic() - wall0
             self.close()
+        sim = self.sim
         return RunResult(sim_time=sim.time - sim0, wall_time=wall, counters=self.counters.as_dict(),
                          report=self.report(), reason=reason, exit_code=code)

@@ -1,0 +1,214 @@
+"""The stand-in's control channel (sim/control.py) through a running ``SimRunner``: every request, bad requests,
+and determinism (the same seed and commands in lockstep give the same SensorFrames, byte for byte, after a
+reset as after a fresh start)."""
+import json
+import math
+import socket
+import threading
+import time
+
+import pytest
+
+from robotatfactory.sim import SimConfig
+from robotatfactory.sim.runner import RunnerConfig, SimRunner
+from robotatfactory.simtwo import Command
+
+
+def request(addr, req, timeout=10.0):
+    """One request (dict or raw bytes) to the control channel; its JSON reply."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.settimeout(timeout)
+    try:
+        s.sendto(req if isinstance(req, bytes) else json.dumps(req).encode(), addr)
+        return json.loads(s.recvfrom(65535)[0])
+    finally:
+        s.close()
+
+
+class Controller:
+    """Plays the bridge in lockstep: records every SensorFrame datagram and answers it with a Command
+    that depends on its Seq only (``drive(seq) -> (v, w)``)."""
+
+    def __init__(self, drive):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.drive = drive
+        self.frames: list[bytes] = []
+        self._run = True
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self):
+        from robotatfactory.simtwo import SensorFrame
+
+        while self._run:
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except socket.timeout:
+                continue
+            f = SensorFrame.decode(data)
+            self.frames.append(data)
+            v, w = self.drive(f.seq)
+            self.sock.sendto(Command(v, w, False, f.seq).encode(), addr)
+
+    def take(self) -> list[bytes]:
+        out, self.frames = self.frames, []
+        return out
+
+    def close(self):
+        self._run = False
+        self.thread.join(2)
+        self.sock.close()
+
+
+def start(field, robot, bridge_addr, sim=None, **kw):
+    from robotatfactory.sim import Simulator
+
+    sim_kw = dict(camera=False, lidar=True)
+    sim_kw.update(sim or {})
+    cfg = dict(port=0, bridge=bridge_addr, camera_bind=None, server_port=None, mode="fast", quiet=True,
+               control_port=0)
+    cfg.update(kw)
+    runner = SimRunner(Simulator(field, robot, SimConfig(**sim_kw)), RunnerConfig(**cfg))
+    runner.open()
+    box = {}
+    t = threading.Thread(target=lambda: box.setdefault("result", runner.run()), daemon=True)
+    t.start()
+    return runner, t, box
+
+
+def stop(runner, t):
+    runner.request_stop()
+    t.join(10)
+    assert not t.is_alive()
+
+
+def test_every_request_and_bad_requests(field, robot):
+    ctl_peer = Controller(lambda seq: (0.0, 0.0))
+    runner, t, box = start(field, robot, ctl_peer.sock.getsockname(), start_paused=True)
+    addr = runner.control_address
+    try:
+        st = request(addr, {"op": "get_state", "id": 1})
+        assert st["ok"] and st["id"] == 1 and st["paused"] and st["seq"] == 0 and st["time"] == 0.0
+        assert set(st["ops"]) >= {"reset", "pause", "resume", "step", "set_robot_pose", "place_part",
+                                  "remove_part", "get_state"}
+        parts = {p["id"]: p for p in st["parts"]}
+        assert len(parts) >= 1
+        time.sleep(0.3)
+        assert runner.sim.seq == 0  # paused: no cycle runs
+        # step N: the reply comes after N cycles
+        r = request(addr, {"op": "step", "cycles": 5, "id": "a"})
+        assert r["ok"] and r["id"] == "a" and r["seq"] == 5 and abs(r["time"] - 0.2) < 1e-9
+        assert len(ctl_peer.take()) == 5
+        # teleport
+        r = request(addr, {"op": "set_robot_pose", "x": 0.3, "y": -0.2, "theta": 4.0})
+        assert r["ok"] and r["pose"][:2] == pytest.approx([0.3, -0.2], abs=1e-9)
+        assert r["pose"][2] == pytest.approx(math.remainder(4.0, 2 * math.pi), abs=1e-9)
+        request(addr, {"op": "step", "cycles": 3})
+        x, y, th = runner.sim.pose
+        assert (x, y) == pytest.approx((0.3, -0.2), abs=0.005)
+        # parts: in a slot, at a pose, removed
+        pid = min(parts)
+        slot = next(s for s in field.slots if s.zone == "outgoing")
+        r = request(addr, {"op": "place_part", "part": pid, "slot": slot.name, "type": "B"})
+        assert r["ok"] and r["part_pose"][:2] == pytest.approx(list(slot.xy), abs=1e-9)
+        request(addr, {"op": "step", "cycles": 2})
+        st = request(addr, {"op": "get_state"})
+        p = next(p for p in st["parts"] if p["id"] == pid)
+        assert p["type"] == "B" and p["pose"][:2] == pytest.approx(list(slot.xy), abs=0.01)
+        r = request(addr, {"op": "place_part", "part": pid, "x": 0.0, "y": 0.5, "facing": 1.0})
+        assert r["ok"] and r["part_pose"] == pytest.approx([0.0, 0.5, 1.0], abs=1e-9)
+        r = request(addr, {"op": "remove_part", "part": pid})
+        assert r["ok"]
+        st = request(addr, {"op": "get_state"})
+        p = next(p for p in st["parts"] if p["id"] == pid)
+        assert p["removed"] and not field.floor.contains(*p["pose"][:2])
+        # bad requests: a specific error each, the scene untouched
+        before = (runner.sim.seq, runner.sim.pose)
+        bad = [(b"\xff\x00", "bad_request"), (b"[1, 2]", "bad_request"), (b"{", "bad_request"),
+               ({"op": "fly"}, "unknown_op"), ({"id": 3}, "unknown_op"),
+               ({"op": "step", "cycles": 0}, "bad_argument"), ({"op": "step", "cycles": "5"}, "bad_argument"),
+               ({"op": "set_robot_pose", "x": 0.0}, "bad_argument"),
+               (b'{"op": "set_robot_pose", "x": NaN, "y": 0}', "bad_argument"),  # Python's json reads NaN
+               ({"op": "set_robot_pose", "x": 50.0, "y": 0.0}, "out_of_field"),
+               ({"op": "place_part", "part": 999, "slot": slot.name}, "unknown_part"),
+               ({"op": "place_part", "part": pid, "slot": "garage_1"}, "unknown_slot"),
+               ({"op": "place_part", "part": pid, "slot": slot.name, "type": "Q"}, "bad_argument"),
+               ({"op": "reset", "round": 7}, "bad_argument"), ({"op": "reset", "parts": "RGQ"}, "bad_argument"),
+               ({"op": "reset", "start_pose": [9, 9, 0]}, "out_of_field")]
+        for req, code in bad:
+            r = request(addr, req)
+            assert not r["ok"] and r["error"] == code, (req, r)
+            assert r["message"]
+        assert (runner.sim.seq, runner.sim.pose) == before
+        # resume runs on; step while running is refused; pause stops it
+        r = request(addr, {"op": "resume"})
+        assert r["ok"] and not r["paused"]
+        time.sleep(0.3)
+        assert runner.sim.seq > before[0] + 3
+        r = request(addr, {"op": "step", "cycles": 2})
+        assert not r["ok"] and r["error"] == "not_paused"
+        r = request(addr, {"op": "pause"})
+        assert r["ok"] and r["paused"]
+        seq = runner.sim.seq
+        time.sleep(0.3)
+        assert runner.sim.seq == seq
+        # reset: a new round and layout, Seq and time from zero
+        r = request(addr, {"op": "reset", "round": 2, "parts": "RXGB", "seed": 4})
+        assert r["ok"] and r["seq"] == 0 and r["time"] == 0.0 and r["round"] == 2 and r["seed"] == 4
+        assert sorted(p["type"] for p in r["parts"]) == ["B", "G", "R"] and not any(p["removed"] for p in r["parts"])
+        assert r["pose"][:2] == pytest.approx([field.start_pose.x, field.start_pose.y], abs=0.01)
+        assert runner.control.errors == len(bad) + 1
+    finally:
+        stop(runner, t)
+        ctl_peer.close()
+    assert box["result"].reason == "stopped"
+
+
+def drive_a(seq):
+    return 0.25 if seq < 20 else 0.1, 0.8 * math.sin(seq / 7)
+
+
+def test_frames_after_a_reset_equal_a_fresh_start_byte_for_byte(field, robot):
+    """Lockstep, the same seed and commands: a fresh start, then a reset after other driving, then another
+    process-fresh runner all send identical SensorFrame datagrams (LIDAR noise and the round included)."""
+    n = 30
+    peer = Controller(drive_a)
+    runner, t, _ = start(field, robot, peer.sock.getsockname(), start_paused=True, lockstep=True,
+                         lockstep_timeout=5.0, sim={"seed": 11})
+    addr = runner.control_address
+    try:
+        assert request(addr, {"op": "step", "cycles": n})["ok"]
+        fresh = peer.take()
+        peer.drive = lambda seq: (-0.2, 0.5)  # something else in between, with a teleport
+        request(addr, {"op": "set_robot_pose", "x": 0.2, "y": 0.1, "theta": 1.0})
+        request(addr, {"op": "step", "cycles": 17})
+        other = peer.take()
+        assert len(other) == 17 and other != fresh[:17]
+        peer.drive = drive_a
+        assert request(addr, {"op": "reset"})["ok"]
+        assert request(addr, {"op": "step", "cycles": n})["ok"]
+        after_reset = peer.take()
+        # another seed: the same commands give other frames (LIDAR noise); back to 11: the same again
+        assert request(addr, {"op": "reset", "seed": 12})["ok"]
+        request(addr, {"op": "step", "cycles": n})
+        seed12 = peer.take()
+        assert request(addr, {"op": "reset", "seed": 11})["ok"]
+        request(addr, {"op": "step", "cycles": n})
+        again = peer.take()
+    finally:
+        stop(runner, t)
+        peer.close()
+    assert len(fresh) == n and after_reset == fresh and again == fresh
+    assert seed12 != fresh
+    # a new runner, fresh from its constructor, agrees too
+    peer = Controller(drive_a)
+    runner, t, _ = start(field, robot, peer.sock.getsockname(), start_paused=True, lockstep=True,
+                         lockstep_timeout=5.0, sim={"seed": 11})
+    try:
+        request(runner.control_address, {"op": "step", "cycles": n})
+        assert peer.take() == fresh
+    finally:
+        stop(runner, t)
+        peer.close()
