@@ -130,3 +130,17 @@ def test_metrics_on_known_answers():
 def test_random_poses_are_clear(field):
     for x, y, th in random_poses(field, 50, seed=3):
         assert clearance(field, x, y) >= 0.08 and -math.pi <= th <= math.pi
+
+
+def test_calibration_drive_is_clear_and_turns_at_its_visits(field):
+    r = make_route("calibration", 1)
+    assert r.stops.sum() == 3 and field.start_area.contains(*r.points[0])
+    pts = densify(r.points, 0.005)
+    assert min(clearance(field, x, y) for x, y in pts) > 0.12
+    slots = np.array([s.xy for s in field.slots])
+    assert min(np.min(np.hypot(*(slots - p).T)) for p in pts) > 0.15
+    pp = PurePursuit.for_route(r, speed=0.15)
+    t, traj, cmds = _drive(pp, r.start)
+    assert pp.done and 20 < t < 60
+    for k in np.flatnonzero(r.stops):
+        assert np.min(np.hypot(*(traj[:, :2] - r.points[k]).T)) < 0.025
