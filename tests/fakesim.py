@@ -102,6 +102,22 @@ class FakeSim:
             self.ranges = np.zeros(self.rays) if self.lidar_update == "sweep" else self.measured
             self.next_render_tick = 0
 
+    def _teleport(self, data: bytes) -> None:
+        """The teleport labels of a Command, as simtwo/control.pas applies them (each TpId once; the robot's
+        own only: the fake has no parts, those are recorded in ``teleports``)."""
+        from robotatfactory.simtwo.teleport import Teleport
+
+        try:
+            tp = Teleport.from_datagram(data)
+        except ProtocolError:
+            return
+        if tp is None or tp.id == getattr(self, "last_teleport_id", 0):
+            return
+        self.last_teleport_id = tp.id
+        self.teleports = getattr(self, "teleports", []) + [tp]
+        if not tp.target:
+            self.x, self.y, self.theta = tp.x, tp.y, tp.theta
+
     def pose(self):
         with self._lock:
             return self.x, self.y, self.theta
@@ -189,6 +205,7 @@ class FakeSim:
             except ProtocolError:
                 continue
             with self._lock:
+                self._teleport(data)
                 self.received.append(Received(cmd.seq, cmd.v, cmd.w, cmd.magnet, time.monotonic()))
                 if cmd.seq == wait_for_seq or wait_for_seq is None:
                     self.v, self.w, self.magnet = cmd.v, cmd.w, cmd.magnet

@@ -45,7 +45,7 @@ from ..localization.odometry import DiffDriveOdometry
 from ..simtwo import Command, ProtocolError, SensorFrame
 from ..simtwo.labels import LabelledValues
 from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
-from ..simtwo.stream import (LogLimiter, RateMeter, SourceGate, StreamTracker, Verdict, source_key,
+from ..simtwo.stream import (Event, LogLimiter, RateMeter, SourceGate, StreamTracker, Verdict, source_key,
                              stream_health)
 from ..simtwo.scan import PerRayAssembler, WholeSweepAssembler, make_assembler
 from ..simtwo.selfhits import SelfFilter
@@ -113,6 +113,13 @@ class Bridge:
         self.odom_delay: deque = deque(maxlen=2000)
         self.sock: socket.socket | None = None
         self.bound_port: int | None = None
+        # the sim/* services (ros/sim_services.py) and the resets they ask for: "stream" (the stand-in
+        # restarts: its next Seq-0 frame starts a new stream at once) or "odometry" (SimTwo's robot reset)
+        self.sim_services = None
+        self._sim_reset: str | None = None
+        self._stream_starts = 0
+        self._published = 0
+        self._starts_before = self._published_at_start = 0
 
     # ---- setup -----------------------------------------------------------------------------------------
     def start(self) -> "Bridge":
@@ -153,6 +160,9 @@ class Bridge:
                                      rospy.get_namespace())
         self._spawn(self._udp_loop, "udp")
         self._spawn(self._diag_loop, "diagnostics")
+        from .sim_services import SimServices
+
+        self.sim_services = SimServices(self, cfg.sim_control).start()
         rospy.loginfo(f"bridge: SensorFrames on udp {cfg.bind_host}:{self.bound_port} from "
                       f"{'any host' if cfg.sim_host == '*' else cfg.sim_host}, camera "
                       f"{cfg.camera_endpoint if cfg.camera_enabled else 'off'}, field {self.field.name}, "
@@ -177,6 +187,8 @@ class Bridge:
 
     def stop(self) -> None:
         self._running = False
+        if self.sim_services is not None:
+            self.sim_services.shutdown()
         for th in self._threads:
             th.join(timeout=2.0)
         if self.camera is not None:
@@ -226,6 +238,26 @@ class Bridge:
     def _reset_commands(self) -> None:
         with self._cmd_lock:
             self.watchdog.reset()
+
+    # ---- resets asked for by the sim/* services (ros/sim_services.py) -------------------------------------
+    def expect_restart(self, on: bool = True, odometry_only: bool = False) -> None:
+        """The next Seq-0 frame starts a new stream (no restart confirmation: the reset was asked for); with
+        ``odometry_only`` the next frame restarts odometry, stamping and map -> odom (SimTwo's robot reset)."""
+        self._starts_before = self._stream_starts
+        self._sim_reset = ("odometry" if odometry_only else "stream") if on else None
+
+    def wait_restarted(self, timeout: float) -> bool:
+        """Wait (wall s) until a frame of the new stream has been published."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if self._stream_starts > self._starts_before and self._published > self._published_at_start:
+                return True
+            time.sleep(0.005)
+        return False
+
+    def ground_truth(self):
+        """(t s, x m, y m, theta rad) of the last published frame, None before the first."""
+        return self._gt_prev
 
     def _warn(self, key: str, text: str) -> None:
         suffix = self.log(key)
@@ -304,7 +336,8 @@ class Bridge:
     def _reply(self, cmd: Command, addr, arrival: float) -> None:
         cfg = self.cfg
         try:
-            self.sock.sendto(cmd.encode(), (addr[0], cfg.reply_port or addr[1]))
+            extra = self.sim_services.teleports.labels() if self.sim_services is not None else b""
+            self.sock.sendto(cmd.encode() + extra, (addr[0], cfg.reply_port or addr[1]))
             self.counts["replies"] += 1
             self.reply_delay.append(time.monotonic() - arrival)
         except OSError as e:
@@ -314,6 +347,9 @@ class Bridge:
     def handle_frame(self, frame: SensorFrame, addr, arrival: float, reply: bool = True) -> None:
         """One decoded frame of the bound source: classify, answer, publish what is accepted."""
         tr = self.tracker
+        if self._sim_reset == "stream" and frame.seq == 0:  # the reset sim/reset asked for: a new stream
+            self._sim_reset = None
+            tr.reset()
         ev = tr.offer(frame.seq, frame.time_ms, arrival, frame.enc_total)
         if ev.verdict is Verdict.RESTART:
             self._reset_commands()
@@ -328,6 +364,13 @@ class Bridge:
             return
         if ev.verdict in (Verdict.FIRST, Verdict.RESTART):
             self._start_stream(ev, frame)
+            self._stream_starts += 1
+            self._published_at_start = self._published
+        elif self._sim_reset == "odometry":  # SimTwo's robot reset (sim/reset): odometry from here
+            self._sim_reset = None
+            self._start_stream(Event(Verdict.FIRST, frame.seq, frame.time_ms), frame)
+            self._stream_starts += 1
+            self._published_at_start = self._published
         elif ev.verdict is Verdict.GAP:
             self._warn("gap", f"bridge: {ev.lost} frame(s) lost before Seq {frame.seq} (ticks are kept: "
                               "odometry uses the cumulative totals)")
@@ -336,6 +379,7 @@ class Bridge:
             self.camera.frame(frame.time_ms, arrival)
         try:
             self.publish_frame(frame, arrival)
+            self._published += 1
         except (rospy.ROSException, ValueError) as e:
             self.counts["publish_errors"] += 1
             self._warn("publish", f"bridge: publishing frame Seq {frame.seq} failed: {e}")

@@ -67,7 +67,7 @@ def default_params(robot: RobotSpec | None = None) -> dict:
         "robot": "simtwo",
         "frame_prefix": "",
         "udp": {"bind_host": "auto", "port": 9810, "max_datagram": 16384},
-        "simulator": {"host": "127.0.0.1", "port": 0, "reply_port": 0},
+        "simulator": {"host": "127.0.0.1", "port": 0, "reply_port": 0, "control": "127.0.0.1:9812"},
         "stream": {"reorder_window": 25, "restart_confirm": 3, "max_jump": 250, "takeover_after": 2.0,
                    "max_wheel_speed": _max_wheel_speed(r)},
         "watchdog": {"timeout": 0.5},
@@ -289,6 +289,7 @@ class BridgeConfig:
     max_jump: int = 250  # cycles
     takeover_after: float = 2.0  # wall s
     max_wheel_speed: float = 54.0  # rad/s
+    sim_control: tuple[str, int] | None = None  # raf sim's control channel (the sim/* services); None: off
 
     @property
     def source(self) -> tuple[str, int] | None:
@@ -330,6 +331,18 @@ class BridgeConfig:
         return out
 
 
+def _control(p: dict) -> tuple[str, int] | None:
+    """``simulator/control``: ``host:port`` of raf sim's control channel (ros/sim_services.py), "" for none."""
+    text = _str(p, ("simulator", "control"), r"|[A-Za-z0-9_.\-]+:\d{1,5}", "host:port of raf sim's control "
+                "channel, e.g. 127.0.0.1:9812, or empty for none")
+    if not text:
+        return None
+    host, port = text.rsplit(":", 1)
+    if not 0 < int(port) <= 65535:
+        raise ConfigError(f"parameter ~simulator/control {text!r}: port must be 1..65535")
+    return host, int(port)
+
+
 def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -> BridgeConfig:
     """Defaults merged with ``overrides`` (nested dict as in config/bridge.yaml), validated."""
     base = default_params(robot)
@@ -362,6 +375,7 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
         sim_host=_host(p, ("simulator", "host"), allow_any=True),
         reply_port=_int(p, ("simulator", "reply_port"), 0, 65535),
         sim_port=_int(p, ("simulator", "port"), 0, 65535),
+        sim_control=_control(p),
         max_jump=_int(p, ("stream", "max_jump"), 1, 10 ** 9),
         takeover_after=_real(p, ("stream", "takeover_after"), 0.0),
         max_wheel_speed=_real(p, ("stream", "max_wheel_speed"), 0.0, lo_open=True),

@@ -151,6 +151,7 @@ class LocalizationNode:
                 rospy.logwarn("localization: odometry went back in time: restarting the filter")
                 self.ekf = Ekf(self.ekf.cfg)
                 self.counts["restarts"] += 1
+                self._odom = None  # (else every later message looks older still and restarts it again)
             if self._odom is not None and t <= self._odom[0]:
                 self.counts["odom_not_newer"] += 1
                 return

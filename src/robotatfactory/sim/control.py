@@ -274,3 +274,41 @@ class SimControl:
         if sim.referee is not None:
             out["score"] = sim.referee.report(sim.time).short()
         return out
+
+
+class ControlClient:
+    """Client of the control channel (the bridge's services use it). ``request`` sends one request and
+    returns the reply dict; ``ConnectionError`` when nothing answers within ``timeout`` wall seconds (a step
+    request waits ``step_timeout`` per 100 cycles more). Thread-safe (one socket per request)."""
+
+    def __init__(self, address: tuple[str, int], timeout: float = 1.0, step_timeout: float = 5.0):
+        self.address = (address[0], int(address[1]))
+        self.timeout = timeout
+        self.step_timeout = step_timeout
+        self._ids = iter(range(1, 2**62))
+
+    def request(self, op: str, timeout: float | None = None, **fields) -> dict:
+        import socket
+
+        rid = next(self._ids)
+        req = {"op": op, "id": rid, **fields}
+        if timeout is None:
+            timeout = self.timeout
+            if op == "step":
+                timeout += self.step_timeout * (1 + int(fields.get("cycles", 1)) // 100)
+            elif op == "reset":
+                timeout += 10.0  # a new scene is compiled
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            s.settimeout(timeout)
+            s.sendto(encode_reply(req), self.address)
+            while True:
+                data, _ = s.recvfrom(65535)
+                reply = json.loads(data)
+                if reply.get("id") == rid:
+                    return reply
+        except (OSError, ValueError) as e:  # timeout, port unreachable (ICMP), garbage
+            raise ConnectionError(f"no answer from the control channel at {self.address[0]}:{self.address[1]} "
+                                  f"({e.__class__.__name__}: {e})") from None
+        finally:
+            s.close()

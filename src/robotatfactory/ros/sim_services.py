@@ -1,0 +1,252 @@
+"""The bridge's simulation services (``sim/reset``, ``sim/pause``, ... ``sim/get_state``), after ROS 2's
+``simulation_interfaces`` (ResetSimulation, SetSimulationState, StepSimulation, SetEntityState,
+GetSimulationState) in ROS 1 form: the package's own .srv types (srv/*.srv, classes generated into
+``robotatfactory.srv``), callable with ``rosservice call``. docs/bridge.md describes them.
+
+Two simulators:
+
+* **the stand-in** (``raf sim``): every service, through its control channel (:mod:`robotatfactory.sim.control`,
+  ``~simulator/control``, default the simulator's command port + 4);
+* **SimTwo** (no control channel answers): ``set_robot_pose``, ``place_part`` and a robot-only ``reset``
+  through the Command datagram's teleport labels (:mod:`robotatfactory.simtwo.teleport`, applied by
+  simtwo/control.pas with SimTwo's ``SetRobotPos``), ``get_state`` from the last SensorFrame; ``pause``,
+  ``resume`` and ``step`` answer ``success: false`` (SimTwo's script API has no call for them).
+
+Which one is connected is probed at start and again at every call (the simulator may start after the
+bridge); ``sim/get_state`` and the start-up log say which and what it supports.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import rospy
+
+from ..sim.control import ControlClient
+from ..simtwo.teleport import TeleportSender
+from ..srv import (GetSimulationState, GetSimulationStateResponse, PlacePart, PlacePartResponse, ResetSimulation,
+                   ResetSimulationResponse, SetRobotPose, SetRobotPoseResponse, StepSimulation,
+                   StepSimulationResponse, Trigger, TriggerResponse)
+
+SERVICES = ("reset", "pause", "resume", "step", "set_robot_pose", "place_part", "get_state")
+SIMTWO_SERVICES = ("reset", "set_robot_pose", "place_part", "get_state")
+STANDIN, SIMTWO = "stand-in", "simtwo"
+# SimTwo's RobotFactoryPro2022 scene: the parts are robots Part1..Part4 (scene.xml), placed at
+# z = part_pos_z = 0.0021 m; their plate is on the part's -y side (PartBlue.xml 'Plate', y = -part_depth/2),
+# so SetRobotPos's heading is the plate's heading + pi/2
+SIMTWO_PART_Z = 0.0021
+SIMTWO_PART_PREFIX = "Part"
+TELEPORT_WAIT = 3.0  # wall s a SimTwo teleport may take to be delivered and seen in the ground truth
+POSE_TOLERANCE = 0.02  # m: the ground truth confirms a SimTwo teleport of the robot
+
+
+class SimServices:
+    """The ``sim/*`` services of one bridge. ``bridge`` is the :class:`~.bridge_node.Bridge`."""
+
+    def __init__(self, bridge, control: tuple[str, int] | None, namespace: str = "sim", repeats: int = 5):
+        self.bridge = bridge
+        self.client = ControlClient(control, timeout=0.5) if control else None
+        self.namespace = namespace.rstrip("/")
+        self.teleports = TeleportSender(repeats)
+        self.kind: str | None = None
+        self.services: list = []
+
+    # ------------------------------------------------------------------------------------------ setup
+    def start(self) -> "SimServices":
+        ns = self.namespace
+        for name, typ, fn in (("reset", ResetSimulation, self._reset), ("pause", Trigger, self._pause),
+                              ("resume", Trigger, self._resume), ("step", StepSimulation, self._step),
+                              ("set_robot_pose", SetRobotPose, self._set_robot_pose),
+                              ("place_part", PlacePart, self._place_part),
+                              ("get_state", GetSimulationState, self._get_state)):
+            self.services.append(rospy.Service(f"{ns}/{name}", typ, fn))
+        self.probe(log=True)
+        return self
+
+    def shutdown(self) -> None:
+        for s in self.services:
+            s.shutdown()
+
+    def probe(self, log: bool = False) -> str:
+        """Which simulator is connected: the stand-in when its control channel answers, else SimTwo."""
+        kind = SIMTWO
+        if self.client is not None:
+            try:
+                if self.client.request("get_state", timeout=0.3).get("ok"):
+                    kind = STANDIN
+            except ConnectionError:
+                pass
+        if log or kind != self.kind:
+            where = (f"control channel udp {self.client.address[0]}:{self.client.address[1]}"
+                     if self.client else "no control channel configured")
+            if kind == STANDIN:
+                rospy.loginfo(f"bridge: simulation services {self.namespace}/*: the stand-in ({where}) supports "
+                              f"all: {', '.join(SERVICES)}")
+            else:
+                rospy.loginfo(f"bridge: simulation services {self.namespace}/*: SimTwo assumed ({where}: no "
+                              f"answer): supported {', '.join(SIMTWO_SERVICES)} (reset: the robot only) through "
+                              f"the Command datagram's teleport labels (simtwo/control.pas); pause, resume, step: "
+                              "not supported")
+        self.kind = kind
+        return kind
+
+    def supported(self) -> list[str]:
+        return list(SERVICES if self.kind == STANDIN else SIMTWO_SERVICES)
+
+    # ------------------------------------------------------------------------------------------ helpers
+    def _call(self, op: str, **fields) -> tuple[bool, str, dict]:
+        """A stand-in request: (success, message, reply)."""
+        try:
+            r = self.client.request(op, **fields)
+        except ConnectionError as e:
+            return False, str(e), {}
+        if not r.get("ok"):
+            return False, f"{r.get('error')}: {r.get('message')}", r
+        return True, "", r
+
+    def _unsupported(self, what: str) -> str:
+        return (f"{what} is not supported by SimTwo (its script API has no call for it); supported: "
+                f"{', '.join(SIMTWO_SERVICES)}")
+
+    def _teleport(self, x, y, theta, z=0.0, target="") -> tuple[bool, str]:
+        """SimTwo: send a teleport in the next replies; for the robot, wait until the ground truth shows it."""
+        if self.bridge.gate.bound is None:
+            return False, "no SensorFrame stream bound yet: nothing to send the teleport to"
+        t = self.teleports.request(x, y, theta, z, target)
+        end = time.monotonic() + TELEPORT_WAIT
+        while not self.teleports.delivered(t):
+            if time.monotonic() > end:
+                return False, f"teleport {t.id} not delivered in {TELEPORT_WAIT} s (is SimTwo streaming?)"
+            time.sleep(0.01)
+        if target:
+            return True, f"teleport {t.id} of {target} sent {self.teleports.repeats} times"
+        while True:
+            gt = self.bridge.ground_truth()
+            if gt is not None and math.hypot(gt[1] - x, gt[2] - y) < POSE_TOLERANCE:
+                return True, f"robot at ({gt[1]:.3f}, {gt[2]:.3f}, {gt[3]:.3f}) (teleport {t.id})"
+            if time.monotonic() > end:
+                return False, (f"teleport {t.id} sent, but the ground truth does not show it (SimTwo's script "
+                               "without teleport support? see docs/simtwo.md)")
+            time.sleep(0.01)
+
+    # ------------------------------------------------------------------------------------------ services
+    def _reset(self, req):
+        kind = self.probe()
+        if kind == STANDIN:
+            fields = {}
+            if req.round:
+                fields["round"] = int(req.round)
+            if req.set_seed:
+                fields["seed"] = int(req.seed)
+            if req.parts:
+                fields["parts"] = req.parts
+            if req.set_start_pose:
+                fields["start_pose"] = [req.x, req.y, req.theta]
+            self.bridge.expect_restart()
+            ok, msg, r = self._call("reset", **fields)
+            if not ok:
+                self.bridge.expect_restart(False)
+                return ResetSimulationResponse(False, msg)
+            self.bridge._reset_commands()
+            if r.get("paused"):
+                return ResetSimulationResponse(True, "reset (paused: the new stream starts at the next step or "
+                                                     "resume)")
+            ok = self.bridge.wait_restarted(3.0)
+            return ResetSimulationResponse(ok, "reset: the new stream is published" if ok else
+                                           "reset done, but no frame of the new stream within 3 s")
+        if req.round or req.set_seed or req.parts:
+            return ResetSimulationResponse(False, "SimTwo resets the robot only (round, seed and parts: restart "
+                                                  "the scene in SimTwo)")
+        sp = self.bridge.field.start_pose
+        x, y, th = (req.x, req.y, req.theta) if req.set_start_pose else (sp.x, sp.y, sp.theta)
+        self.bridge._reset_commands()
+        ok, msg = self._teleport(x, y, th)
+        if ok:
+            self.bridge.expect_restart(True, odometry_only=True)
+            ok = self.bridge.wait_restarted(2.0)
+            msg = "robot reset, odometry restarted: " + msg if ok else "robot moved, but no frame since"
+        return ResetSimulationResponse(ok, msg)
+
+    def _pause(self, req):
+        if self.probe() != STANDIN:
+            return TriggerResponse(False, self._unsupported("pause"))
+        ok, msg, r = self._call("pause")
+        return TriggerResponse(ok, msg or f"paused at t = {r['time']:.3f} s")
+
+    def _resume(self, req):
+        if self.probe() != STANDIN:
+            return TriggerResponse(False, self._unsupported("resume"))
+        ok, msg, r = self._call("resume")
+        return TriggerResponse(ok, msg or f"running from t = {r['time']:.3f} s")
+
+    def _step(self, req):
+        if self.probe() != STANDIN:
+            return StepSimulationResponse(False, self._unsupported("step"))
+        ok, msg, r = self._call("step", cycles=int(req.steps))
+        return StepSimulationResponse(ok, msg or f"stepped to Seq {r['seq']}, t = {r['time']:.3f} s")
+
+    def _set_robot_pose(self, req):
+        if self.probe() == STANDIN:
+            ok, msg, r = self._call("set_robot_pose", x=req.x, y=req.y, theta=req.theta)
+            return SetRobotPoseResponse(ok, msg or "robot at ({:.3f}, {:.3f}, {:.3f})".format(*r["pose"]))
+        if not self.bridge.field.floor.contains(req.x, req.y):
+            return SetRobotPoseResponse(False, f"out_of_field: ({req.x:g}, {req.y:g}) is not on the floor")
+        return SetRobotPoseResponse(*self._teleport(req.x, req.y, req.theta))
+
+    def _place_part(self, req):
+        if self.probe() == STANDIN:
+            if req.remove:
+                ok, msg, r = self._call("remove_part", part=int(req.part))
+                return PlacePartResponse(ok, msg or f"part {req.part} removed")
+            fields = {"part": int(req.part)}
+            if req.slot:
+                fields["slot"] = req.slot
+            else:
+                fields.update(x=req.x, y=req.y, facing=req.facing)
+            if req.type:
+                fields["type"] = req.type
+            ok, msg, r = self._call("place_part", **fields)
+            return PlacePartResponse(ok, msg or "part {} at ({:.3f}, {:.3f}, {:.3f})".format(req.part, *r["part_pose"]))
+        if req.type:
+            return PlacePartResponse(False, "SimTwo cannot recolour a part (type must be empty)")
+        if req.part < 1:
+            return PlacePartResponse(False, f"unknown_part: {req.part} (SimTwo's parts are Part1..Part4)")
+        field = self.bridge.field
+        if req.remove:
+            x, y, facing = field.floor.x[1] + 20.0 + 0.5 * req.part, field.floor.y[0], 0.0
+        elif req.slot:
+            slots = {s.name: s for s in field.slots}
+            if req.slot not in slots:
+                return PlacePartResponse(False, f"unknown_slot: {req.slot!r}")
+            s = slots[req.slot]
+            x, y, facing = s.xy[0], s.xy[1], s.facing
+        else:
+            if not field.floor.contains(req.x, req.y):
+                return PlacePartResponse(False, f"out_of_field: ({req.x:g}, {req.y:g}) is not on the floor")
+            x, y, facing = req.x, req.y, req.facing
+        return PlacePartResponse(*self._teleport(x, y, math.remainder(facing + math.pi / 2, 2 * math.pi),
+                                                 SIMTWO_PART_Z, f"{SIMTWO_PART_PREFIX}{int(req.part)}"))
+
+    def _get_state(self, req):
+        kind = self.probe()
+        out = GetSimulationStateResponse(success=True, simulator=kind, supported=self.supported())
+        if kind == STANDIN:
+            ok, msg, r = self._call("get_state")
+            if not ok:
+                return GetSimulationStateResponse(success=False, message=msg, simulator=kind,
+                                                  supported=self.supported())
+            out.paused, out.time, out.seq = bool(r["paused"]), float(r["time"]), int(r["seq"])
+            out.x, out.y, out.theta = r["pose"]
+            out.state_json = json.dumps(r)
+            out.message = "stand-in: " + ("paused" if out.paused else "running")
+            return out
+        gt = self.bridge.ground_truth()
+        tr = self.bridge.tracker
+        if gt is None:
+            out.message = "SimTwo: no SensorFrame yet"
+            return out
+        out.time, out.x, out.y, out.theta = gt
+        out.seq = tr.last_seq if tr.last_seq is not None else 0
+        out.message = "SimTwo: from the last SensorFrame (pause state unknown)"
+        return out
