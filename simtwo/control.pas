@@ -94,6 +94,8 @@ var
   TimedOut: integer;           // 1 while the wheels are stopped for lack of commands
 
   NFrames, NAccepted, NRejected, NTimeouts: integer;
+  LastTpId: integer;           // TpId of the last teleport applied (0: none)
+  NTeleports: integer;
 
   // the reply being decoded
   RLines: array[0..2047] of string;
@@ -524,6 +526,58 @@ end;
 // Actuators
 // ---------------------------------------------------------------------------------------------
 
+// Teleport labels of the reply just decoded (docs/protocol.md, "Teleport labels"): TpId (> 0, each
+// applied once), TpTarget (a robot of the scene, e.g. Part3; absent: this script's robot), TpX, TpY,
+// TpTh and optional TpZ. SimTwo's SetRobotPos (ODERobotsPublished.pas) calls TRobot.SetXYZTeta
+// (ODERobots.pas): every solid placed at the pose, velocities zeroed, joint angles back to the scene's.
+// In SimTwo's RobotAtFactory scenes the parts are robots Part1..Part4 (RobotFactoryPro2022/scene.xml).
+procedure ApplyTeleport;
+var s, target: string;
+    id, r: integer;
+    x, y, z, th: double;
+begin
+  if not FindLabel('TpId', s) then exit;
+  if not ParseIntStr(s, id) then begin
+    LogMsg('teleport ignored: TpId is not an integer');
+    exit;
+  end;
+  if (id <= 0) or (id = LastTpId) then exit;
+  LastTpId := id;
+  if not LabelReal('TpX', x) then begin
+    LogMsg('teleport ' + IntToStr(id) + ' ignored: ' + RepError);
+    exit;
+  end;
+  if not LabelReal('TpY', y) then begin
+    LogMsg('teleport ' + IntToStr(id) + ' ignored: ' + RepError);
+    exit;
+  end;
+  if not LabelReal('TpTh', th) then begin
+    LogMsg('teleport ' + IntToStr(id) + ' ignored: ' + RepError);
+    exit;
+  end;
+  z := 0;
+  if FindLabel('TpZ', s) then begin
+    if not ParseRealStr(s, z) then begin
+      LogMsg('teleport ' + IntToStr(id) + ' ignored: TpZ is not a real number');
+      exit;
+    end;
+  end;
+  r := iRobot;
+  target := ROBOT_ID;
+  if FindLabel('TpTarget', s) then begin
+    target := s;
+    r := GetRobotIndex(target);
+    if r < 0 then begin
+      LogMsg('teleport ' + IntToStr(id) + ' ignored: no robot ' + target + ' in the scene');
+      exit;
+    end;
+  end;
+  SetRobotPos(r, x, y, z, th);
+  NTeleports := NTeleports + 1;
+  LogMsg('teleport ' + IntToStr(id) + ': ' + target + ' to x ' + FmtReal(x) + ' y ' + FmtReal(y)
+         + ' z ' + FmtReal(z) + ' theta ' + FmtReal(th));
+end;
+
 // Wheel speed references for SimTwo's speed controller (enabled once, in Initialize) and the magnet
 procedure ApplyCommand;
 var wl, wr: double;
@@ -590,6 +644,7 @@ begin
   accepted := false;
   if txt <> '' then begin
     if DecodeReply(txt) then begin
+      ApplyTeleport;
       if SeqAcceptable(RepSeq) then begin
         CmdV := RepV;
         CmdW := RepW;
@@ -681,6 +736,8 @@ begin
   NAccepted := 0;
   NRejected := 0;
   NTimeouts := 0;
+  LastTpId := 0;
+  NTeleports := 0;
   RCount := 0;
   LidarDrawSeq := 0;
   for i := 0 to MAX_RAY do begin

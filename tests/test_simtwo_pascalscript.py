@@ -597,6 +597,37 @@ def test_no_reply_stops_the_wheels_after_the_timeout_and_keeps_the_magnet(harnes
     assert max(c.duration_ms for k, c in run.cycles.items() if k >= 0) < 500, "Control never waits"
 
 
+def test_teleport_labels_become_setrobotpos_once_each(harness_exe, tmp_path):
+    """The Command's teleport labels (robotatfactory.simtwo.teleport, as the bridge's sim/* services send
+    them, each repeated): SetRobotPos once per TpId, on the script's robot or a named one (a part); a bad
+    teleport is logged and skipped, a malformed Command carries none; the commands still apply."""
+    from robotatfactory.simtwo.teleport import Teleport
+
+    robot_tp = Teleport(1, 0.3, -0.2, 1.1).labels()
+    part_tp = Teleport(2, -0.3475, 0.075, -1.5, 0.0021, "Part3").labels()
+    extra = {2: robot_tp, 3: robot_tp, 4: robot_tp, 5: part_tp, 6: part_tp,
+             7: Teleport(3, 0.0, 0.0, 0.0, 0.0, "Nope").labels(),
+             8: b"TpId\r\n4\r\n\r\nTpX\r\nfar\r\n\r\nTpY\r\n0\r\n\r\nTpTh\r\n0\r\n\r\n"}
+
+    def policy(k, raw):
+        if k == 9:  # not a valid Command (no V): its teleport is not applied either
+            return [b"RAF\r\n1\r\n\r\nSeq\r\n9\r\n\r\n" + Teleport(5, 0.1, 0.1, 0.0).labels()]
+        return [reply(k, 0.1, 0.2, 0) + extra.get(k, b"")]
+
+    run = run_harness(harness_exe, tmp_path, 12, policy)
+    sets = [(k, args) for k, c in sorted(run.cycles.items()) for n, args in c.sets if n == "RobotPos"]
+    # the reply to frame k is read in cycle k + 1
+    assert [(k, int(a[0])) for k, a in sets] == [(3, 0), (6, 3)]
+    assert [float(v) for v in sets[0][1][1:]] == pytest.approx([0.3, -0.2, 0.0, 1.1])
+    assert [float(v) for v in sets[1][1][1:]] == pytest.approx([-0.3475, 0.075, 0.0021, -1.5])
+    logs = run.logs()
+    assert sum("teleport 1:" in m for m in logs) == 1 and sum("teleport 2:" in m for m in logs) == 1
+    assert any("teleport 3 ignored: no robot Nope" in m for m in logs)
+    assert any("teleport 4 ignored: TpX is not a real number" in m for m in logs)
+    assert not any("teleport 5" in m for m in logs)
+    assert run.applied(11)[:2] == pytest.approx(ROBOT.wheel_speeds(0.1, 0.2))
+
+
 # ---- 4. a scene without the sensors ---------------------------------------------------------------------
 
 def test_missing_robot_axes_and_sensors(harness_exe, tmp_path):

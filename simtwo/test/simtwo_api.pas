@@ -58,6 +58,7 @@ procedure SetSensorVin(R, i: integer; Vin: byte);
 procedure SetAxisSpeedRef(R, i: integer; aSpeed: double);
 procedure SetMotorControllerState(R, i: integer; newState: boolean);
 procedure SetMotorControllerPars(R, i: integer; nKi, nKd, nKp, nKf: double);
+procedure SetRobotPos(R: integer; x, y, z, teta: double);
 function MNumRows(constref Mat: Matrix): Longword;
 function MNumCols(constref Mat: Matrix): Longword;
 function Mgetv(constref Mat: Matrix; r, c: Longword): double;
@@ -86,7 +87,7 @@ function HarnessOptReal(const key: string; default: double): double;
 implementation
 
 const
-  ROBOT_ROWS: array[0..0] of string = ('AGV');
+  ROBOT_ROWS: array[0..4] of string = ('AGV', 'Part1', 'Part2', 'Part3', 'Part4');  // as RobotFactoryPro2022/scene.xml
   SENSOR_IDS: array[0..8] of string =
     ('Line0', 'Line1', 'Line2', 'Line3', 'Line4', 'solenoid1', 'MicroSwitch', 'RFID', 'ranger2d');
   AXIS_IDS: array[0..1] of string = ('LeftAxis', 'RightAxis');
@@ -227,9 +228,11 @@ end;
 { ---- scripted sensors (deterministic in the cycle number k) ---- }
 
 function GetRobotIndex(ID: string): integer;
+var i: integer;
 begin
   result := -1;
-  if (ID = ROBOT_ROWS[0]) and Present(ID) then result := 0;
+  for i := 0 to High(ROBOT_ROWS) do
+    if (ID = ROBOT_ROWS[i]) and Present(ID) then result := i;
   HarnessRec(Format('GET %d RobotIndex %s %d', [HCycle, ID, result]));
 end;
 
@@ -388,6 +391,13 @@ procedure SetAxisSpeedRef(R, i: integer; aSpeed: double);
 begin
   CheckAxis(R, i, 'SetAxisSpeedRef');
   HarnessRec(Format('SET %d AxisSpeedRef %d %s', [HCycle, i, HarnessReal(aSpeed)]));
+end;
+
+procedure SetRobotPos(R: integer; x, y, z, teta: double);
+begin
+  if (R < 0) or (R > High(ROBOT_ROWS)) then Fail(Format('SetRobotPos: robot index %d does not exist', [R]));
+  HarnessRec(Format('SET %d RobotPos %d %s %s %s %s', [HCycle, R, HarnessReal(x), HarnessReal(y), HarnessReal(z),
+                                                       HarnessReal(teta)]));
 end;
 
 procedure SetMotorControllerState(R, i: integer; newState: boolean);

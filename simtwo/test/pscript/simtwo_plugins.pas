@@ -169,6 +169,7 @@ begin
     RegisterDelphiFunction(@SetAxisSpeedRef, 'SetAxisSpeedRef', cdRegister);
     RegisterDelphiFunction(@SetMotorControllerState, 'SetMotorControllerState', cdRegister);
     RegisterDelphiFunction(@SetMotorControllerPars, 'SetMotorControllerPars', cdRegister);
+    RegisterDelphiFunction(@SetRobotPos, 'SetRobotPos', cdRegister);
   end;
 end;
 
