@@ -154,12 +154,24 @@ def test_every_request_and_bad_requests(field, robot):
         seq = runner.sim.seq
         time.sleep(0.3)
         assert runner.sim.seq == seq
+        # while a step runs, a reset or a second step is refused (busy); the step's reply comes after its cycles
+        long_step = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        long_step.settimeout(30)
+        long_step.sendto(json.dumps({"op": "step", "cycles": 400, "id": "long"}).encode(), addr)
+        wait_for = time.monotonic() + 5
+        while runner.control.steps_left == 0 and time.monotonic() < wait_for:
+            time.sleep(0.001)
+        r = request(addr, {"op": "reset"})
+        assert not r["ok"] and r["error"] == "busy"
+        r = json.loads(long_step.recvfrom(65535)[0])
+        long_step.close()
+        assert r["ok"] and r["id"] == "long" and r["seq"] == seq + 400
         # reset: a new round and layout, Seq and time from zero
         r = request(addr, {"op": "reset", "round": 2, "parts": "RXGB", "seed": 4})
         assert r["ok"] and r["seq"] == 0 and r["time"] == 0.0 and r["round"] == 2 and r["seed"] == 4
         assert sorted(p["type"] for p in r["parts"]) == ["B", "G", "R"] and not any(p["removed"] for p in r["parts"])
         assert r["pose"][:2] == pytest.approx([field.start_pose.x, field.start_pose.y], abs=0.01)
-        assert runner.control.errors == len(bad) + 1
+        assert runner.control.errors == len(bad) + 2
     finally:
         stop(runner, t)
         ctl_peer.close()

@@ -224,6 +224,8 @@ class SimControl:
 
     def _op_reset(self, req):
         sim = self.runner.sim
+        if self.steps_left > 0:
+            raise ControlError("busy", f"a step request has {self.steps_left} cycles to run")
         changes = {}
         if "seed" in req:
             changes["seed"] = _int(req, "seed", 0, 2**31 - 1)
