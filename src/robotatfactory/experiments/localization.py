@@ -851,6 +851,8 @@ class Session:
                     "--status-every", "5", *self._sim_mode_args()]
         if not args.no_beacons:
             sim_args.append("--beacons")
+        if "--no-control" in _known_options("sim"):  # SimTwo has no control channel; nor a port clash here
+            sim_args.append("--no-control")
         if self.robot_file is not None:
             sim_args += ["--robot", str(self.robot_file)]
         self.procs.start("sim", _raf(*sim_args), env)
