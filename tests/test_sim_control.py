@@ -224,3 +224,23 @@ def test_frames_after_a_reset_equal_a_fresh_start_byte_for_byte(field, robot):
     finally:
         stop(runner, t)
         peer.close()
+
+
+def test_raf_sim_prints_the_control_port_and_a_taken_default_is_only_a_warning(raf_cmd):
+    import subprocess
+
+    taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    taken.bind(("127.0.0.1", 0))
+    p = taken.getsockname()[1]
+    base = raf_cmd + ["sim", "--fast", "--duration", "0.1", "--no-camera", "--no-server", "--quiet"]
+    try:
+        free = subprocess.run(base + ["--port", str(p - 3)], capture_output=True, text=True, timeout=60)
+        assert free.returncode == 0 and f"control udp 127.0.0.1:{p + 1}" in free.stdout
+        r = subprocess.run(base + ["--port", str(p - 4)], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0 and "running without a control channel" in r.stderr
+        assert "control udp" not in r.stdout
+        r = subprocess.run(base + ["--port", str(p - 4), "--control-port", str(p)], capture_output=True, text=True,
+                           timeout=60)
+        assert r.returncode == 2 and "the control channel cannot bind" in r.stderr
+    finally:
+        taken.close()

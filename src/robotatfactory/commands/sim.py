@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ctl.add_argument("--control-port", type=int, default=None, metavar="PORT",
                      help="UDP port of the control channel (reset, pause, resume, step, set_robot_pose, "
                           "place_part, remove_part, get_state: JSON requests, docs/protocol.md) on --host "
-                          "(default: --port + 4, i.e. 9812)")
+                          "(default: --port + 4, i.e. 9812; when that one is taken, a warning and no channel)")
     ctl.add_argument("--no-control", action="store_true", help="no control channel")
     g.add_argument("--controller", default=None, metavar="HOST:PORT",
                    help="accept commands from this source only (default: the first that sends a valid command; "
@@ -170,7 +170,7 @@ def run(args) -> int:
         command_timeout=args.command_timeout or None,
         control_port=None if args.no_control else (args.control_port if args.control_port is not None
                                                     else control_port_for(args.port)),
-        start_paused=args.paused)
+        start_paused=args.paused, control_optional=args.control_port is None)
     from ..sim.runner import SimRunner
 
     sim = Simulator(field, robot, config)

@@ -77,6 +77,7 @@ class RunnerConfig:
     command_timeout: float | None = None  # simulation s without a valid command: stop (raf sim: 0.5); None: keep
     control_port: int | None = None  # the control channel's UDP port on host (sim/control.py); None: none
     start_paused: bool = False  # start paused (the control channel's step/resume run it)
+    control_optional: bool = False  # True: a control port that cannot be bound is a warning, not an error
 
     def __post_init__(self):
         if self.mode not in MODES:
@@ -249,10 +250,16 @@ class SimRunner:
         self._sock = sock
         try:
             if c.control_port is not None:
-                ctl = bind_udp(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), c.host, c.control_port,
-                               "the control channel", "another simulator running? choose --control-port")
-                ctl.setblocking(False)
-                self._ctl_sock = ctl
+                try:
+                    ctl = bind_udp(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), c.host, c.control_port,
+                                   "the control channel", "another simulator running? choose --control-port")
+                except ConfigError as e:
+                    if not c.control_optional:
+                        raise
+                    log.warning("%s; running without a control channel", e)
+                else:
+                    ctl.setblocking(False)
+                    self._ctl_sock = ctl
             if c.camera_bind:
                 import zmq
 
