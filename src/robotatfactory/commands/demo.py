@@ -18,7 +18,7 @@ def _stages():
     """(title, function(args, out_dir)) in order; later issues add the simulator, bridge and localization."""
     return [("field map", _field_map), ("protocol codec benchmark", _protocol),
             ("stand-in simulator snapshot", _snapshot),
-            ("simulator + bridge + localization on the reference route (raf experiment localization)",
+            ("simulator + bridge + localization in the SimTwo-like mode: camera calibration drive, reference and second route (raf experiment localization)",
              _localization)]
 
 
