@@ -51,6 +51,20 @@ while time.monotonic() < end:
 """
 
 
+def _diag_services() -> tuple[str, str]:
+    """The bridge's /diagnostics: (simulator, supported sim/* services)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    diag = Collector("/diagnostics", DiagnosticArray)
+    try:
+        m = diag.wait(1, timeout=5, pred=lambda m: any(kv.key == "sim_services" for s in m.status
+                                                         for kv in s.values))[0]
+    finally:
+        diag.close()
+    kv = {v.key: v.value for s in m.status for v in s.values}
+    return kv["simulator"], kv["sim_services"]
+
+
 def _probe_lines(proc_out) -> list[dict]:
     return [json.loads(line) for line in proc_out.read_text().splitlines() if line.startswith("{")]
 
@@ -91,6 +105,7 @@ def test_services_with_the_stand_in(ros_master, field, tmp_path):
         assert st.success and st.simulator == "stand-in"
         assert set(st.supported) == {"reset", "pause", "resume", "step", "set_robot_pose", "place_part", "get_state"}
         parts = json.loads(st.state_json)["parts"]
+        assert _diag_services() == ("stand-in", "reset pause resume step set_robot_pose place_part get_state")
         probe_out = tmp_path / "probe.out"
         probe = subprocess.Popen([sys.executable, "-c", PROBE, "60"], env=env, stdout=open(probe_out, "w"),
                                  stderr=subprocess.STDOUT, start_new_session=True)
@@ -198,6 +213,7 @@ def test_services_with_simtwo_use_the_command_labels(ros_master, field, tmp_path
         assert st.success and st.simulator == "simtwo"
         assert set(st.supported) == {"reset", "set_robot_pose", "place_part", "get_state"}
         assert st.x == pytest.approx(-0.6, abs=0.01) and st.state_json == ""
+        assert _diag_services() == ("simtwo", "reset set_robot_pose place_part get_state")
         r = rospy.ServiceProxy("/sim/pause", Trigger)()
         assert not r.success and "not supported by SimTwo" in r.message
         r = rospy.ServiceProxy("/sim/set_robot_pose", SetRobotPose)(0.2, 0.1, 1.0)

@@ -538,6 +538,9 @@ class Bridge:
             level = DiagnosticStatus.WARN if wd.stopping else DiagnosticStatus.OK
             text = (f"watchdog: cmd_vel older than {cfg.watchdog_timeout} s, sending V = W = 0"
                     if wd.stopping else ("following cmd_vel" if wd.have_velocity else "no cmd_vel yet"))
+        ss = self.sim_services
+        if ss is not None:  # which sim/* services the connected simulator supports (as last probed)
+            vals.update({"simulator": ss.kind or "unknown", "sim_services": " ".join(ss.supported())})
         st3 = rm.diagnostic_status(f"{name}: commands", level, text, hw, vals)
         arr.status = [st1, st3]
         return arr

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import time
 
 import rospy
@@ -61,7 +62,8 @@ class SimServices:
                               ("place_part", PlacePart, self._place_part),
                               ("get_state", GetSimulationState, self._get_state)):
             self.services.append(rospy.Service(f"{ns}/{name}", typ, fn))
-        self.probe(log=True)
+        # the first probe in the background: the node's start-up does not wait for a simulator's answer
+        threading.Thread(target=self.probe, kwargs={"log": True}, name="raf-sim-services-probe", daemon=True).start()
         return self
 
     def shutdown(self) -> None:
