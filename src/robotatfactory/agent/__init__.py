@@ -1,0 +1,16 @@
+"""The autonomous competition robot's core (issue 11): plain Python, no ROS import.
+
+Each module has one job and is usable and testable alone:
+
+* :mod:`.client` -- the factory-state server client (UDP): PING until PONG, IWP until it is not STOP, then
+  OWP/MAP/MBP/CTL; timeouts, retries, strict parsing.
+* :mod:`.state` -- the factory as the server spells it (:class:`FactoryState`) and slot references.
+* :mod:`.tasks` -- the round's task logic: which part goes where next, and the whole round's plan.
+* :mod:`.delay` -- learns the machines' processing delay from what the server shows.
+* :mod:`.footprint` -- the robot's outline (m, base_link frame) and the docking geometry of a slot.
+* :mod:`.planner` -- collision-free paths on the field map for the robot's footprint (grid A*, smoothed).
+* :mod:`.follower` -- a path follower on the pose estimate with a speed profile and acceleration limits.
+
+Frames: the field (map/world) frame of :mod:`robotatfactory.field`; base_link on the floor between the
+wheels, x forward. Units: metres, radians, seconds.
+"""
