@@ -529,7 +529,7 @@ end;
 // Teleport labels of the reply just decoded (docs/protocol.md, "Teleport labels"): TpId (> 0, each
 // applied once), TpTarget (a robot of the scene, e.g. Part3; absent: this script's robot), TpX, TpY,
 // TpTh and optional TpZ. SimTwo's SetRobotPos (ODERobotsPublished.pas) calls TRobot.SetXYZTeta
-// (ODERobots.pas): every solid placed at the pose, velocities zeroed, joint angles back to the scene's.
+// (ODERobots.pas 581-): every solid placed at the pose in its scene orientation, velocities zeroed.
 // In SimTwo's RobotAtFactory scenes the parts are robots Part1..Part4 (RobotFactoryPro2022/scene.xml).
 procedure ApplyTeleport;
 var s, target: string;
