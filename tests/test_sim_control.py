@@ -244,3 +244,35 @@ def test_raf_sim_prints_the_control_port_and_a_taken_default_is_only_a_warning(r
         assert r.returncode == 2 and "the control channel cannot bind" in r.stderr
     finally:
         taken.close()
+
+
+def test_raf_simctl_sends_requests_and_reports_refusals(field, robot, raf_cmd):
+    import subprocess
+
+    peer = Controller(lambda seq: (0.0, 0.0))
+    runner, t, _ = start(field, robot, peer.sock.getsockname(), start_paused=True)
+    ctl = "127.0.0.1:%d" % runner.control_address[1]
+
+    def simctl(*args):
+        r = subprocess.run(raf_cmd + ["simctl", *args, "--control", ctl], capture_output=True, text=True, timeout=60)
+        return r.returncode, (json.loads(r.stdout) if r.stdout.startswith("{") else r.stdout + r.stderr)
+
+    try:
+        code, r = simctl("step", "3")
+        assert code == 0 and r["seq"] == 3
+        code, r = simctl("set_robot_pose", "-0.4", "-0.35", "0.5")
+        assert code == 0 and r["pose"] == pytest.approx([-0.4, -0.35, 0.5], abs=1e-9)
+        pid = request(runner.control_address, {"op": "get_state"})["parts"][0]["id"]
+        code, r = simctl("place_part", str(pid), "--slot", "outgoing_2", "--type", "G")
+        assert code == 0 and r["part"] == pid
+        code, r = simctl("place_part", str(pid), "--slot", "nowhere")
+        assert code == 1 and r["error"] == "unknown_slot"
+        code, r = simctl("reset", "--round", "3", "--seed", "2")
+        assert code == 0 and r["round"] == 3 and r["seed"] == 2 and r["seq"] == 0
+        code, out = simctl("step")
+        assert code == 2 and "expected 1 number" in out
+    finally:
+        stop(runner, t)
+        peer.close()
+    code, out = simctl("get_state")  # nobody there any more
+    assert code == 2 and "no answer" in out
