@@ -50,20 +50,33 @@ def loopback_ros_default() -> None:
 MASTER_RESTARTED = 4  # exit code of a node whose ROS master restarted under it
 
 
-def watch_master(who: str, period: float = 1.0) -> dict:
+def master_pid() -> int | None:
+    """The ROS master's process id, or None when no master answers (read before ``init_node``, so that a
+    master restarted while the node starts up is noticed by :func:`watch_master`)."""
+    import rosgraph
+
+    try:
+        return int(rosgraph.Master("/raf_master_pid").getPid())
+    except Exception:  # noqa: BLE001 - no master (reported elsewhere)
+        return None
+
+
+def watch_master(who: str, period: float = 1.0, pid0: int | None = None) -> dict:
     """Watch the ROS master from a daemon thread: when it restarts (a new process answers at the same URI),
     rospy cannot re-register this node's publishers and subscribers with it, so the node would go on deaf
     and mute. Log a clear message and shut the node down instead (roslaunch ``respawn="true"`` or the user
-    starts it again). Returns a dict whose ``"restarted"`` is set True when that happened."""
+    starts it again). ``pid0``: the master's pid read before the node registered (default: read now).
+    Returns a dict whose ``"restarted"`` is set True when that happened."""
     import rosgraph
     import rospy
 
     state = {"restarted": False}
     m = rosgraph.Master(rospy.get_name() or f"/raf_{who}")
-    try:
-        pid0 = m.getPid()
-    except Exception:  # noqa: BLE001 - no master to watch (it will be reported elsewhere)
-        return state
+    if pid0 is None:
+        try:
+            pid0 = m.getPid()
+        except Exception:  # noqa: BLE001 - no master to watch (it will be reported elsewhere)
+            return state
 
     def loop():
         lost = False
@@ -114,10 +127,11 @@ def run_node(args, who: str, params: dict, make_node: Callable[[], object], star
     for key, value in params.items():
         m.setParam(f"{path}/{key}" if key else path, list(value) if isinstance(value, tuple) else value)
     loopback_ros_default()
+    pid0 = master_pid()
     rospy.init_node(args.name, argv=[sys.argv[0]] + ([f"__ns:=/{ns}"] if ns else []))
     node = make_node()
     print(f"raf {who}: {started(node)}", flush=True)
-    watch = watch_master(f"raf {who}")
+    watch = watch_master(f"raf {who}", pid0=pid0)
     try:
         rospy.spin()
     finally:
@@ -137,13 +151,14 @@ def spin_node(name: str, make_node: Callable[[], object], argv: list[str] | None
     from ..errors import ConfigError
 
     loopback_ros_default()
+    pid0 = master_pid()
     rospy.init_node(name, argv=argv if argv is not None else sys.argv)
     try:
         node = make_node()
     except ConfigError as e:
         rospy.logfatal(f"{name}: {e}")
         return 2
-    watch = watch_master(name)
+    watch = watch_master(name, pid0=pid0)
     rospy.spin()
     node.stop()
     return MASTER_RESTARTED if watch["restarted"] else 0
