@@ -1,0 +1,175 @@
+"""Paths on the field for the robot's footprint: grid A* on the clearance map, then shortcut smoothing;
+approach poses in front of every slot.
+
+A path is a polyline of (x, y) waypoints in the field frame (m). Every point of it keeps the robot's
+turning circle (:attr:`Footprint.radius` plus ``margin``) clear of walls, ribs, parts and the floor's edge,
+so the robot may turn in place at any waypoint and drive straight between them. A* runs on the 8-connected
+grid of :class:`~.obstacles.FieldObstacles`, its step cost raised near obstacles (``keep_away`` m of
+preferred extra clearance) so paths keep to the middle of corridors where there is room; the grid path
+is then shortened by dropping every waypoint whose neighbours see each other with the same clearance.
+
+Approach poses: the dock pose of a slot (:func:`~.footprint.pose_in_front`) backed off along the slot's
+facing until the turning circle is clear. The robot reaches the approach pose with the planner and the
+follower, then drives straight to the dock pose (docking), and backs straight out to it.
+"""
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .footprint import Footprint, pose_in_front
+from .obstacles import FieldObstacles
+
+_NEIGHBOURS = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)]
+
+
+class NoPath(RuntimeError):
+    """No collision-free path exists between the two points (for this footprint and margin)."""
+
+
+@dataclass(frozen=True)
+class Path:
+    """Waypoints (x, y) in the field frame (m), start first; ``radius`` is the clearance it keeps (m)."""
+
+    points: tuple[tuple[float, float], ...]
+    radius: float
+
+    @property
+    def length(self) -> float:
+        p = np.asarray(self.points)
+        return float(np.sum(np.hypot(*np.diff(p, axis=0).T))) if len(p) > 1 else 0.0
+
+
+class PathPlanner:
+    """Plans on ``obstacles`` for a footprint; ``margin`` (m) is added to the footprint's radius."""
+
+    def __init__(self, obstacles: FieldObstacles, margin: float = 0.01, keep_away: float = 0.06,
+                 keep_away_weight: float = 4.0):
+        self.obstacles = obstacles
+        self.margin = float(margin)
+        self.keep_away = float(keep_away)
+        self.keep_away_weight = float(keep_away_weight)
+
+    def required(self, footprint: Footprint | float) -> float:
+        r = footprint if isinstance(footprint, (int, float)) else footprint.radius
+        return float(r) + self.margin
+
+    def is_free(self, xy, footprint: Footprint | float) -> bool:
+        return self.obstacles.clearance_at(*xy) >= self.required(footprint)
+
+    # ------------------------------------------------------------------------------------------ search
+    def plan(self, start, goal, footprint: Footprint | float) -> Path:
+        """A smoothed path from ``start`` to ``goal`` ((x, y), m). A start or goal inside the margin (the
+        robot docked, or in a tight start corner) is joined to the nearest free cell by a straight line.
+        Raises :class:`NoPath`."""
+        ob = self.obstacles
+        need = self.required(footprint)
+        free = ob.clearance >= need
+        s = self._nearest_free(ob.cell(*start), free)
+        g = self._nearest_free(ob.cell(*goal), free)
+        cells = self._astar(s, g, free, need)
+        pts = [tuple(start)] + [ob.center(i, j) for i, j in cells] + [tuple(goal)]
+        # the start/goal themselves may sit inside the margin: keep them, smooth the rest
+        smooth = self._shortcut(pts[1:-1], need)
+        out = [tuple(map(float, start))]
+        for p in smooth + [tuple(map(float, goal))]:
+            if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
+                out.append(p)
+        out = self._drop_joins(out, need)
+        return Path(tuple(out), need)
+
+    def _nearest_free(self, cell, free: np.ndarray) -> tuple[int, int]:
+        if free[cell]:
+            return cell
+        idx = np.argwhere(free)
+        if len(idx) == 0:
+            raise NoPath("no free cell on the map for this footprint")
+        d = np.hypot(idx[:, 0] - cell[0], idx[:, 1] - cell[1])
+        k = int(np.argmin(d))
+        if d[k] * self.obstacles.resolution > 0.1:
+            raise NoPath(f"point {self.obstacles.center(*cell)} is {d[k] * self.obstacles.resolution:.2f} m "
+                         "from any free cell")
+        return int(idx[k, 0]), int(idx[k, 1])
+
+    def _astar(self, s, g, free: np.ndarray, need: float) -> list[tuple[int, int]]:
+        ob = self.obstacles
+        res = ob.resolution
+        clr = ob.clearance
+        pref = need + self.keep_away
+        w = self.keep_away_weight
+        nx, ny = free.shape
+        gx, gy = g
+        best = {s: 0.0}
+        parent: dict = {s: None}
+        heap = [(0.0, 0.0, s)]
+        while heap:
+            _, cost, c = heapq.heappop(heap)
+            if c == g:
+                break
+            if cost > best.get(c, math.inf):
+                continue
+            ci, cj = c
+            for di, dj in _NEIGHBOURS:
+                i, j = ci + di, cj + dj
+                if not (0 <= i < nx and 0 <= j < ny) or not free[i, j]:
+                    continue
+                step = res * (1.4142135623730951 if di and dj else 1.0)
+                short = pref - clr[i, j]
+                if short > 0:
+                    step *= 1.0 + w * short / self.keep_away
+                nc = cost + step
+                if nc < best.get((i, j), math.inf):
+                    best[(i, j)] = nc
+                    parent[(i, j)] = c
+                    h = res * math.hypot(i - gx, j - gy)
+                    heapq.heappush(heap, (nc + h, nc, (i, j)))
+        if g not in parent:
+            raise NoPath(f"no path from {ob.center(*s)} to {ob.center(*g)} with clearance {need:.3f} m")
+        out = []
+        c = g
+        while c is not None:
+            out.append(c)
+            c = parent[c]
+        return out[::-1]
+
+    def _shortcut(self, pts: list, need: float) -> list:
+        """Greedy string pulling: from each kept point, jump to the farthest point it sees."""
+        if len(pts) <= 2:
+            return list(pts)
+        out = [pts[0]]
+        i = 0
+        while i < len(pts) - 1:
+            j = len(pts) - 1
+            while j > i + 1 and not self.obstacles.segment_clear(pts[i], pts[j], need):
+                j -= 1
+            out.append(pts[j])
+            i = j
+        return out
+
+    def _drop_joins(self, pts: list, need: float) -> list:
+        """Drop a waypoint next to the start or goal when its neighbours see each other."""
+        changed = True
+        while changed and len(pts) > 2:
+            changed = False
+            for k in (1, len(pts) - 2):
+                if 0 < k < len(pts) - 1 and self.obstacles.segment_clear(pts[k - 1], pts[k + 1], need):
+                    del pts[k]
+                    changed = True
+                    break
+        return pts
+
+    # ------------------------------------------------------------------------------------------ slots
+    def approach_pose(self, slot, dock_distance: float, footprint: Footprint | float,
+                      step: float = 0.005, limit: float = 0.4) -> tuple[float, float, float]:
+        """The pose (x, y, theta) in front of ``slot`` facing its plate, the nearest to the dock pose
+        (``dock_distance`` m from the slot centre) whose turning circle is clear. Raises NoPath."""
+        d = dock_distance
+        while d <= dock_distance + limit:
+            pose = pose_in_front(slot, d)
+            if self.is_free(pose[:2], footprint):
+                return pose
+            d += step
+        raise NoPath(f"no clear approach pose in front of {slot.name} within {limit} m of its dock pose")

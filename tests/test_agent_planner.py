@@ -1,0 +1,109 @@
+"""Paths on the field with the robot's footprint, and approach/dock poses for every slot."""
+import math
+
+import numpy as np
+import pytest
+
+from robotatfactory.agent.footprint import (carrying_footprint, dock_distance, pose_in_front, robot_footprint,
+                                            wrap)
+from robotatfactory.agent.obstacles import FieldObstacles, PartObstacle, part_polygon, polygons_overlap
+from robotatfactory.agent.planner import NoPath, PathPlanner
+
+
+@pytest.fixture(scope="module")
+def geo(field, robot):
+    return robot_footprint(robot), carrying_footprint(robot, field.part), dock_distance(robot, field.part)
+
+
+def samples(path, step=0.01):
+    """(x, y, heading) every ``step`` m along each segment, heading along the segment."""
+    pts = np.asarray(path.points)
+    for a, b in zip(pts[:-1], pts[1:]):
+        L = float(np.hypot(*(b - a)))
+        th = math.atan2(b[1] - a[1], b[0] - a[0])
+        for u in np.linspace(0.0, 1.0, max(2, int(L / step) + 1)):
+            yield (*(a + u * (b - a)), th)
+
+
+def assert_path_clear(ob, path, footprint, start_end_slack=0.0):
+    """Driving each segment (heading along it) never touches an obstacle; turning in place at every
+    inner waypoint is clear (its turning circle)."""
+    for pose in samples(path):
+        assert not ob.collides(footprint, pose), f"collision at {pose}"
+    for p in path.points[1:-1]:
+        assert ob.clearance_at(*p) >= footprint.radius, p
+
+
+def test_footprint_from_the_robot_file(field, robot, geo):
+    fp, fc, d = geo
+    assert fp.front == pytest.approx(robot.electromagnet["x"]) and fp.back == pytest.approx(-0.07)
+    assert fp.radius == pytest.approx(math.hypot(0.07, 0.0525))  # the base box's corner
+    assert fc.front == pytest.approx(0.08 + 0.0005 + 0.002 + 0.06) and fc.radius > 0.14
+    assert d == pytest.approx(0.03 + 0.002 + 0.08 + 0.003)
+
+
+def test_approach_and_dock_poses_of_every_slot(field, robot, geo):
+    """Pick: the empty robot from the approach pose straight to 3 mm of the plate, the part in its slot;
+    place: the loaded robot straight to the pose that leaves the part on the slot centre. Both face the
+    plate, both lines are clear with the exact outline, the approach pose clears the turning circle."""
+    fp, fc, d = geo
+    for slot in field.slots:
+        part_here = PartObstacle(*slot.xy, slot.facing)
+        for footprint, parts in ((fp, [part_here]), (fc, [])):
+            ob = FieldObstacles(field, parts)
+            pl = PathPlanner(ob)
+            ax, ay, ath = pl.approach_pose(slot, d, footprint)
+            dock = pose_in_front(slot, d)
+            assert abs(wrap(ath - slot.facing - math.pi)) < 1e-9 and dock[2] == ath
+            # the approach pose is on the plate's normal, behind the dock pose
+            u = (math.cos(slot.facing), math.sin(slot.facing))
+            along = (ax - slot.xy[0]) * u[0] + (ay - slot.xy[1]) * u[1]
+            across = -(ax - slot.xy[0]) * u[1] + (ay - slot.xy[1]) * u[0]
+            assert abs(across) < 1e-9 and d <= along <= d + 0.12, (slot.name, along)
+            assert ob.clearance_at(ax, ay) >= footprint.radius
+            for k in np.linspace(0.0, 1.0, 30):  # straight in, with 5 mm of lateral error either side
+                for lat in (-0.005, 0.0, 0.005):
+                    pose = (ax + k * (dock[0] - ax) - lat * u[1], ay + k * (dock[1] - ay) + lat * u[0], ath)
+                    assert not ob.collides(footprint, pose), (slot.name, footprint is fc, k, lat)
+        # the magnet touches the plate at the dock pose minus the 3 mm gap, not before
+        ob = FieldObstacles(field, [PartObstacle(*slot.xy, slot.facing)])
+        assert ob.collides(fp, pose_in_front(slot, d - 0.004))
+
+
+def test_paths_from_the_start_and_between_slots_are_clear(field, geo):
+    fp, fc, d = geo
+    parts = [PartObstacle(*s.xy, s.facing) for s in field.slots_of("incoming")]
+    ob = FieldObstacles(field, parts)
+    pl = PathPlanner(ob)
+    start = (field.start_pose.x, field.start_pose.y)
+    for slot in field.slots:
+        goal = pl.approach_pose(slot, d, fp)
+        path = pl.plan(start, goal[:2], fp)
+        assert path.points[0] == start and path.points[-1] == pytest.approx(goal[:2])
+        assert path.length < 3.0
+        assert_path_clear(ob, path, fp)
+    # loaded: from each incoming slot to every place it may go (inside the grid's margin of the start
+    # and the goal, the robot moves along the slot's normal, which the dock test covers)
+    ob_empty_slots = FieldObstacles(field, [])
+    pl = PathPlanner(ob_empty_slots)
+    for src in field.slots_of("incoming"):
+        a = pl.approach_pose(src, d, fc)
+        for dst in field.slots_of("outgoing") + [s for s in field.slots if s.role == "input"]:
+            b = pl.approach_pose(dst, d, fc)
+            path = pl.plan(a[:2], b[:2], fc)
+            assert_path_clear(ob_empty_slots, path, fc)
+
+
+def test_parts_on_the_floor_are_avoided_and_walls_block(field, geo):
+    fp, _, _ = geo
+    stray = PartObstacle(0.0, -0.38, 0.3)  # a part knocked into the corridor below machine B
+    ob = FieldObstacles(field, [stray])
+    pl = PathPlanner(ob)
+    path = pl.plan((-0.2, -0.38), (0.2, -0.38), fp)
+    assert len(path.points) > 2  # not the straight line through the part
+    assert_path_clear(ob, path, fp)
+    poly = part_polygon(field.part, stray)
+    assert all(not polygons_overlap(p, poly) for pose in samples(path) for p in fp.polygons(*pose))
+    # a footprint too large for every corridor has no path
+    with pytest.raises(NoPath):
+        pl.plan((-0.6, 0.0), (0.6, 0.0), 0.4)
