@@ -1,0 +1,104 @@
+"""The path follower: its rules on a kinematic robot, and in closed loop on the bare stand-in simulator
+(SimTwo's speed PID, no ramp). The simulator's ground-truth pose stands in for the EKF only here."""
+import math
+
+import numpy as np
+import pytest
+
+from robotatfactory.agent.follower import DriveLimits, PathFollower
+from robotatfactory.agent.footprint import dock_distance, robot_footprint, wrap
+from robotatfactory.agent.obstacles import FieldObstacles
+from robotatfactory.agent.planner import PathPlanner
+from robotatfactory.sim import SimConfig
+from robotatfactory.simtwo import Command
+
+
+def polyline_distance(p, pts):
+    pts = np.asarray(pts)
+    best = math.inf
+    for a, b in zip(pts[:-1], pts[1:]):
+        d = b - a
+        u = np.clip(np.dot(p - a, d) / max(np.dot(d, d), 1e-12), 0.0, 1.0)
+        best = min(best, float(np.hypot(*(p - a - u * d))))
+    return best
+
+
+def test_rules_on_a_kinematic_robot(robot):
+    lim = DriveLimits.from_robot(robot)
+    assert lim.v_max == pytest.approx(0.4) and lim.alpha_max == pytest.approx(lim.a_max / (robot.track / 2))
+    dt = robot.control_period
+    f = PathFollower(lim, dt)
+    x, y, th = 0.0, 0.0, math.pi  # facing away from the path
+    f.start([(0.0, 0.0), (0.6, 0.0), (0.6, 0.3)], final_heading=math.pi / 2)
+    outs = []
+    for _ in range(1000):
+        o = f.step((x, y, th))
+        outs.append(o)
+        x += o.v * math.cos(th) * dt
+        y += o.v * math.sin(th) * dt
+        th = wrap(th + o.w * dt)
+        if o.done:
+            break
+    assert outs[-1].done and math.hypot(x - 0.6, y - 0.3) < 0.01 and abs(wrap(th - math.pi / 2)) < 0.02
+    v = np.array([o.v for o in outs])
+    w = np.array([o.w for o in outs])
+    assert np.all(np.abs(np.diff(v)) <= lim.a_max * dt + 1e-12)
+    assert np.all(np.abs(np.diff(w)) <= lim.alpha_max * dt + 1e-12)
+    assert v.max() <= lim.v_max + 1e-12 and np.abs(w).max() <= lim.w_max + 1e-12
+    # no translation while the heading error is large: the first cycles only turn
+    assert all(o.v == 0.0 for o in outs if abs(o.heading_error) > lim.heading_tolerance)
+    assert all(o.v == 0.0 for o in outs if o.phase == "turn" and o.w != 0.0)
+    assert sum(o.phase == "turn" and o.w != 0.0 for o in outs) > 10  # it did turn in place (start, corner)
+    assert outs[0].v == 0.0 and outs[0].w > 0
+    # slow in the last 0.2 m, stops at the corner (a 90 degree turn)
+    assert all(o.v <= lim.v_final + 1e-9 for o in outs if o.remaining < lim.slow_distance and o.phase == "drive")
+    assert v.max() > 0.3  # but it does speed up on the long leg
+
+
+@pytest.fixture(scope="module")
+def sim(field, robot):
+    from robotatfactory.sim import Simulator
+
+    s = Simulator(field, robot, SimConfig(camera=False, lidar=False, competition=False))
+    yield s
+    s.close()
+
+
+def test_closed_loop_on_the_simulator(sim, field, robot):
+    """From the start area to two approach poses and back out in reverse: on the path within 1 cm, at the
+    goal within 5 mm and 0.03 rad, never touching a wall (exact outline on the true pose)."""
+    fp = robot_footprint(robot)
+    ob = FieldObstacles(field, [])
+    pl = PathPlanner(ob)
+    lim = DriveLimits.from_robot(robot)
+    fol = PathFollower(lim, robot.control_period)
+    for zone, n in (("machine_B", 1), ("machine_A", 3)):
+        slot = field.slot(zone, n)
+        goal = pl.approach_pose(slot, dock_distance(robot, field.part), fp)
+        path = pl.plan(sim.pose[:2], goal[:2], fp)
+        fol.start(path.points, final_heading=goal[2])
+        t0, worst = sim.time, 0.0
+        budget = path.length / lim.v_max + 2 * math.pi / lim.w_max * len(path.points) + 3.0
+        for _ in range(int(budget / robot.control_period)):
+            o = fol.step(sim.pose)
+            sim.step_cycle(Command(o.v, o.w, False))
+            worst = max(worst, polyline_distance(np.array(sim.pose[:2]), path.points))
+            assert not ob.collides(fp, sim.pose), sim.pose
+            if o.done:
+                break
+        x, y, th = sim.pose
+        assert o.done, f"not there within {budget:.1f} s"
+        assert math.hypot(x - goal[0], y - goal[1]) < 0.005 and abs(wrap(th - goal[2])) < 0.03
+        assert worst < 0.01
+        print(f"{slot.name}: {path.length:.2f} m in {sim.time - t0:.2f} s, off the path <= {worst * 1000:.1f} mm")
+        # back out 12 cm, the back first
+        back = (x - 0.12 * math.cos(th), y - 0.12 * math.sin(th))
+        fol.start([(x, y), back], reverse=True)
+        for _ in range(200):
+            o = fol.step(sim.pose)
+            assert o.v <= 0.0
+            sim.step_cycle(Command(o.v, o.w, False))
+            if o.done:
+                break
+        assert o.done and math.hypot(sim.pose[0] - back[0], sim.pose[1] - back[1]) < 0.005
+        assert abs(wrap(sim.pose[2] - th)) < 0.03
