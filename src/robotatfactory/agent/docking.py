@@ -1,0 +1,157 @@
+"""Docking: the final approach to a slot to pick its part, or to leave the carried part on it.
+
+Both start at the slot's approach pose (:meth:`PathPlanner.approach_pose`), facing the plate, and end
+there again after backing out. Each control cycle :meth:`Docker.step` takes the pose estimate (x, y, theta;
+field frame, m, rad) and the contact switch, and returns body speeds and the electromagnet state.
+
+**Pick:** drive straight along the slot's normal at ``v_dock`` towards the plate (aiming
+``overshoot`` m past the dock pose so the contact is reached even with a pose error); when the contact
+switch is pressed (the part's front face within its 1 cm beam, the magnet face within ~1 cm of the plate)
+stop, switch the electromagnet on, wait ``settle`` s, and back out to ``retreat`` m from the slot centre.
+The contact switch stays pressed while a part hangs on the magnet (the part's body is in its beam), so it
+is also the confirmation that the part came along: released after backing out = the part was lost.
+No contact by the end of the approach = failure ``no_contact`` (the caller retries or re-localizes).
+
+**Place:** drive straight to the place pose (the carried part's centre on the slot centre: the dock
+distance with the magnet's hold gap), stop, electromagnet off, wait ``settle`` s, back out to ``retreat``.
+The contact switch must be released once backed out (the part stayed); pressed = failure ``still_held``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from .follower import DriveLimits, PathFollower
+from .footprint import HOLD_GAP, PLATE_THICKNESS, pose_in_front
+
+
+@dataclass(frozen=True)
+class DockSettings:
+    """Speeds (m/s), distances (m), times (s) of the final approach."""
+
+    v_dock: float = 0.06
+    overshoot: float = 0.012  # m past the dock pose the pick approach aims at (the contact stops it first)
+    gap: float = 0.003  # m between the magnet face and the plate at the nominal dock pose
+    settle: float = 0.2  # s standing still with the magnet switched on/off
+    v_back: float = 0.15
+
+
+@dataclass(frozen=True)
+class DockOutput:
+    """One cycle's command: body speeds (m/s, rad/s), the magnet, and where the manoeuvre is."""
+
+    v: float
+    w: float
+    magnet: bool
+    phase: str  # approach, grip, release, back, done, failed
+    done: bool = False
+    failed: str | None = None  # no_contact, part_lost, still_held
+
+
+class Docker:
+    """Pick and place manoeuvres for one robot. ``magnet_x`` (m) is the magnet face in base_link;
+    ``part`` the field's PartSpec; ``limits`` the normal drive limits (the docking speeds are lower)."""
+
+    def __init__(self, limits: DriveLimits, dt: float, magnet_x: float, part, settings: DockSettings = DockSettings()):
+        self.settings = settings
+        self.dt = float(dt)
+        self.magnet_x = float(magnet_x)
+        self.part = part
+        self.approach_limits = replace(limits, v_max=settings.v_dock, v_final=settings.v_dock, slow_distance=0.0,
+                                       position_tolerance=0.002)
+        self.back_limits = replace(limits, v_max=settings.v_back, v_final=settings.v_back, slow_distance=0.0,
+                                   position_tolerance=0.003)
+        self.follower = PathFollower(self.approach_limits, dt)
+        self.mode = "idle"
+        self.phase = "done"
+        self.magnet = False
+        self._wait = 0.0
+        self._slot = None
+        self._retreat = 0.0
+
+    # ------------------------------------------------------------------------------------------ geometry
+    def dock_distance(self) -> float:
+        """Slot centre to base_link when picking: the magnet face ``gap`` m from the plate (m)."""
+        return self.part.depth / 2 + PLATE_THICKNESS + self.magnet_x + self.settings.gap
+
+    def place_distance(self) -> float:
+        """Slot centre to base_link when the carried part's centre is on the slot centre (m)."""
+        return self.part.depth / 2 + PLATE_THICKNESS + self.magnet_x + HOLD_GAP
+
+    # ------------------------------------------------------------------------------------------ start
+    def start_pick(self, slot, pose, retreat: float) -> None:
+        """Pick the part in ``slot`` from ``pose`` (the approach pose); back out to ``retreat`` m from the
+        slot centre afterwards."""
+        self._begin("pick", slot, pose, retreat, self.dock_distance() - self.settings.overshoot)
+        self.magnet = False
+
+    def start_place(self, slot, pose, retreat: float) -> None:
+        """Leave the carried part on ``slot``; the magnet stays on until the place pose is reached."""
+        self._begin("place", slot, pose, retreat, self.place_distance())
+        self.magnet = True
+
+    def _begin(self, mode: str, slot, pose, retreat: float, distance: float) -> None:
+        self.mode, self._slot, self._retreat = mode, slot, float(retreat)
+        target = pose_in_front(slot, distance)
+        self.follower.limits = self.approach_limits
+        # from the point of the slot's normal nearest the robot: the approach follows the normal
+        start = self._on_normal(pose)
+        self.follower.start([start, target[:2]], final_heading=None)
+        self.follower.phase = "drive" if abs(math.remainder(pose[2] - target[2], 2 * math.pi)) < 0.1 else "turn"
+        self.phase = "approach"
+
+    def _on_normal(self, pose) -> tuple[float, float]:
+        s = self._slot
+        u = (math.cos(s.facing), math.sin(s.facing))
+        along = (pose[0] - s.xy[0]) * u[0] + (pose[1] - s.xy[1]) * u[1]
+        along = max(along, self.dock_distance() + 0.01)
+        return (s.xy[0] + along * u[0], s.xy[1] + along * u[1])
+
+    # ------------------------------------------------------------------------------------------ step
+    def step(self, pose, contact: bool) -> DockOutput:
+        """One control cycle from the pose estimate and the contact switch."""
+        if self.phase == "approach":
+            out = self.follower.step(pose)
+            if self.mode == "pick" and contact:
+                self.follower.stop()  # brake within the limits (a few mm at v_dock), magnet on at once
+                self.phase, self._wait = "grip", 0.0
+                self.magnet = True
+                out = self.follower.step(pose)
+                return self._out(out.v, out.w)
+            if out.done:
+                if self.mode == "pick":
+                    return self._fail("no_contact")
+                self.phase, self._wait = "release", 0.0
+                self.magnet = False
+                return self._out(0.0, 0.0)
+            return self._out(out.v, out.w)
+        if self.phase in ("grip", "release"):
+            # brake with the limits, then stand still for `settle` seconds
+            out = self.follower.step(pose)
+            self._wait += self.dt
+            if self._wait >= self.settings.settle and out.v == 0.0 and out.w == 0.0:
+                back = pose_in_front(self._slot, self._retreat)
+                self.follower.limits = self.back_limits
+                self.follower.start([tuple(pose[:2]), back[:2]], reverse=True)
+                self.follower.phase = "drive"
+                self.phase = "back"
+            return self._out(out.v, out.w)
+        if self.phase == "back":
+            out = self.follower.step(pose)
+            if out.done:
+                if self.mode == "pick" and not contact:
+                    return self._fail("part_lost")
+                if self.mode == "place" and contact:
+                    return self._fail("still_held")
+                self.phase = "done"
+                return self._out(0.0, 0.0, done=True)
+            return self._out(out.v, out.w)
+        return self._out(0.0, 0.0, done=self.phase == "done")
+
+    def _fail(self, reason: str) -> DockOutput:
+        self.follower.stop()
+        self.phase = "failed"
+        return DockOutput(0.0, 0.0, self.magnet, "failed", False, reason)
+
+    def _out(self, v: float, w: float, done: bool = False) -> DockOutput:
+        return DockOutput(v, w, self.magnet, self.phase, done, None)
