@@ -60,6 +60,12 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
   echo "$want" > "$stamp"
 fi
+# the package's ROS service classes (generated output, not committed): when missing or older than srv/*.srv
+gen=src/robotatfactory/srv/__init__.py
+if [ ! -f "$gen" ] || [ -n "$(find srv -name '*.srv' -newer "$gen" 2>/dev/null)" ] || [ srv/generate.py -nt "$gen" ]; then
+  echo "[bootstrap] generating the service classes (srv/generate.py)"
+  .venv/bin/python srv/generate.py > /dev/null
+fi
 echo "[bootstrap] ready: $ROOT/.venv/bin/raf"
 
 action=${1:-}

@@ -1,7 +1,9 @@
 """Generates the Python classes of the package's services (src/robotatfactory/srv/) from srv/*.srv with genpy.
 
-There is no catkin build here, so the generated modules are committed; tests/test_sim_services.py checks
-they are what this script writes. Run after editing a .srv file:
+There is no catkin build here: scripts/bootstrap.sh runs this script whenever a .srv file is newer than the
+generated package (which git ignores, as generated output), and tests/test_sim_services.py checks that the
+package is what this script makes of the .srv files now. In a catkin workspace, or after editing a .srv file
+by hand, run it yourself:
 
     python3 srv/generate.py
 
