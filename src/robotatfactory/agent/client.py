@@ -175,6 +175,19 @@ class FactoryClient:
         """Seconds left in the round (CTL)."""
         return parse_ctl(self.request("CTL"))
 
+    def poll_state(self) -> FactoryState | None:
+        """One look without blocking on the start: None while IWP answers STOP (the run has not
+        started), else the whole state (:meth:`state`). For callers that run their own loop."""
+        reply = self.request("IWP")
+        if reply == STOP:
+            self.counters.stops += 1
+            return None
+        incoming = parse_letters("IWP", reply)
+        if self.started_at is None:
+            self.started_at = self._clock()
+        rest = {z: self.zone(z) for z in ("outgoing", "machine_A", "machine_B")}
+        return FactoryState(incoming, rest["outgoing"], rest["machine_A"], rest["machine_B"], self.time_left())
+
     def state(self) -> FactoryState:
         """Every zone and the time left: five requests (IWP, OWP, MAP, MBP, CTL)."""
         zones = {z: self.zone(z) for z in ZONE_REQUESTS}

@@ -10,7 +10,8 @@ switch is pressed (the part's front face within its 1 cm beam, the magnet face w
 stop, switch the electromagnet on, wait ``settle`` s, and back out to ``retreat`` m from the slot centre.
 The contact switch stays pressed while a part hangs on the magnet (the part's body is in its beam), so it
 is also the confirmation that the part came along: released after backing out = the part was lost.
-No contact by the end of the approach = failure ``no_contact`` (the caller retries or re-localizes).
+No contact by the end of the approach: the robot backs out, then reports ``no_contact`` (the caller
+retries or re-localizes).
 
 **Place:** drive straight to the place pose (the carried part's centre on the slot centre: the dock
 distance with the magnet's hold gap), stop, electromagnet off, wait ``settle`` s, back out to ``retreat``.
@@ -68,6 +69,7 @@ class Docker:
         self._wait = 0.0
         self._slot = None
         self._retreat = 0.0
+        self._failing: str | None = None
 
     # ------------------------------------------------------------------------------------------ geometry
     def dock_distance(self) -> float:
@@ -92,6 +94,7 @@ class Docker:
 
     def _begin(self, mode: str, slot, pose, retreat: float, distance: float) -> None:
         self.mode, self._slot, self._retreat = mode, slot, float(retreat)
+        self._failing = None
         target = pose_in_front(slot, distance)
         self.follower.limits = self.approach_limits
         # from the point of the slot's normal nearest the robot: the approach follows the normal
@@ -119,8 +122,10 @@ class Docker:
                 out = self.follower.step(pose)
                 return self._out(out.v, out.w)
             if out.done:
-                if self.mode == "pick":
-                    return self._fail("no_contact")
+                if self.mode == "pick":  # nothing there: back out, then report
+                    self._failing = "no_contact"
+                    self._back(pose)
+                    return self._out(0.0, 0.0)
                 self.phase, self._wait = "release", 0.0
                 self.magnet = False
                 return self._out(0.0, 0.0)
@@ -130,15 +135,13 @@ class Docker:
             out = self.follower.step(pose)
             self._wait += self.dt
             if self._wait >= self.settings.settle and out.v == 0.0 and out.w == 0.0:
-                back = pose_in_front(self._slot, self._retreat)
-                self.follower.limits = self.back_limits
-                self.follower.start([tuple(pose[:2]), back[:2]], reverse=True)
-                self.follower.phase = "drive"
-                self.phase = "back"
+                self._back(pose)
             return self._out(out.v, out.w)
         if self.phase == "back":
             out = self.follower.step(pose)
             if out.done:
+                if self._failing:
+                    return self._fail(self._failing)
                 if self.mode == "pick" and not contact:
                     return self._fail("part_lost")
                 if self.mode == "place" and contact:
@@ -147,6 +150,14 @@ class Docker:
                 return self._out(0.0, 0.0, done=True)
             return self._out(out.v, out.w)
         return self._out(0.0, 0.0, done=self.phase == "done")
+
+    def _back(self, pose) -> None:
+        """Back straight out along the slot's normal to ``retreat`` m from its centre."""
+        back = pose_in_front(self._slot, self._retreat)
+        self.follower.limits = self.back_limits
+        self.follower.start([tuple(pose[:2]), back[:2]], reverse=True)
+        self.follower.phase = "drive"
+        self.phase = "back"
 
     def _fail(self, reason: str) -> DockOutput:
         self.follower.stop()

@@ -9,8 +9,9 @@ Behaviour (the stack that won RobotAtFactory 4.0 in 2022/2023 did the same, on a
   in place towards the segment first. Driving, the heading is steered back onto the line through a
   point ``lookahead`` m ahead (cross-track correction).
 * **Speed profile** with acceleration limits: v never changes by more than ``a_max * dt`` per cycle (SimTwo's
-  speed controller has no ramp: a step in the command slips the tyres), braking as ``sqrt(2 a d)`` to
-  every waypoint where the path turns by more than the heading tolerance, and to the end.
+  speed controller has no ramp: a step in the command slips the tyres), braking as ``sqrt(v_c^2 + 2 a d)``
+  to a stop at every waypoint where the path turns by more than the heading tolerance and at the end,
+  and to ``v_max (1 - turn / tolerance)`` (at least ``v_final``) at gentler corners.
 * **Slow in the last** ``slow_distance`` (0.2 m) before the end: at most ``v_final``.
 * At the end, an optional final heading is turned to in place. ``reverse=True`` drives the path backwards
   (the robot's back first), for backing out of a slot.
@@ -97,12 +98,16 @@ class PathFollower:
         n = len(self.points) - 1
         tol = self.limits.heading_tolerance
         self._stop_at = []
+        self._corner_v = []  # the speed allowed at the end of segment i (m/s)
         for i in range(n):  # stop at the end of segment i?
             if i == n - 1:
                 self._stop_at.append(True)
+                self._corner_v.append(0.0)
             else:
                 turn = abs(wrap(self._heading(i + 1) - self._heading(i)))
                 self._stop_at.append(turn > tol)
+                self._corner_v.append(0.0 if turn > tol else
+                                      max(self.limits.v_final, self.limits.v_max * (1.0 - turn / tol)))
         self.phase = "turn" if n > 0 else ("final_turn" if final_heading is not None else "done")
 
     def _heading(self, i: int) -> float:
@@ -151,22 +156,26 @@ class PathFollower:
             if to_end <= L.position_tolerance and self.k == n - 1:
                 self.phase = "final_turn" if self.final_heading is not None else "done"
             else:
-                # distance to the next stop (a sharp corner or the end)
+                # the speed allowed now: braking to each coming corner's speed, up to the next stop
                 j = self.k
-                d_stop = max(to_end, 0.0)
-                while not self._stop_at[j]:
+                d_c = max(to_end, 0.0) - self.v * self.dt
+                v_allowed = L.v_max
+                while True:
+                    v_allowed = min(v_allowed, math.sqrt(self._corner_v[j] ** 2 + 2 * L.a_max * max(d_c, 0.0)))
+                    if self._stop_at[j]:
+                        break
                     j += 1
-                    d_stop += self._seg_len[j]
+                    d_c += self._seg_len[j]
                 aim = seg_th + math.atan2(-cross, L.lookahead)
                 herr = wrap(aim - th)
-                if self.phase == "turn" and abs(wrap(seg_th - th)) <= L.heading_tolerance / 2:
+                if self.phase == "turn" and abs(herr) <= L.heading_tolerance / 2:
                     self.phase = "drive"
-                if abs(wrap(seg_th - th)) > L.heading_tolerance:
+                if abs(herr) > L.heading_tolerance:
                     self.phase = "turn"
                 # turning in place only once stopped: no translation while the heading error is large
                 w_t = self._turn_rate(herr) if (self.phase == "drive" or self.v == 0.0) else 0.0
                 if self.phase == "drive" and not (self._stop_at[self.k] and to_end <= L.position_tolerance):
-                    v_t = min(L.v_max, math.sqrt(2 * L.a_max * max(d_stop - self.v * self.dt, 0.0)))
+                    v_t = v_allowed
                     # at most v_final in the last slow_distance: braking for it starts before
                     gap = max(remaining - L.slow_distance - self.v * self.dt, 0.0)
                     v_t = min(v_t, math.sqrt(L.v_final ** 2 + 2 * L.a_max * gap))

@@ -79,7 +79,20 @@ class PathPlanner:
             if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
                 out.append(p)
         out = self._drop_joins(out, need)
+        out = self._drop_short(out, need - self.margin)
         return Path(tuple(out), need)
+
+    def _drop_short(self, pts: list, radius: float, short: float = 0.03) -> list:
+        """Drop inner waypoints closer than ``short`` m to the previous one (grid snapping near a start
+        inside the margin) when the line that replaces them clears ``radius`` (the footprint's own)."""
+        k = 1
+        while k < len(pts) - 1:
+            a, b = pts[k - 1], pts[k]
+            if math.hypot(b[0] - a[0], b[1] - a[1]) < short and self.obstacles.segment_clear(a, pts[k + 1], radius):
+                del pts[k]
+            else:
+                k += 1
+        return pts
 
     def _nearest_free(self, cell, free: np.ndarray) -> tuple[int, int]:
         if free[cell]:

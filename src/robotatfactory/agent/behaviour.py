@@ -1,0 +1,260 @@
+"""The round's behaviour: a per-cycle state machine that ties the task policy, the planner, the follower
+and the docking together. No I/O and no clock of its own: the caller (the ROS node, or a test around the
+bare simulator) feeds it every control cycle and polls the factory-state server for it.
+
+Each cycle: :meth:`RoundAgent.step` (t in s, the pose estimate (x, y, theta) in the field frame or None when
+it is stale, the contact switch) returns an :class:`AgentCommand` (body speeds, the magnet). Whenever
+:attr:`RoundAgent.wants_state` is True the caller asks the server (IWP, OWP, MAP, MBP, CTL) and hands the
+answer to :meth:`RoundAgent.on_state`; the agent decides only on a state seen after its last action
+finished, so every decision is re-planned from what the server says. It does not move before it has
+the part list (the first state).
+
+Events (``events``: list of (t, text)) say what it did: the task chosen, picked, placed, failures.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..competition.parts import PartType
+from .delay import DelayEstimator, lanes_of
+from .docking import Docker
+from .follower import DriveLimits, PathFollower
+from .footprint import carrying_footprint, dock_distance, robot_footprint
+from .obstacles import FieldObstacles, PartObstacle
+from .planner import NoPath, PathPlanner
+from .state import ZONES, FactoryState, SlotRef
+from .tasks import Done, Move, TaskPolicy, Wait
+
+MACHINE_CLEARANCE = 0.2  # m from a machine input after placing (the machine needs > 0.17 m)
+
+
+@dataclass(frozen=True)
+class AgentCommand:
+    """What to send this cycle: v (m/s), w (rad/s), the electromagnet."""
+
+    v: float
+    w: float
+    magnet: bool
+
+
+@dataclass
+class AgentCounters:
+    picks: int = 0
+    pick_failures: int = 0
+    places: int = 0
+    place_failures: int = 0
+    no_path: int = 0
+    stale_pose_cycles: int = 0
+
+
+@dataclass
+class RoundAgent:
+    """See the module docstring. ``retries``: docking attempts per pick before re-deciding."""
+
+    field: object
+    robot: object
+    limits: DriveLimits | None = None
+    retries: int = 2
+    state_period: float = 0.5  # s between server polls (5 requests each)
+    events: list = field(default_factory=list)
+    counters: AgentCounters = field(default_factory=AgentCounters)
+
+    def __post_init__(self):
+        r, f = self.robot, self.field
+        self.limits = self.limits or DriveLimits.from_robot(r)
+        self.dt = float(r.control_period)
+        self.policy = TaskPolicy.for_field(f)
+        self.delays = DelayEstimator(lanes_of(f))
+        self.follower = PathFollower(self.limits, self.dt)
+        self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part)
+        self.fp_empty = robot_footprint(r)
+        self.fp_carry = carrying_footprint(r, f.part)
+        self.d_dock = dock_distance(r, f.part)
+        self.mode = "wait_start"
+        self.state: FactoryState | None = None
+        self.state_time = -math.inf
+        self.need_state_after = 0.0
+        self.task: Move | Wait | Done | None = None
+        self.carrying: PartType | None = None
+        self.target: SlotRef | None = None
+        self.attempts = 0
+        self.magnet = False
+        self.path = None
+        self._last_poll = -math.inf
+        self._v = self._w = 0.0
+        self.t = 0.0
+
+    # ------------------------------------------------------------------------------------------ inputs
+    @property
+    def wants_state(self) -> bool:
+        """True when the caller should poll the server now and call :meth:`on_state`."""
+        if self.mode == "done":
+            return False
+        # also while driving: the delay estimate is only as sharp as the polls are frequent
+        return self.state_time < self.need_state_after or self.t - self._last_poll >= self.state_period
+
+    def on_state(self, state: FactoryState, t: float) -> None:
+        """A fresh server state seen at time ``t`` (s)."""
+        self._last_poll = t
+        if self.state is not None and self.mode == "decide" and self.task is not None and not self.state.same_slots(state):
+            self._event(t, f"server state changed: {state}")
+        self.state, self.state_time = state, t
+        seen = self.delays.update(state, t)
+        if seen is not None:
+            self._event(t, f"processing delay observed: {seen:.1f} s (estimate {self.delays.estimate:.1f} s)")
+        if self.mode == "wait_start":
+            self._event(t, f"part list {state.letters('incoming')}: the run starts")
+            self.mode = "decide"
+
+    # ------------------------------------------------------------------------------------------ cycle
+    def step(self, t: float, pose, contact: bool) -> AgentCommand:
+        self.t = float(t)
+        if pose is None:  # stale estimate: brake and wait (the caller decides what is stale)
+            self.counters.stale_pose_cycles += 1
+            return self._brake()
+        if self.mode in ("wait_start", "done"):
+            return self._brake()
+        if self.mode == "decide":
+            if self.state_time < self.need_state_after:
+                return self._brake()
+            self._decide(pose)
+            if self.mode == "decide" or self.mode == "done":
+                return self._brake()
+        if self.mode in ("to_pick", "to_place"):
+            o = self.follower.step(pose)
+            if o.done:
+                self._start_dock(pose)
+            return self._cmd(o.v, o.w)
+        if self.mode in ("pick", "place"):
+            o = self.docker.step(pose, contact)
+            self.magnet = o.magnet
+            if o.failed:
+                self._dock_failed(o.failed, pose)
+            elif o.done:
+                self._dock_done(pose)
+            return self._cmd(o.v, o.w)
+        return self._brake()
+
+    # ------------------------------------------------------------------------------------------ decisions
+    def _decide(self, pose) -> None:
+        st = self.state
+        if self.carrying is not None:  # a place failed or the destination changed: find a new one
+            dest = self.policy.destinations(st, self.carrying)
+            if not dest:
+                return  # hold the part until a destination is free (re-polled every state_period)
+            self.target = dest[0]
+            self._go("to_place", pose)
+            return
+        ready = {ln.input: self.delays.expected_ready(ln.input) for ln in self.delays.lanes}
+        task = self.policy.next_task(st, robot_xy=tuple(pose[:2]), ready_at={k: v for k, v in ready.items() if v})
+        if task != self.task:
+            self._event(self.t, f"task: {task}")
+        self.task = task
+        if isinstance(task, Done):
+            self.mode = "done"
+            return
+        if isinstance(task, Wait):
+            return  # stay, poll again
+        self.target = task.source
+        self.attempts = 0
+        self._go("to_pick", pose)
+
+    def _obstacles(self, exclude: SlotRef | None = None) -> FieldObstacles:
+        parts = []
+        for zone in ZONES:
+            for n, p in enumerate(self.state.zone(zone), start=1):
+                if p is not None and SlotRef(zone, n) != exclude:
+                    s = self.field.slot(zone, n)
+                    parts.append(PartObstacle(*s.xy, s.facing))
+        return FieldObstacles(self.field, parts)
+
+    def _go(self, mode: str, pose) -> None:
+        fp = self.fp_carry if self.carrying is not None else self.fp_empty
+        slot = self.field.slot(self.target.zone, self.target.number)
+        pl = PathPlanner(self._obstacles())
+        try:
+            goal = pl.approach_pose(slot, self.d_dock, fp)
+            self.path = pl.plan(tuple(pose[:2]), goal[:2], fp)
+        except NoPath as e:
+            self.counters.no_path += 1
+            self._event(self.t, f"no path to {self.target}: {e}")
+            self.mode, self.need_state_after = "decide", self.t + self.state_period
+            return
+        self.follower.start(self.path.points, final_heading=goal[2])
+        self.mode = mode
+
+    def _retreat(self, carrying: bool) -> float:
+        """Distance from the slot centre to back out to (m): the approach distance of the footprint the
+        robot will have afterwards."""
+        slot = self.field.slot(self.target.zone, self.target.number)
+        fp = self.fp_carry if carrying else self.fp_empty
+        pl = PathPlanner(self._obstacles(exclude=self.target))
+        x, y, _ = pl.approach_pose(slot, self.d_dock, fp)
+        d = math.hypot(x - slot.xy[0], y - slot.xy[1])
+        if slot.role == "input":  # a machine starts only once base_link is 0.17 m from its input
+            d = max(d, MACHINE_CLEARANCE)
+        return d
+
+    def _start_dock(self, pose) -> None:
+        slot = self.field.slot(self.target.zone, self.target.number)
+        if self.mode == "to_pick":
+            self.docker.start_pick(slot, pose, self._retreat(carrying=True))
+            self.mode = "pick"
+        else:
+            self.docker.start_place(slot, pose, self._retreat(carrying=False))
+            self.mode = "place"
+
+    def _dock_done(self, pose) -> None:
+        if self.mode == "pick":
+            self.counters.picks += 1
+            self.carrying = self.task.part
+            self._event(self.t, f"picked the {self.carrying.label} part from {self.target}")
+            self.state = self.state.with_slot(self.task.source, None)  # expected until the server says
+            self.target = self.task.target
+            dest = self.policy.destinations(self.state.with_slot(self.task.source, None), self.carrying)
+            if self.target not in dest:  # the planned place was taken meanwhile
+                self.target = dest[0] if dest else None
+            if self.target is None:
+                self.mode, self.need_state_after = "decide", self.t
+                return
+            self._go("to_place", pose)
+            return
+        self.counters.places += 1
+        self._event(self.t, f"placed the {self.carrying.label} part in {self.target}")
+        if self.target.zone.startswith("machine"):
+            self.delays.placed(self.target, self.carrying, self.t)
+        self.state = self.state.with_slot(self.target, self.carrying)
+        self.carrying = None
+        self.magnet = False
+        self.mode, self.need_state_after = "decide", self.t
+
+    def _dock_failed(self, reason: str, pose) -> None:
+        self._event(self.t, f"{self.mode} at {self.target} failed: {reason}")
+        if self.mode == "pick":
+            self.counters.pick_failures += 1
+            self.magnet = False
+            self.attempts += 1
+            if reason == "no_contact" and self.attempts < self.retries:
+                self._go("to_pick", pose)  # back to the approach pose, then try again
+                return
+        else:
+            self.counters.place_failures += 1
+            if reason == "still_held":
+                self.magnet = False
+        self.carrying = None if self.mode == "pick" else self.carrying
+        self.mode, self.need_state_after = "decide", self.t
+
+    # ------------------------------------------------------------------------------------------ output
+    def _cmd(self, v: float, w: float) -> AgentCommand:
+        self._v, self._w = v, w
+        return AgentCommand(v, w, self.magnet)
+
+    def _brake(self) -> AgentCommand:
+        a, al = self.limits.a_max * self.dt, self.limits.alpha_max * self.dt
+        self._v -= max(-a, min(a, self._v))
+        self._w -= max(-al, min(al, self._w))
+        return AgentCommand(self._v, self._w, self.magnet)
+
+    def _event(self, t: float, text: str) -> None:
+        self.events.append((t, text))
