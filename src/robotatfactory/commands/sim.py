@@ -20,6 +20,7 @@ examples:
   raf sim --lockstep --on-timeout stop     # wait for the controller's reply every cycle
   raf sim --round 3 --parts RGBX --seed 4  # round 3 with a given layout
   raf sim --snapshot field.png             # an overview picture, then exit
+  raf sim --robots 2                       # two robots: robot 2 on ports 9818/9820/9909 (+10 per robot)
 """
 
 
@@ -86,8 +87,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="machine processing time in simulation seconds (default 10)")
     g.add_argument("--start-after", type=float, default=0.0, metavar="S",
                    help="simulation seconds before the run starts; the server says STOP until then (default 0)")
-    g.add_argument("--start-pose", default=None, metavar="X,Y,THETA",
-                   help="robot start pose in metres and radians (default: the field's start pose)")
+    g.add_argument("--robots", type=int, default=1, metavar="N",
+                   help="robots in the scene, 1..4 (default 1). Robot k's command, bridge and camera ports are "
+                        "robot 1's + 10*(k-1) (printed at start); one factory server sees them all; no control "
+                        "channel with several robots; start poses: the start area's 2x2 cells or --start-pose")
+    g.add_argument("--start-pose", default=None, action="append", metavar="X,Y,THETA",
+                   help="robot start pose in metres and radians (default: the field's start pose); with --robots "
+                        "N: once per robot, in order, or one list X,Y,THETA;X,Y,THETA;...")
     g.add_argument("--beacons", action="store_true", help="put the LIDAR beacons in the team areas")
     g.add_argument("--robot", default="simtwo", help="robot parameters: shipped name or a .json file (default simtwo)")
 
@@ -131,9 +137,23 @@ def run(args) -> int:
         logging.getLogger("OpenGL").setLevel(logging.WARNING)
     field = load_field(args.field)
     robot = load_robot(args.robot)
-    start_pose = parse_pose(args.start_pose) if args.start_pose else None
+    poses = [parse_pose(t) for text in (args.start_pose or []) for t in text.split(";") if t.strip()]
+    n = args.robots
+    if not 1 <= n <= 4:
+        raise ConfigError(f"--robots {n}: must be 1..4")
+    if n == 1:
+        if len(poses) > 1:
+            raise ConfigError(f"{len(poses)} start poses for one robot (use --robots N for several)")
+        start_pose, start_poses = (poses[0] if poses else None), None
+    else:
+        if poses and len(poses) != n:
+            raise ConfigError(f"{len(poses)} start poses for {n} robots: give one per robot, or none")
+        start_pose, start_poses = None, (tuple(poses) if poses else None)
+        if args.control_port is not None or args.paused:
+            raise ConfigError("--control-port and --paused need the control channel, which runs with one robot only")
     snapshot = args.snapshot is not None
-    config = SimConfig(seed=args.seed, start_pose=start_pose, beacons=args.beacons,
+    config = SimConfig(seed=args.seed, start_pose=start_pose, robots=n, start_poses=start_poses,
+                       beacons=args.beacons,
                        camera=not args.no_camera and not snapshot, round_no=args.round_no, parts=args.parts,
                        processing_delay=args.processing_delay, start_after=args.start_after,
                        camera_timing=args.camera_timing,
@@ -168,12 +188,14 @@ def run(args) -> int:
         on_timeout=args.on_timeout, duration=args.duration, status_every=args.status_every, quiet=args.quiet,
         controller=parse_address(args.controller) if args.controller else None, takeover_after=args.takeover_after,
         command_timeout=args.command_timeout or None,
-        control_port=None if args.no_control else (args.control_port if args.control_port is not None
-                                                    else control_port_for(args.port)),
+        control_port=None if args.no_control or n > 1 else (args.control_port if args.control_port is not None
+                                                             else control_port_for(args.port)),
         start_paused=args.paused, control_optional=args.control_port is None)
     from ..sim.runner import SimRunner
 
     sim = Simulator(field, robot, config)
+    if n > 1:
+        return _run_several(field, sim, runner_config)
     runner = SimRunner(sim, runner_config)
     old = {s: signal.signal(s, runner.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -206,3 +228,46 @@ def run(args) -> int:
     if result.report is not None:
         print(result.report, flush=True)
     return result.exit_code
+
+
+def _run_several(field, sim, runner_config) -> int:
+    """``raf sim --robots N`` (N >= 2): sim/multirunner.py's MultiRunner, the ports printed per robot."""
+    import signal
+
+    from ..sim.multirunner import MultiRunner
+
+    try:
+        runner = MultiRunner(sim, runner_config)
+    except Exception:
+        sim.close()
+        raise
+    old = {s: signal.signal(s, runner.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        runner.open()
+        c = runner_config
+        extras = ["no control channel (several robots)"]
+        if runner.server is not None:
+            extras.append("factory server udp %s:%d (sees every robot)" % runner.server.address)
+        if sim.setup is not None:
+            extras.append(sim.setup.describe())
+        print(f"raf sim: field {field.name}, {len(sim.units)} robots, {c.mode}{' lockstep' if c.lockstep else ''}; "
+              + "; ".join(extras), flush=True)
+        for line in runner.describe():
+            print(f"raf sim: {line}", flush=True)
+        results = runner.run()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        runner.close()
+        sim.close()
+    r0 = results[0]
+    print(f"raf sim: {r0.reason} at t = {r0.sim_time:.2f} s of simulation in {r0.wall_time:.2f} s "
+          f"(real-time factor {r0.real_time_factor:.2f})", flush=True)
+    for k, r in enumerate(results, 1):
+        cnt = r.counters
+        print(f"raf sim: robot {k}: frames sent {cnt['frames_sent']}, commands {cnt['commands']} (rejected "
+              f"{cnt['rejected']}), lockstep timeouts {cnt['timeouts']}, camera frames {cnt['camera_frames']}",
+              flush=True)
+    if r0.report is not None:
+        print(r0.report, flush=True)
+    return max(r.exit_code for r in results)

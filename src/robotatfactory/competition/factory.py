@@ -103,6 +103,15 @@ class PartState:
     held: bool
 
 
+def _several(robot_xy) -> bool:
+    """True when ``robot_xy`` is a list of positions (several robots) rather than one (x, y)."""
+    try:
+        first = robot_xy[0]
+    except (TypeError, IndexError, KeyError):
+        return False
+    return isinstance(first, (tuple, list)) or hasattr(first, "__len__")
+
+
 def slot_label(slot: Slot) -> str:
     """``machine A slot 1 (input)``, ``outgoing warehouse slot 3``."""
     zone = {"incoming": "incoming warehouse", "outgoing": "outgoing warehouse",
@@ -159,7 +168,7 @@ class Factory:
         self._events: list[FactoryEvent] = []
         self._start: float | None = None
         self._last_t: float | None = None
-        self._robot_before: tuple[float, float] | None = None  # first robot position seen before the start
+        self._robot_before: dict[int, tuple[float, float]] = {}  # per robot: first position seen before the start
         self._false_start = False
         self._robot_checked = False
         self._counters = dict(steps=0, bad_time=0, bad_positions=0, bad_held=0, unknown_parts=0, missing_parts=0,
@@ -272,7 +281,9 @@ class Factory:
         """Update the state from the simulator's cycle at time ``t`` and run the machines.
 
         ``part_xy``: {part_id: (x, y)} world metres of each part's centre; ``robot_xy``: (x, y) of the
-        robot (base_link); ``held``: ids of the parts the electromagnet holds (a held part is in no slot).
+        robot (base_link), or a list of them, one per robot, when several robots share the field (a machine
+        starts only when every robot is clear of its input slot; every robot must start in the start area);
+        ``held``: ids of the parts the electromagnets hold (a held part is in no slot).
         Bad entries (unknown ids, non-finite numbers) are counted, logged and ignored; a part that is not
         reported is in no slot. Returns the teleports the simulator must apply before the next step.
         """
@@ -301,33 +312,40 @@ class Factory:
         self._last_t = t
         held_ids = self._clean_held(held)
         positions = self._clean_positions(part_xy)
-        robot = self._clean_xy(robot_xy)
-        if robot is None:
+        several = _several(robot_xy)
+        robots = [self._clean_xy(r) for r in robot_xy] if several else [self._clean_xy(robot_xy)]
+        if not robots or any(r is None for r in robots):
+            robots = None
             self._counters["bad_robot"] += 1
             self._rlog.warn("bad_robot", "bad robot position %r: machines wait", robot_xy)
         self._held = held_ids
-        if robot is not None:
-            self._check_robot(t, robot)
+        if robots is not None:
+            for k, robot in enumerate(robots):
+                self._check_robot(t, robot, k if several else None)
+            self._robot_checked = self._robot_checked or (self._start is not None and t >= self._start)
         self._update_slots(t, positions, held_ids)
         if not self.running(t):
             return []
-        return self._run_machines(t, robot)
+        return self._run_machines(t, robots)
 
     # ------------------------------------------------------------------------------------------ internals
-    def _check_robot(self, t: float, robot: tuple[float, float]) -> None:
-        """Rule notes: the robot must not move before the start and must start in the start area."""
+    def _check_robot(self, t: float, robot: tuple[float, float], k: int | None = None) -> None:
+        """Rule notes: the robot (``k``: robot k + 1 of several) must not move before the start and must
+        start in the start area."""
+        who = "the robot" if k is None else f"robot {k + 1}"
+        key = 0 if k is None else k
         if self._start is None or t < self._start:
-            if self._robot_before is None:
-                self._robot_before = robot
-            elif not self._false_start and math.dist(robot, self._robot_before) > FALSE_START_DISTANCE:
+            before = self._robot_before.get(key)
+            if before is None:
+                self._robot_before[key] = robot
+            elif not self._false_start and math.dist(robot, before) > FALSE_START_DISTANCE:
                 self._false_start = True
                 self._events.append(FactoryEvent(t, "false_start", note=(
-                    f"the robot moved {math.dist(robot, self._robot_before):.3f} m before the run started")))
+                    f"{who} moved {math.dist(robot, before):.3f} m before the run started")))
         elif not self._robot_checked:
-            self._robot_checked = True
             if not self.field.start_area.contains(*robot):
                 self._events.append(FactoryEvent(t, "outside_start_area", note=(
-                    f"the robot was at ({robot[0]:.3f}, {robot[1]:.3f}) m when the run started, outside the "
+                    f"{who} was at ({robot[0]:.3f}, {robot[1]:.3f}) m when the run started, outside the "
                     f"start area x {self.field.start_area.x}, y {self.field.start_area.y}")))
 
     def rule_notes(self) -> list[str]:
@@ -426,7 +444,7 @@ class Factory:
             return f"wrong type: {slot_label(slot).split(' slot')[0]} processes {want.label} parts only"
         return ""
 
-    def _run_machines(self, t: float, robot: tuple[float, float] | None) -> list[Teleport]:
+    def _run_machines(self, t: float, robots: list[tuple[float, float]] | None) -> list[Teleport]:
         teleports = []
         occupied = {slot: pid for pid, slot in self._where.items()}
         for lane in self.lanes:
@@ -443,9 +461,9 @@ class Factory:
                     continue  # empty, or a part this machine does not process (it stays there)
                 if lane.output in occupied:
                     continue
-                if robot is None or math.hypot(robot[0] - lane.input.xy[0],
-                                               robot[1] - lane.input.xy[1]) <= self.robot_clearance:
-                    continue
+                if robots is None or any(math.hypot(r[0] - lane.input.xy[0], r[1] - lane.input.xy[1])
+                                         <= self.robot_clearance for r in robots):
+                    continue  # no robot position, or a robot too near the input slot
                 job = Job(pid, lane, t, t + self.setup.processing_delay)
                 self._jobs[lane.input] = job
                 self._counters["processing"] += 1

@@ -27,6 +27,7 @@ class PartPlacement:
 LIDAR_UPDATES = ("sweep", "per_ray")
 SPEED_CONTROLS = ("simtwo", "simtwo_per_cycle", "ideal_pi")
 PID_TIMINGS = ("script_enabled", "scene_enabled", "script_holds_voltage")
+MAX_ROBOTS = 4  # robots in one scene (raf sim --robots)
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,9 @@ class SimConfig:
     Same config (seed included) and same commands: same sensor frames and camera images, bit for bit.
 
     * ``start_pose``: (x, y, theta) in the field frame (m, rad); None = the field's start pose.
+    * ``robots``: how many robots share the scene (1..4, ``MAX_ROBOTS``); ``start_poses``: one (x, y, theta)
+      per robot (None: robot 1 at ``start_pose`` when N = 1, else the start area's cells, see
+      :func:`robotatfactory.sim.scene.start_poses`). N = 1 builds and runs exactly the one-robot scene.
     * ``camera``: render the robot camera during :meth:`Simulator.step_cycle`, collected with
       ``take_frames()``; ``camera_timing`` says when: ``"simtwo"`` (default) as SimTwo's GUI loop does,
       ``"grid"`` on SimTwo's nominal 60 FPS clock decimated by 4 (k/15 s of simulation time).
@@ -67,6 +71,8 @@ class SimConfig:
 
     seed: int = 0
     start_pose: tuple[float, float, float] | None = None
+    robots: int = 1
+    start_poses: tuple[tuple[float, float, float], ...] | None = None
     beacons: bool = False
     camera: bool = True
     lidar: bool = True
@@ -91,6 +97,16 @@ class SimConfig:
         if self.start_pose is not None:
             if len(self.start_pose) != 3 or not all(math.isfinite(float(v)) for v in self.start_pose):
                 raise ConfigError(f"start pose {self.start_pose!r}: expected three finite numbers x,y,theta")
+        if not isinstance(self.robots, int) or not 1 <= self.robots <= MAX_ROBOTS:
+            raise ConfigError(f"--robots {self.robots!r}: must be an integer 1..{MAX_ROBOTS}")
+        if self.start_poses is not None:
+            if len(self.start_poses) != self.robots:
+                raise ConfigError(f"{len(self.start_poses)} start poses for {self.robots} robots: give one per robot")
+            for p in self.start_poses:
+                if len(p) != 3 or not all(math.isfinite(float(v)) for v in p):
+                    raise ConfigError(f"start pose {p!r}: expected three finite numbers x,y,theta")
+            if self.start_pose is not None:
+                raise ConfigError("give either start_pose or start_poses, not both")
         if self.start_after < 0 or not math.isfinite(self.start_after):
             raise ConfigError(f"--start-after {self.start_after}: must be >= 0 seconds")
         if not isinstance(self.seed, int) or self.seed < 0:

@@ -74,14 +74,38 @@ ROBOT_RGB = (0.15, 0.15, 0.17)
 
 
 @dataclass
+class RobotNames:
+    """The names of one robot's body, joints, actuators and camera (robot 1: no prefix; robot k: ``rk_``)."""
+
+    prefix: str = ""
+    robot_body: str = "robot"
+    robot_joint: str = "robot_free"
+    wheel_joints: tuple[str, str] = ("wheel_left_hinge", "wheel_right_hinge")
+    wheel_bodies: tuple[str, str] = ("wheel_left", "wheel_right")
+    actuators: tuple[str, str] = ("motor_left", "motor_right")
+    robot_camera: str = "robot_camera"
+
+    @classmethod
+    def numbered(cls, k: int) -> "RobotNames":
+        """Robot ``k`` (1-based): robot 1 keeps the one-robot scene's names, robot k >= 2 gets ``rk_``."""
+        p = "" if k == 1 else f"r{k}_"
+        return cls(p, f"{p}robot", f"{p}robot_free", (f"{p}wheel_left_hinge", f"{p}wheel_right_hinge"),
+                   (f"{p}wheel_left", f"{p}wheel_right"), (f"{p}motor_left", f"{p}motor_right"),
+                   f"{p}robot_camera")
+
+
+@dataclass
 class SceneInfo:
-    """Names the simulator looks up after compiling (bodies, joints, geoms, cameras, parts)."""
+    """Names the simulator looks up after compiling (bodies, joints, geoms, cameras, parts).
+
+    The ``robot_*``, ``wheel_joints`` and ``actuators`` fields name robot 1; ``robots`` names every robot."""
 
     robot_body: str = "robot"
     robot_joint: str = "robot_free"
     wheel_joints: tuple[str, str] = ("wheel_left_hinge", "wheel_right_hinge")
     actuators: tuple[str, str] = ("motor_left", "motor_right")
     robot_camera: str = "robot_camera"
+    robots: list[RobotNames] = dc_field(default_factory=lambda: [RobotNames()])
     overview_camera: str = "overview"
     top_camera: str = "top"
     parts: dict[int, str] = dc_field(default_factory=dict)  # part id -> body name
@@ -252,8 +276,14 @@ def build_spec(field: Field, robot: RobotSpec, config: SimConfig,
     # --- cameras for overviews
     _add_overview_cameras(world, field)
 
-    # --- the robot
-    _add_robot(spec, world, robot, config, field)
+    # --- the robot(s)
+    n = getattr(config, "robots", 1)
+    if n == 1:
+        _add_robot(spec, world, robot, config, field)  # the one-robot scene, exactly as it always was
+    else:
+        info.robots = [RobotNames.numbered(k) for k in range(1, n + 1)]
+        for names, pose in zip(info.robots, start_poses(field, n, config.start_poses)):
+            _add_robot(spec, world, robot, config, field, names=names, pose=pose, multi=True)
 
     # --- parts
     tag_side = round(field.part.tag_size * qs, 6)
@@ -294,13 +324,43 @@ def _wheel_inertia(mass: float, r: float, width: float) -> list[float]:
     return [trans, axial, trans]  # the wheel body's y axis is the axle
 
 
-def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -> None:
+def start_poses(field: Field, n: int, given=None) -> list[tuple[float, float, float]]:
+    """Start poses (x, y, theta; m, rad, field frame) of ``n`` robots: ``given`` when not None; one robot: the
+    field's start pose; several: the centres of the start area's 2 x 2 cells (the rules' 0.35 m square: each
+    cell, 0.175 m, holds the 0.14 x 0.15 m robot), the row nearer the field (larger y) first, left to right,
+    all with the field start pose's heading. The rules allow several robots per team and ask every robot
+    to start inside the start area."""
+    if given is not None:
+        return [tuple(float(v) for v in p) for p in given]
+    sp = field.start_pose
+    if n == 1:
+        return [(sp.x, sp.y, sp.theta)]
+    a = field.start_area
+    xs = [a.x[0] + (a.x[1] - a.x[0]) * f for f in (0.25, 0.75)]
+    ys = [a.y[0] + (a.y[1] - a.y[0]) * f for f in (0.75, 0.25)]
+    cells = [(x, y, sp.theta) for y in ys for x in xs]
+    if n > len(cells):
+        raise ValueError(f"the start area holds {len(cells)} robots, not {n}: give the start poses")
+    return cells[:n]
+
+
+def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field, names: RobotNames | None = None,
+               pose=None, multi: bool = False) -> None:
+    """One robot. ``multi`` (a scene of several robots): the base, magnet and LIDAR housing go in group
+    ``G_STATIC`` and the base carries invisible copies of the tyres, so that the other robots' rays see
+    them (each robot's own rays exclude its base body: ``mj_ray``'s ``bodyexclude``)."""
     import mujoco
 
-    x, y, th = config.start_pose if config.start_pose is not None else \
-        (field.start_pose.x, field.start_pose.y, field.start_pose.theta)
-    body = world.add_body(name="robot", pos=[x, y, 0.0], quat=yaw_quat(th))
-    body.add_freejoint(name="robot_free")
+    names = names or RobotNames()
+    p = names.prefix
+    if pose is not None:
+        x, y, th = pose
+    else:
+        x, y, th = config.start_pose if config.start_pose is not None else \
+            (field.start_pose.x, field.start_pose.y, field.start_pose.theta)
+    g_body = G_STATIC if multi else G_ROBOT
+    body = world.add_body(name=names.robot_body, pos=[x, y, 0.0], quat=yaw_quat(th))
+    body.add_freejoint(name=names.robot_joint)
     bsize = tuple(robot.base["size"])
     bz = float(robot.base["z"])
     body.mass = float(robot.base["mass"])
@@ -309,39 +369,39 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -
     body.inertia = _box_inertia(body.mass, bsize)
     body.explicitinertial = True
 
-    g = body.add_geom(name="robot_base", type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in bsize],
+    g = body.add_geom(name=f"{p}robot_base", type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in bsize],
                       pos=[0, 0, bz], rgba=[*ROBOT_RGB, 1])
-    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_ROBOT
+    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, g_body
     g.friction = list(WALL_FRICTION)
     mx = float(robot.electromagnet["x"])
-    g = body.add_geom(name="robot_magnet", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(BUMPER_HALF),
+    g = body.add_geom(name=f"{p}robot_magnet", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(BUMPER_HALF),
                       pos=[mx - BUMPER_HALF[0], 0, MAGNET_Z], rgba=[0.55, 0.55, 0.6, 1])
-    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_ROBOT
+    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, g_body
     g.friction = list(WALL_FRICTION)
     # the wheels' outline for walls and parts: a box around both tyres, clear of the floor
     wwidth = float(robot.wheel.get("width", 0.02))
     r = robot.wheel_radius
-    g = body.add_geom(name="robot_wheel_guard", type=mujoco.mjtGeom.mjGEOM_BOX,
+    g = body.add_geom(name=f"{p}robot_wheel_guard", type=mujoco.mjtGeom.mjGEOM_BOX,
                       size=[r, robot.track / 2 + wwidth / 2, r - 0.0025], pos=[0, 0, r + 0.0025],
                       rgba=[0, 0, 0, 0])
     g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_HIDDEN
     g.friction = list(WALL_FRICTION)
     cr = float(robot.caster["radius"])
-    g = body.add_geom(name="robot_caster", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[cr, 0, 0],
+    g = body.add_geom(name=f"{p}robot_caster", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[cr, 0, 0],
                       pos=[float(robot.caster["x"]), 0, cr], rgba=[0.6, 0.6, 0.6, 1])
     g.contype, g.conaffinity, g.group = B_WHEEL, B_FLOOR, G_ROBOT
     g.condim = 1  # a ball caster: no friction (priority: its condim wins over the floor's)
     g.priority = 1
     g.solref, g.solimp = list(STIFF_SOLREF), list(STIFF_SOLIMP)
     lx, ly, lz = robot.lidar.xyz
-    g = body.add_geom(name="robot_lidar", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.022, 0.004, 0],
+    g = body.add_geom(name=f"{p}robot_lidar", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.022, 0.004, 0],
                       pos=[lx, ly, bz + bsize[2] / 2 + 0.004], rgba=[0.1, 0.1, 0.1, 1])
-    _visual(g, G_ROBOT)
+    _visual(g, g_body)
 
     # the camera: MuJoCo looks along its -z with +y up; OpenCV's optical frame is x right, y down, z forward
     T = robot.camera.base_to_optical()
     R_mj = T[:3, :3] @ np.diag([1.0, -1.0, -1.0])
-    cam = body.add_camera(name="robot_camera", pos=list(T[:3, 3]), quat=mat_quat(R_mj))
+    cam = body.add_camera(name=names.robot_camera, pos=list(T[:3, 3]), quat=mat_quat(R_mj))
     c = robot.camera
     cam.resolution = [c.width, c.height]
     cam.sensor_size = [c.width * 1e-5, c.height * 1e-5]
@@ -356,16 +416,16 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -
     wwidth = float(robot.wheel.get("width", 0.02))
     m = robot.motor
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        wb = body.add_body(name=f"wheel_{side}", pos=[0, sign * robot.track / 2, r])
+        wb = body.add_body(name=f"{p}wheel_{side}", pos=[0, sign * robot.track / 2, r])
         wb.mass = wmass
         wb.ipos = [0.0, 0.0, 0.0]  # on the axle (MjSpec would otherwise leave it at the body's offset)
         wb.iquat = [1.0, 0.0, 0.0, 0.0]
         wb.inertia = _wheel_inertia(wmass, r, wwidth)
         wb.explicitinertial = True
-        j = wb.add_joint(name=f"wheel_{side}_hinge", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
+        j = wb.add_joint(name=f"{p}wheel_{side}_hinge", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
         j.damping = [float(m["Bv"]) * float(m.get("gear", 1.0)) ** 2, 0.0, 0.0]
         j.frictionloss = float(m["Fc"]) * float(m.get("gear", 1.0))
-        g = wb.add_geom(name=f"wheel_{side}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0, 0])
+        g = wb.add_geom(name=f"{p}wheel_{side}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0, 0])
         # the sphere only rolls on the floor (it is wider than the 6 mm tyre); walls and parts meet the
         # wheel guard box instead
         g.contype, g.conaffinity, g.group = B_WHEEL, B_FLOOR, G_HIDDEN
@@ -375,13 +435,18 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field) -
         g.rgba = [0, 0, 0, 0]
         # the tyre as SimTwo's wheel solid (AGV.xml: a cylinder of WheelDiameter/2 and WheelThickness):
         # what the camera sees and the LIDAR's rays hit
-        g = wb.add_geom(name=f"wheel_{side}_tyre", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[r, wwidth / 2, 0],
+        g = wb.add_geom(name=f"{p}wheel_{side}_tyre", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[r, wwidth / 2, 0],
                         quat=[math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0], rgba=[0.05, 0.05, 0.05, 1])
         _visual(g, G_WHEEL)
-        g = wb.add_geom(name=f"wheel_{side}_hub", type=mujoco.mjtGeom.mjGEOM_BOX,
+        g = wb.add_geom(name=f"{p}wheel_{side}_hub", type=mujoco.mjtGeom.mjGEOM_BOX,
                         size=[r * 0.8, wwidth / 2 + 0.0005, 0.004], rgba=[0.8, 0.8, 0.8, 1])
         _visual(g, G_ROBOT)
-        a = spec.add_actuator(name=f"motor_{side}", target=f"wheel_{side}_hinge")
+        if multi:  # the tyre as the other robots' rays see it: fixed to the base (a tyre is round), invisible
+            g = body.add_geom(name=f"{p}wheel_{side}_tyre_seen", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                              size=[r, wwidth / 2, 0], pos=[0, sign * robot.track / 2, r],
+                              quat=[math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0], rgba=[0, 0, 0, 0])
+            _visual(g, G_STATIC)
+        a = spec.add_actuator(name=f"{p}motor_{side}", target=f"{p}wheel_{side}_hinge")
         a.trntype = mujoco.mjtTrn.mjTRN_JOINT
         a.gainprm[0] = 1.0  # ctrl = torque Kt*I (N.m), computed by the motor model each physics step
         a.ctrllimited = 0

@@ -121,6 +121,7 @@ class Lidar:
         self.geomgroup = np.asarray(groups, dtype=np.uint8)
         self.self_groups = None if self_groups is None else np.asarray(self_groups, dtype=np.uint8)
         self.self_hits: np.ndarray | None = None  # per ray: distance to the robot's own wheels, -1 = none
+        self.bodyexclude = -1  # body id the rays never hit (several robots: the robot's own base), -1: none
         self.rays_cast = 0
         self._dt = float(physics_step)
         self._period = float(spec.period)
@@ -189,18 +190,23 @@ class Lidar:
         self.poses[slot] = (x, y, yaw)
 
     # ------------------------------------------------------------------------------------------ measuring
-    def measure_self_hits(self, model, data, mujoco, body_pos, body_mat) -> None:
+    def measure_self_hits(self, model, data, mujoco, body_pos, body_mat, own_geoms=None) -> None:
         """Cast every ray once against the robot's own wheels (``self_groups``) from the LIDAR's origin at
-        the robot body's present pose (``body_pos`` 3, ``body_mat`` 3x3); stores ``self_hits``."""
+        the robot body's present pose (``body_pos`` 3, ``body_mat`` 3x3); stores ``self_hits``.
+        ``own_geoms`` (a scene of several robots): the geom ids of this robot's wheels; hits on any other
+        geom of those groups (another robot's wheels) are not self hits."""
         if self.self_groups is None:
             self.self_hits = None
             return
         R = np.asarray(body_mat, dtype=np.float64).reshape(3, 3)
         origin = np.asarray(body_pos, dtype=np.float64) + R @ np.asarray(self.spec.xyz, dtype=np.float64)
         out = np.full(self.n, -1.0)
+        gid = np.zeros(1, dtype=np.int32) if own_geoms is not None else None
         for i, a in enumerate(self._angles_list):
             vec = np.ascontiguousarray(R @ np.array([math.cos(a), math.sin(a), 0.0]))
-            d = mujoco.mj_ray(model, data, origin, vec, self.self_groups, 1, -1, None)
+            d = mujoco.mj_ray(model, data, origin, vec, self.self_groups, 1, -1, gid)
+            if gid is not None and int(gid[0]) not in own_geoms:
+                continue
             if 0.0 <= d <= float(self.spec.range_max):
                 out[i] = d
         self.self_hits = out
@@ -215,6 +221,7 @@ class Lidar:
         pnt, vec = self._pnt, self._vec
         pnt[2] = lz
         gg = self.geomgroup
+        bx = self.bodyexclude
         ray = mujoco.mj_ray
         cos, sin, atan2 = math.cos, math.sin, math.atan2
         idx: list[int] = []
@@ -236,7 +243,7 @@ class Lidar:
                 a = yaw + angles[i]
                 vec[0] = cos(a)
                 vec[1] = sin(a)
-                dist.append(ray(model, data, pnt, vec, gg, 1, -1, None))
+                dist.append(ray(model, data, pnt, vec, gg, 1, bx, None))
             idx.extend(rays)
         m = len(idx)
         if m:

@@ -38,6 +38,7 @@ log = logging.getLogger(__name__)
 SETTLE_STEPS = 300  # physics steps run before t = 0 so that wheels and parts rest on the floor
 MAGNET_CHECK_STEPS = 10  # while on and empty, the magnet looks for a plate every 10 ms
 MAGNET_GAP = 0.0005  # m left between the magnet's face and a held plate
+UNIT_SEED_STRIDE = 1_000_003  # robot k's LIDAR noise seed: seed + stride * (k - 1) (robot 1: the seed itself)
 BEAM_BACKOFF = 0.005  # m: beams start this far behind their origin (a ray starting inside a touching
 #                       surface would miss it); hits are measured from the nominal origin
 
@@ -62,13 +63,17 @@ class Simulator:
         off = offscreen or (cam.width, cam.height)
         off = (max(off[0], cam.width), max(off[1], cam.height))
         spec, self.info = sc.build_spec(field, robot, config, parts, offscreen=off)
-        self._eq_names = {}
-        for pid in self.info.parts:
-            name = f"magnet_weld_{pid}"
-            eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
-                                   name1="robot", name2=self.info.parts[pid], active=False)
-            eq.solref = [0.01, 1.0]
-            self._eq_names[pid] = name
+        eq_names: list[dict[int, str]] = []  # per robot: part id -> its magnet's weld
+        for names in self.info.robots:
+            per = {}
+            for pid in self.info.parts:
+                name = f"{names.prefix}magnet_weld_{pid}"
+                eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                                       name1=names.robot_body, name2=self.info.parts[pid], active=False)
+                eq.solref = [0.01, 1.0]
+                per[pid] = name
+            eq_names.append(per)
+        self._eq_names = eq_names[0]
         self.spec = spec
         self.model = m = spec.compile()
         self.data = d = mujoco.MjData(m)
@@ -77,26 +82,15 @@ class Simulator:
         if abs(self.steps_per_cycle * self.dt - robot.control_period) > 1e-9:
             raise ValueError(f"control period {robot.control_period} s is not a multiple of the physics step {self.dt} s")
 
-        # ids
         name2id = mujoco.mj_name2id
-        self._robot_body = name2id(m, mujoco.mjtObj.mjOBJ_BODY, self.info.robot_body)
-        j = name2id(m, mujoco.mjtObj.mjOBJ_JOINT, self.info.robot_joint)
-        self._qa = int(m.jnt_qposadr[j])
-        self._va = int(m.jnt_dofadr[j])
-        jl, jr = (name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in self.info.wheel_joints)
-        self._wq = (int(m.jnt_qposadr[jl]), int(m.jnt_qposadr[jr]))
-        self._wv = (int(m.jnt_dofadr[jl]), int(m.jnt_dofadr[jr]))
-        self._act = tuple(name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in self.info.actuators)
         self.parts = PartBodies(m, self.info)
-        self._eq = {pid: name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, n) for pid, n in self._eq_names.items()}
         self._plate_geoms = {name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"part_{pid}_plate"): pid for pid in self.info.parts}
         for pid, letter, *_ in parts:
             self.parts.set_letter(pid, letter)
 
-        # actuation
+        # actuation: shared parameters
         mp = MotorParams.from_spec(robot.motor)
         self.motor_params = mp
-        self.motors = (DCMotor(mp, self.dt), DCMotor(mp, self.dt))
         cp = SpeedControllerParams.from_spec(robot.speed_controller)
         self.controller_params = cp
         self._ctrl_every = max(1, int(round(cp.period / self.dt)))
@@ -104,14 +98,59 @@ class Simulator:
         self.speed_control = config.speed_control
         if config.speed_control == "ideal_pi":
             self.pid_params = None
-            self.controllers = (SpeedPI(cp, mp.Vmax), SpeedPI(cp, mp.Vmax))
         else:
             if not robot.simtwo_pid:
                 from ..errors import ConfigError
 
                 raise ConfigError(f"robot {robot.name!r} has no 'simtwo_pid' gains for speed control "
                                   f"{config.speed_control!r} (add them, or use --speed-control ideal_pi)")
-            self.pid_params = pp = SimTwoPIDParams.from_spec(robot.simtwo_pid, self.dt)
+            self.pid_params = SimTwoPIDParams.from_spec(robot.simtwo_pid, self.dt)
+        self._ray_gid = np.zeros(1, dtype=np.int32)
+        self._magnet_groups = np.asarray(sc.MAGNET_GROUPS, dtype=np.uint8)
+        self._contact_groups = np.asarray(sc.CONTACT_GROUPS, dtype=np.uint8)
+
+        # robot 1 is this object; robots 2..N are units sharing the model and data (see RobotUnit)
+        self.index = 1
+        self.units: list[Simulator] = [self]
+        self._init_robot(self.info.robots[0], eq_names[0], 1)
+        for k in range(2, len(self.info.robots) + 1):
+            self.units.append(RobotUnit(self, self.info.robots[k - 1], eq_names[k - 1], k))
+
+        # rest everything on the floor, then start the clock and the encoders at t = 0
+        mujoco.mj_forward(m, d)
+        for _ in range(SETTLE_STEPS):
+            mujoco.mj_step(m, d)
+        d.time = 0.0
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(m, d)
+        for u in self.units:
+            u._start_robot()
+        self._start_factory_if_due()
+
+    def _init_robot(self, names: "sc.RobotNames", eq_names: dict[int, str], k: int) -> None:
+        """Robot ``k``'s ids, motors, controllers, sensors and camera clock (the model is compiled)."""
+        m, config, robot = self.model, self.config, self.robot
+        multi = len(self.info.robots) > 1
+        name2id = mujoco.mj_name2id
+        self.names = names
+        self._robot_body = name2id(m, mujoco.mjtObj.mjOBJ_BODY, names.robot_body)
+        j = name2id(m, mujoco.mjtObj.mjOBJ_JOINT, names.robot_joint)
+        self._qa = int(m.jnt_qposadr[j])
+        self._va = int(m.jnt_dofadr[j])
+        jl, jr = (name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in names.wheel_joints)
+        self._wq = (int(m.jnt_qposadr[jl]), int(m.jnt_qposadr[jr]))
+        self._wv = (int(m.jnt_dofadr[jl]), int(m.jnt_dofadr[jr]))
+        self._act = tuple(name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in names.actuators)
+        self._eq = {pid: name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, n) for pid, n in eq_names.items()}
+        # several robots: this robot's own rays never hit its base body (the others' rays do)
+        self._ray_exclude = self._robot_body if multi else -1
+
+        mp, cp = self.motor_params, self.controller_params
+        self.motors = (DCMotor(mp, self.dt), DCMotor(mp, self.dt))
+        if self.pid_params is None:
+            self.controllers = (SpeedPI(cp, mp.Vmax), SpeedPI(cp, mp.Vmax))
+        else:
+            pp = self.pid_params
             self.controllers = (SimTwoPID(pp), SimTwoPID(pp))
             for c in self.controllers:
                 # enabled (and its gains set) once: by the script's first call, whose physics step is the
@@ -125,17 +164,20 @@ class Simulator:
         self.magnet_on = False
         self.held: int | None = None
 
-        # sensors
-        self._lidar = Lidar(robot.lidar, self.dt, config.seed, config.lidar_noise, sc.LIDAR_GROUPS,
-                            update=config.lidar_update,
+        # sensors (robot k >= 2: its own noise stream)
+        seed = config.seed if k == 1 else config.seed + UNIT_SEED_STRIDE * (k - 1)
+        self._lidar = Lidar(robot.lidar, self.dt, seed, config.lidar_noise,
+                            sc.LIDAR_GROUPS, update=config.lidar_update,
                             self_groups=sc.LIDAR_SELF_GROUPS if config.lidar_self_hits else None) \
             if config.lidar else None
-        self._ray_gid = np.zeros(1, dtype=np.int32)
-        self._magnet_groups = np.asarray(sc.MAGNET_GROUPS, dtype=np.uint8)
-        self._contact_groups = np.asarray(sc.CONTACT_GROUPS, dtype=np.uint8)
+        if self._lidar is not None:
+            self._lidar.bodyexclude = self._ray_exclude
         self.contact = False
 
-        # camera clock: when frames are rendered (SimTwo's GUI cadence or the k/15 s grid), see sim/camera.py
+        # camera clock: when frames are rendered (SimTwo's GUI cadence or the k/15 s grid), see sim/camera.py;
+        # every robot's camera on the same clock (SimTwo's GUI loop renders all its cameras together)
+        cam = robot.camera
+        self._camera_name = names.robot_camera
         self._cadence = RenderCadence(config.camera_timing, self.dt, cam.render_fps, cam.decimation, config.seed)
         self._schedule = self._cadence.frames()
         self._next_frame: ScheduledFrame = next(self._schedule)
@@ -145,20 +187,21 @@ class Simulator:
         self.frames_rendered = 0
         self.render_times: deque[float] = deque(maxlen=10000)  # seconds per camera frame, latest last
 
-        # rest everything on the floor, then start the clock and the encoders at t = 0
-        mujoco.mj_forward(m, d)
-        for _ in range(SETTLE_STEPS):
-            mujoco.mj_step(m, d)
-        d.time = 0.0
-        d.qvel[:] = 0.0
-        mujoco.mj_forward(m, d)
+    def _start_robot(self) -> None:
+        """After the settling steps: the LIDAR's self hits, the clock and the encoders at t = 0."""
+        m, d = self.model, self.data
         if self._lidar is not None:  # the robot's own wheels as the rays see them (robot frame)
-            self._lidar.measure_self_hits(m, d, mujoco, d.xpos[self._robot_body], d.xmat[self._robot_body])
+            own = None
+            if len(self.units) > 1:
+                own = {int(g) for g in range(m.ngeom)
+                       if int(m.geom_bodyid[g]) in {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)
+                                                   for b in self.names.wheel_bodies}}
+            self._lidar.measure_self_hits(m, d, mujoco, d.xpos[self._robot_body], d.xmat[self._robot_body],
+                                          own_geoms=own)
         self._step = 0
         self.seq = 0
-        self.encoders = (Encoder(robot.ticks_per_rev, float(d.qpos[self._wq[0]])),
-                         Encoder(robot.ticks_per_rev, float(d.qpos[self._wq[1]])))
-        self._start_factory_if_due()
+        self.encoders = (Encoder(self.robot.ticks_per_rev, float(d.qpos[self._wq[0]])),
+                         Encoder(self.robot.ticks_per_rev, float(d.qpos[self._wq[1]])))
 
     # ------------------------------------------------------------------------------------------ setup
     def _initial_parts(self) -> list[tuple[int, str, float, float, float]]:
@@ -246,8 +289,9 @@ class Simulator:
 
     def place_part(self, part_id: int, x: float, y: float, facing: float) -> None:
         """Teleport a part (at rest) to (x, y) with its plate towards ``facing``."""
-        if self.held == part_id:
-            self._release()
+        for u in self.units:
+            if u.held == part_id:
+                u._release()
         self.parts.place(self.data, part_id, x, y, facing)
         mujoco.mj_forward(self.model, self.data)
 
@@ -286,14 +330,84 @@ class Simulator:
 
     # ------------------------------------------------------------------------------------------ the cycle
     def step_cycle(self, cmd: Command | None = None) -> SensorFrame:
-        """Apply ``cmd`` (None: keep the present one) and advance one control period."""
+        """Apply ``cmd`` (None: keep the present one) and advance one control period (one robot; a scene of
+        several robots steps with :meth:`step_all`)."""
+        if len(self.units) > 1:
+            raise RuntimeError("a scene of several robots advances with step_all(commands)")
         if cmd is not None:
             self.apply(cmd)
         self._start_factory_if_due()
         n = self.steps_per_cycle
         s0 = self._step
+        lidar_slot, events = self._plan_cycle(s0, n)
+        if self.reference_drive:
+            self._run_reference(s0, n, lidar_slot, events)
+        else:
+            self._run_fast(s0, n, lidar_slot, events)
+        self._step = s0 + n
+        return self._end_of_cycle()
 
-        # what happens after which step of this cycle (offset j: after step s0 + j + 1)
+    def step_all(self, commands) -> list[SensorFrame]:
+        """Several robots: apply ``commands[k]`` to robot k + 1 (None: keep its present one), advance one
+        control period for all of them together, return their frames (robot 1 first). The robots' motors
+        run the plain per-step arithmetic of :meth:`_run_reference` (the one-robot fast path is
+        :meth:`step_cycle`'s); the factory steps once with every robot's position and held part."""
+        units = self.units
+        if len(commands) != len(units):
+            raise ValueError(f"{len(commands)} commands for {len(units)} robots")
+        for u, c in zip(units, commands):
+            if c is not None:
+                u.apply(c)
+        self._start_factory_if_due()
+        n = self.steps_per_cycle
+        s0 = self._step
+        plans = [u._plan_cycle(s0, n) for u in units]
+        m, d = self.model, self.data
+        step = mujoco.mj_step
+        for j in range(n):
+            for u in units:
+                u._drive_step(s0 + j)
+            step(m, d)
+            for u, (lidar_slot, events) in zip(units, plans):
+                if lidar_slot[j] >= 0:
+                    u._log_lidar_pose(lidar_slot[j])
+                if j in events:
+                    u._on_events(s0 + j + 1, events[j])
+        for u in units:
+            u._step = s0 + n
+            u._measure()
+        poses = [u.pose for u in units]
+        if self.factory is not None:
+            held = {u.held for u in units if u.held is not None}
+            self._apply_teleports(self.factory.step(self.time, self.parts.all_xy(d), [p[:2] for p in poses], held))
+        return [u._make_frame(*p) for u, p in zip(units, poses)]
+
+    def _drive_step(self, s: int) -> None:
+        """The motor voltages and torques of physics step ``s`` (the arithmetic of :meth:`_run_reference`)."""
+        d = self.data
+        qvel, ctrl = d.qvel, d.ctrl
+        il, ir = self._wv
+        (ml, mr), (pl, pr) = self.motors, self.controllers
+        vo = self.voltage_override
+        wl, wr = qvel[il], qvel[ir]
+        if vo is not None:
+            ul, ur = vo
+            if self.pid_params is None:
+                pl.output, pr.output = vo
+        elif self.pid_params is not None:
+            ul, ur = pl.tick(wl), pr.tick(wr)
+        else:
+            if s % self._ctrl_every == 0:
+                pl.update(wl)
+                pr.update(wr)
+            ul, ur = pl.output, pr.output
+        ctrl[self._act[0]] = ml.step(ul, wl)
+        ctrl[self._act[1]] = mr.step(ur, wr)
+
+    def _plan_cycle(self, s0: int, n: int) -> tuple[list[int], dict[int, list]]:
+        """What happens after which physics step of the cycle from step ``s0`` (``n`` steps): the LIDAR's
+        pose slots and the camera and magnet events (offset j: after step s0 + j + 1); frames due at the
+        cycle's start are rendered now; SimTwo's script iteration of the speed controllers."""
         lidar_slot = [-1] * n
         if self._lidar is not None:
             for slot, j in enumerate(self._lidar.plan(s0, n)):
@@ -317,12 +431,7 @@ class Simulator:
             hold = self.config.simtwo_pid_timing == "script_holds_voltage"
             for c, ref in zip(self.controllers, self._wheel_refs):
                 c.script_cycle(ref, reset_integral=reset, hold_voltage=hold)
-        if self.reference_drive:
-            self._run_reference(s0, n, lidar_slot, events)
-        else:
-            self._run_fast(s0, n, lidar_slot, events)
-        self._step = s0 + n
-        return self._end_of_cycle()
+        return lidar_slot, events
 
     def _on_events(self, step: int, ev: list) -> None:
         self._step = step
@@ -538,6 +647,16 @@ class Simulator:
             pl.ticks, pr.ticks = tl, tr
 
     def _end_of_cycle(self) -> SensorFrame:
+        d = self.data
+        self._measure()
+        x, y, th = self.pose
+        if self.factory is not None:
+            held = {self.held} if self.held is not None else set()
+            self._apply_teleports(self.factory.step(self.time, self.parts.all_xy(d), (x, y), held))
+        return self._make_frame(x, y, th)
+
+    def _measure(self) -> None:
+        """The end of a cycle's sensor readings: encoders, the LIDAR's rays, the contact switch."""
         m, d = self.model, self.data
         el, er = self.encoders
         el.update(float(d.qpos[self._wq[0]]))
@@ -545,14 +664,15 @@ class Simulator:
         if self._lidar is not None:
             self._lidar.cast(m, d, mujoco)
         self.contact = self._contact_pressed()
-        x, y, th = self.pose
-        if self.factory is not None:
-            held = {self.held} if self.held is not None else set()
-            teleports = self.factory.step(self.time, self.parts.all_xy(d), (x, y), held)
-            if teleports:
-                for tp in teleports:
-                    self._teleport(tp)
-                mujoco.mj_forward(m, d)
+
+    def _apply_teleports(self, teleports) -> None:
+        if teleports:
+            for tp in teleports:
+                self._teleport(tp)
+            mujoco.mj_forward(self.model, self.data)
+
+    def _make_frame(self, x: float, y: float, th: float) -> SensorFrame:
+        el, er = self.encoders
         frame = SensorFrame(
             seq=self.seq, time_ms=self.time_ms, enc_delta=(el.delta, er.delta), enc_total=(el.total, er.total),
             x=x, y=y, theta=th, contact=self.contact, magnet=self.magnet_on,
@@ -565,8 +685,9 @@ class Simulator:
         if pid not in self.parts.qadr:
             log.warning("factory asked to teleport unknown part %r", pid)
             return
-        if self.held == pid:
-            self._release()
+        for u in self.units:
+            if u.held == pid:
+                u._release()
         x, y = tp.slot.xy
         self.parts.place(self.data, pid, x, y, tp.slot.facing)
         self.parts.set_letter(pid, tp.new_type.letter)
@@ -581,7 +702,8 @@ class Simulator:
         p, R = self._robot_frame()
         origin = p + R @ (np.asarray(c["xyz"], dtype=np.float64) - (BEAM_BACKOFF, 0.0, 0.0))
         direction = np.ascontiguousarray(R[:, 0])
-        dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._contact_groups, 1, -1, self._ray_gid)
+        dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._contact_groups, 1, self._ray_exclude,
+                             self._ray_gid)
         return bool(self._ray_gid[0] >= 0 and 0.0 <= dist <= float(c["beam"]) + BEAM_BACKOFF)
 
     def _magnet_check(self) -> None:
@@ -590,13 +712,16 @@ class Simulator:
         p, R = self._robot_frame()
         origin = p + R @ np.array([float(em["x"]) - BEAM_BACKOFF, 0.0, sc.MAGNET_Z])
         direction = np.ascontiguousarray(R[:, 0])
-        dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._magnet_groups, 1, -1, self._ray_gid)
+        dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._magnet_groups, 1, self._ray_exclude,
+                             self._ray_gid)
         gid = int(self._ray_gid[0])
         if gid < 0 or not 0.0 <= dist <= float(em["beam"]) + BEAM_BACKOFF:
             return
         pid = self._plate_geoms.get(gid)
         if pid is None:
             return
+        if len(self.units) > 1 and any(u.held == pid for u in self.units):
+            return  # another robot's magnet holds it
         d = self.data
         part_R = d.xmat[self.parts.body[pid]].reshape(3, 3)
         if float(part_R[:, 0] @ R[:, 0]) > -math.cos(math.radians(45)):
@@ -633,7 +758,7 @@ class Simulator:
     def _get_renderer(self) -> Renderer:
         if self._renderer is None:
             c = self.robot.camera
-            self._renderer = Renderer(self.model, self.info.robot_camera, c.width, c.height)
+            self._renderer = Renderer(self.model, self._camera_name, c.width, c.height)
         return self._renderer
 
     def _render_frame(self, sf: ScheduledFrame) -> None:
@@ -660,7 +785,7 @@ class Simulator:
     def camera_pose(self) -> np.ndarray:
         """4x4 world <- camera_optical (OpenCV: x right, y down, z forward) from the simulated state."""
         m, d = self.model, self.data
-        cid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, self.info.robot_camera)
+        cid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, self._camera_name)
         T = np.eye(4)
         T[:3, :3] = d.cam_xmat[cid].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
         T[:3, 3] = d.cam_xpos[cid]
@@ -682,9 +807,10 @@ class Simulator:
         return img
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        for u in getattr(self, "units", [self]):
+            if u._renderer is not None:
+                u._renderer.close()
+                u._renderer = None
 
     def __enter__(self):
         return self
@@ -697,3 +823,36 @@ class Simulator:
             self.close()
         except Exception:  # noqa: BLE001 - interpreter shutdown: nothing left to report to
             pass
+
+
+class RobotUnit(Simulator):
+    """Robot k >= 2 of a scene of several robots: its own motors, controllers, sensors, camera, magnet and
+    frame counter, sharing the main :class:`Simulator`'s model, data, parts and competition. Read it as a
+    Simulator (``pose``, ``held``, ``take_frames()``, ``render_camera()``...); the scene advances with the
+    main simulator's :meth:`Simulator.step_all`."""
+
+    _SHARED = ("reference_drive", "field", "robot", "config", "factory", "referee", "setup", "info", "spec",
+               "model", "data", "dt", "steps_per_cycle", "parts", "_plate_geoms", "motor_params",
+               "controller_params", "_ctrl_every", "speed_control", "pid_params", "_magnet_groups",
+               "_contact_groups", "units")
+
+    def __init__(self, main: Simulator, names, eq_names: dict[int, str], k: int):  # noqa: D107 - see the class
+        self.main = main
+        for a in self._SHARED:
+            setattr(self, a, getattr(main, a))
+        self._ray_gid = np.zeros(1, dtype=np.int32)
+        self._renderer = None
+        self.index = k
+        self._eq_names = eq_names
+        self._init_robot(names, eq_names, k)
+
+    def step_cycle(self, cmd: Command | None = None) -> SensorFrame:
+        raise RuntimeError("a scene of several robots advances with the main simulator's step_all(commands)")
+
+    def _start_factory_if_due(self) -> None:
+        self.main._start_factory_if_due()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
