@@ -8,8 +8,13 @@ Each module has one job and is usable and testable alone:
 * :mod:`.tasks` -- the round's task logic: which part goes where next, and the whole round's plan.
 * :mod:`.delay` -- learns the machines' processing delay from what the server shows.
 * :mod:`.footprint` -- the robot's outline (m, base_link frame) and the docking geometry of a slot.
+* :mod:`.obstacles` -- walls, ribs, parts and the floor's edge: exact polygons and a clearance grid.
 * :mod:`.planner` -- collision-free paths on the field map for the robot's footprint (grid A*, smoothed).
 * :mod:`.follower` -- a path follower on the pose estimate with a speed profile and acceleration limits.
+* :mod:`.docking` -- the final approach: pick with the contact switch and the magnet, place, back out.
+* :mod:`.behaviour` -- the round's per-cycle state machine tying them together (:class:`RoundAgent`).
+
+docs/agent.md describes the decisions and what was measured.
 
 Frames: the field (map/world) frame of :mod:`robotatfactory.field`; base_link on the floor between the
 wheels, x forward. Units: metres, radians, seconds.
