@@ -128,6 +128,14 @@ def run_node(args, who: str, params: dict, make_node: Callable[[], object], star
         m.setParam(f"{path}/{key}" if key else path, list(value) if isinstance(value, tuple) else value)
     loopback_ros_default()
     pid0 = master_pid()
+    if ns:
+        # rospy takes its namespace from ROS_NAMESPACE / __ns when it is imported; an __ns given to init_node
+        # later is not read (rospy/names.py sets _caller_id at import, init_node resolves the node name
+        # against it): set it here
+        import os
+
+        os.environ["ROS_NAMESPACE"] = f"/{ns}"
+        rospy.names._set_caller_id(f"/{ns}/unnamed")
     rospy.init_node(args.name, argv=[sys.argv[0]] + ([f"__ns:=/{ns}"] if ns else []))
     node = make_node()
     print(f"raf {who}: {started(node)}", flush=True)

@@ -1,0 +1,103 @@
+"""Two robots end to end: ``raf sim --robots 2`` (lockstep, cameras on), one bridge and one localization node
+per robot in namespaces robot1/robot2 with frame prefixes (as launch/multi_robot.launch starts them), a
+private roscore. Both drive and both are localized on their own TF trees."""
+from __future__ import annotations
+
+import math
+import socket
+import time
+
+import pytest
+
+from rosutil import Collector, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.render]
+
+STRIDE = 10  # sim/multirunner.PORT_STRIDE
+
+
+def _free_pair(kind) -> int:
+    """A port p with p and p + STRIDE both free (robot 2's port is robot 1's + STRIDE)."""
+    for _ in range(100):
+        with socket.socket(socket.AF_INET, kind) as a, socket.socket(socket.AF_INET, kind) as b:
+            a.bind(("127.0.0.1", 0))
+            p = a.getsockname()[1]
+            if p + STRIDE > 65535:
+                continue
+            try:
+                b.bind(("127.0.0.1", p + STRIDE))
+            except OSError:
+                continue
+            return p
+    raise RuntimeError("no free port pair")
+
+
+def _yaw(q) -> float:
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+def test_two_robots_drive_and_are_localized(ros_master, tmp_path):
+    import rospy
+    import tf2_ros
+    from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
+    from nav_msgs.msg import Odometry
+
+    test_node()
+    env = ros_master.env()
+    port, sim_port, cam = _free_pair(socket.SOCK_DGRAM), _free_pair(socket.SOCK_DGRAM), _free_pair(socket.SOCK_STREAM)
+    procs = []
+    try:
+        for k in (1, 2):
+            ns, off = f"robot{k}", STRIDE * (k - 1)
+            extra = [] if k == 1 else ["--set", "topics/clock=clock"]  # one /clock: robot 1's bridge
+            procs.append(raf_process(["bridge", "--ns", ns, "--frame-prefix", ns, "--port", str(port + off),
+                                      "--camera", f"tcp://127.0.0.1:{cam + off}", "--set", "simulator/control=",
+                                      *extra], env, tmp_path / f"bridge{k}.log"))
+            procs.append(raf_process(["localize", "--ns", ns, "--frame-prefix", ns], env, tmp_path / f"loc{k}.log"))
+        pubs = [rospy.Publisher(f"/robot{k}/cmd_vel", Twist, queue_size=1) for k in (1, 2)]
+        gt = [Collector(f"/robot{k}/ground_truth", Odometry) for k in (1, 2)]
+        pose = [Collector(f"/robot{k}/pose", PoseWithCovarianceStamped) for k in (1, 2)]
+        wait_until(lambda: all(p.get_num_connections() for p in pubs)
+                   and all(c.sub.get_num_connections() for c in pose), 40, what="bridges and localization nodes")
+        procs.append(raf_process(["sim", "--robots", "2", "--port", str(sim_port), "--bridge",
+                                  f"127.0.0.1:{port}", "--camera-bind", f"tcp://127.0.0.1:{cam}", "--no-server",
+                                  "--lockstep", "--realtime", "--lockstep-timeout", "3", "--status-every", "5"],
+                                 env, tmp_path / "sim.log"))
+        for c in pose:
+            c.wait(1, timeout=40)  # each node localized its robot from its own camera
+        starts = [c.msgs[-1].pose.pose.position for c in gt]
+        # both drive: robot 1 straight ahead, robot 2 forward and turning right (away from robot 1)
+        cmds = [(0.1, 0.0), (0.08, -0.25)]
+        end = time.monotonic() + 4.0
+        while time.monotonic() < end:
+            for p, (v, w) in zip(pubs, cmds):
+                t = Twist()
+                t.linear.x, t.angular.z = v, w
+                p.publish(t)
+            time.sleep(0.05)
+        time.sleep(1.0)  # a second of fixes after the stop
+        buf = tf2_ros.Buffer()
+        listener = tf2_ros.TransformListener(buf)
+        for k in (1, 2):
+            g = gt[k - 1].msgs[-1].pose.pose
+            moved = math.hypot(g.position.x - starts[k - 1].x, g.position.y - starts[k - 1].y)
+            assert 0.2 < moved < 0.55, (k, moved)
+            # the localization node's estimate of robot k agrees with robot k's ground truth
+            est = pose[k - 1].msgs[-1].pose.pose
+            err = math.hypot(est.position.x - g.position.x, est.position.y - g.position.y)
+            print(f"robot{k}: moved {moved:.3f} m, localization error {err * 1000:.1f} mm")
+            assert err < 0.05, (k, err, (est.position.x, est.position.y), (g.position.x, g.position.y))
+            dth = (_yaw(est.orientation) - _yaw(g.orientation) + math.pi) % (2 * math.pi) - math.pi
+            assert abs(dth) < 0.1, (k, dth)
+            # its own TF tree: map -> robotk/odom (localization) -> robotk/base_link (bridge)
+            tf = buf.lookup_transform("map", f"robot{k}/base_link", rospy.Time(0), rospy.Duration(10))
+            tr = tf.transform.translation
+            assert math.hypot(tr.x - g.position.x, tr.y - g.position.y) < 0.06, (k, tr)
+        listener.unregister()
+        p1, p2 = (c.msgs[-1].pose.pose.position for c in gt)
+        assert math.hypot(p1.x - p2.x, p1.y - p2.y) > 0.1  # two robots, not one seen twice
+        for c in (*gt, *pose):
+            c.close()
+    finally:
+        codes = [stop_process(p) for p in reversed(procs)]
+    assert codes[0] == 0, (tmp_path / "sim.log").read_text()[-3000:]
