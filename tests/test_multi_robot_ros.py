@@ -101,3 +101,38 @@ def test_two_robots_drive_and_are_localized(ros_master, tmp_path):
     finally:
         codes = [stop_process(p) for p in reversed(procs)]
     assert codes[0] == 0, (tmp_path / "sim.log").read_text()[-3000:]
+
+
+@pytest.mark.parametrize("n", [1, 2, 4])
+def test_multi_robot_launch_starts_a_bridge_and_a_localization_node_per_robot(ros_master, n):
+    import subprocess
+
+    import yaml
+
+    from rosutil import ROOT
+
+    env = ros_master.env()
+    launch = str(ROOT / "launch" / "multi_robot.launch")
+    nodes = subprocess.run(["roslaunch", "--nodes", launch, f"robots:={n}"], env=env, capture_output=True,
+                           text=True, timeout=60)
+    assert nodes.returncode == 0, nodes.stderr
+    want = {"/raf_sim"} | {f"/robot{k}/raf_{what}" for k in range(1, n + 1) for what in ("bridge", "localization")}
+    assert set(nodes.stdout.split()) == want
+    dump = subprocess.run(["roslaunch", "--dump-params", launch, f"robots:={n}", "port:=9810", "camera_port:=9899"],
+                          env=env, capture_output=True, text=True, timeout=60)
+    params = yaml.safe_load(dump.stdout)
+    for k in range(1, n + 1):
+        b = f"/robot{k}/raf_bridge/"
+        assert params[b + "frame_prefix"] == params[f"/robot{k}/raf_localization/frame_prefix"] == f"robot{k}"
+        assert params[b + "udp/port"] == 9810 + 10 * (k - 1)  # as raf sim --robots derives them
+        assert params[b + "camera/endpoint"] == f"tcp://127.0.0.1:{9899 + 10 * (k - 1)}"
+        assert params[b + "topics/clock"] == ("/clock" if k == 1 else "clock")  # one /clock
+    args = subprocess.run(["roslaunch", "--args", "/raf_sim", launch, f"robots:={n}"], env=env, capture_output=True,
+                          text=True, timeout=60)
+    assert f"sim --robots {n} " in args.stdout
+    # RViz shows every robot's odometry, ground truth, localization and scan
+    rv = yaml.safe_load((ROOT / "rviz" / "multi_robot.rviz").read_text())
+    groups = {d["Name"]: d for d in rv["Visualization Manager"]["Displays"] if d["Class"] == "rviz/Group"}
+    for k in range(1, 5):
+        topics = {d.get("Topic") or d.get("Image Topic") for d in groups[f"robot{k}"]["Displays"]}
+        assert {f"/robot{k}/{t}" for t in ("odom", "ground_truth", "pose", "scan", "camera/image_raw")} <= topics
