@@ -36,9 +36,12 @@ def test_plan_of_every_seed_ends_with_every_part_blue_in_the_outgoing_warehouse(
 def test_decisions_on_hand_made_states(policy):
     s = FactoryState.from_letters("BGRX")
     assert policy.next_task(s) == Move(R, SlotRef("incoming", 3), SlotRef("machine_A", 1))
-    # a processed part at an output is taken before the incoming ones
+    # red first (two stages ahead), into the lane whose output is free
     s = FactoryState.from_letters("RXXX", machine_A="XGXX")
-    assert policy.next_task(s) == Move(G, SlotRef("machine_A", 2), SlotRef("machine_B", 3))  # the nearer input
+    assert policy.next_task(s) == Move(R, SlotRef("incoming", 1), SlotRef("machine_A", 3))
+    # among greens, the one at a machine output before an incoming one; to the nearer B input
+    s = FactoryState.from_letters("GXXX", machine_A="XGXX")
+    assert policy.next_task(s) == Move(G, SlotRef("machine_A", 2), SlotRef("machine_B", 3))
     # an input whose output is occupied comes after a free lane
     s = FactoryState.from_letters("XXXX", machine_B="XBXX")
     assert policy.destinations(s, G) == [SlotRef("machine_B", 3), SlotRef("machine_B", 1)]
