@@ -102,3 +102,15 @@ def test_closed_loop_on_the_simulator(sim, field, robot):
                 break
         assert o.done and math.hypot(sim.pose[0] - back[0], sim.pose[1] - back[1]) < 0.005
         assert abs(wrap(sim.pose[2] - th)) < 0.03
+
+
+def test_extrapolation_is_exact_on_arcs():
+    from robotatfactory.agent.predict import extrapolate
+
+    # a quarter circle of radius 0.5 m, left turn, from the origin heading +x
+    x, y, th = extrapolate((0.0, 0.0, 0.0), 0.5 * math.pi / 2, math.pi / 2, 1.0)
+    assert (x, y, th) == pytest.approx((0.5, 0.5, math.pi / 2), abs=1e-12)
+    assert extrapolate((1.0, 2.0, math.pi), 0.2, 0.0, 0.5) == pytest.approx((0.9, 2.0, math.pi))
+    assert extrapolate((1.0, 2.0, 3.0), 0.2, 1.0, 0.0) == (1.0, 2.0, 3.0)
+    # the turn in place: heading only, wrapped
+    assert extrapolate((0.0, 0.0, 3.0), 0.0, 2.0, 0.1) == pytest.approx((0.0, 0.0, 3.2 - 2 * math.pi))

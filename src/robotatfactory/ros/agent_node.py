@@ -9,7 +9,7 @@ Talks to the factory-state server over UDP (a thread polls it whenever the agent
 never waits on the network).
 
 Every control period (the robot's, 40 ms, ROS time: simulation time under ``/use_sim_time``) it steps the
-agent with the latest pose, or with None when the pose or odometry is older than ``max_input_age``
+agent with the latest pose brought forward to now with odometry's speeds (:mod:`..agent.predict`), or with None when the pose or odometry is older than ``max_input_age``
 seconds (the agent then brakes to a stop). Bad messages are counted and skipped.
 """
 from __future__ import annotations
@@ -27,6 +27,7 @@ from std_msgs.msg import Bool
 
 from ..agent.behaviour import RoundAgent
 from ..agent.client import FactoryClient, ServerReplyError, ServerTimeout
+from ..agent.predict import extrapolate
 from ..field import load_field
 from ..robot import load_robot
 from . import messages as rm
@@ -57,6 +58,7 @@ class AgentNode:
         self.pose_stamp = -math.inf
         self.odom_stamp = -math.inf
         self.contact = False
+        self.twist = (0.0, 0.0)  # (v m/s, w rad/s) from the latest odometry
         self.counts = {"bad_pose": 0, "stale_cycles": 0, "server_errors": 0, "cycles": 0}
         self._events_logged = 0
         self._path_sent = None
@@ -102,6 +104,7 @@ class AgentNode:
     def on_odom(self, msg: Odometry) -> None:
         with self.lock:
             self.odom_stamp = msg.header.stamp.to_sec()
+            self.twist = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
 
     def on_contact(self, msg: Bool) -> None:
         with self.lock:
@@ -127,7 +130,9 @@ class AgentNode:
         now = rospy.get_time()
         with self.lock:
             fresh = (now - self.pose_stamp <= self.cfg.max_input_age and now - self.odom_stamp <= self.cfg.max_input_age)
-            pose = self.pose if fresh else None
+            # the estimate brought forward to now with the measured speeds (the EKF's stamp is older)
+            pose = extrapolate(self.pose, *self.twist, min(now - self.pose_stamp, self.cfg.max_input_age)) \
+                if fresh and self.pose is not None else None
             if pose is None:
                 self.counts["stale_cycles"] += 1
             cmd = self.agent.step(now, pose, self.contact)
