@@ -109,3 +109,28 @@ def test_no_part_no_contact_is_a_failure(make_sim, field, robot):
     assert o.failed == "no_contact" and sim.held is None and not run.magnet
     # it stopped short of the rib ends: the base never touched the warehouse
     assert not FieldObstacles(field, []).collides(fp, sim.pose)
+
+
+def test_an_aborted_pick_backs_out_first(make_sim, field, robot):
+    sim = make_sim(round_no=1, parts="XBXX")
+    run = Run(sim, field, robot)
+    fp = robot_footprint(robot)
+    d = dock_distance(robot, field.part)
+    slot = field.slot("incoming", 2)
+    ap = PathPlanner(FieldObstacles(field, [PartObstacle(*slot.xy, slot.facing)])).approach_pose(slot, d, fp)
+    sim.set_pose(*ap)
+    run.docker.start_pick(slot, sim.pose, 0.2)
+    for _ in range(10):  # part of the way in
+        o = run.docker.step(sim.pose, run.contact)
+        run.cycle(o.v, o.w, o.magnet)
+    run.docker.abort(sim.pose)
+    vs = []
+    for _ in range(300):
+        o = run.docker.step(sim.pose, run.contact)
+        vs.append(o.v)
+        run.cycle(o.v, o.w, o.magnet)
+        if o.failed or o.done:
+            break
+    assert o.failed == "timeout" and not o.magnet and sim.held is None
+    assert min(vs) < 0 and max(vs) <= 0  # only backwards
+    assert math.hypot(sim.pose[0] - slot.xy[0], sim.pose[1] - slot.xy[1]) == pytest.approx(0.2, abs=0.005)

@@ -58,3 +58,24 @@ def test_a_round_scores_the_maximum(field, robot, round_no, seed):
     assert agent.counters.pick_failures == agent.counters.place_failures == 0
     if round_no == 3:  # the machines' 10 s learned from the server, polled every 0.5 s
         assert 10.0 <= agent.delays.estimate <= 10.0 + agent.state_period + 0.2
+
+
+def test_a_blocked_robot_times_out_gives_up_and_never_loops_forever(field, robot):
+    """The pose never changes (the robot is stuck): every leg times out, the part is left alone after
+    three failures, and the agent ends instead of retrying forever."""
+    from robotatfactory.agent.state import FactoryState
+
+    agent = RoundAgent(field, robot)
+    sp = field.start_pose
+    pose = (sp.x, sp.y, sp.theta)
+    t = 0.0
+    while t < 600.0 and agent.mode != "done":
+        if agent.wants_state:
+            agent.on_state(FactoryState.from_letters("XBXX"), t)
+        c = agent.step(t, pose, False)
+        assert not c.magnet
+        t += robot.control_period
+    assert agent.mode == "done", agent.events[-3:]
+    assert agent.counters.timeouts == agent.give_up_after == 3
+    assert sum("timeout" in text for _, text in agent.events) == 3
+    assert t < 300.0  # three budgets of one leg each, not the round's 600 s

@@ -45,6 +45,7 @@ class AgentCounters:
     places: int = 0
     place_failures: int = 0
     no_path: int = 0
+    timeouts: int = 0
     stale_pose_cycles: int = 0
 
 
@@ -57,6 +58,8 @@ class RoundAgent:
     limits: DriveLimits | None = None
     retries: int = 2
     state_period: float = 0.5  # s between server polls (5 requests each)
+    give_up_after: int = 3  # failures at one slot before its part is left alone
+    dock_timeout: float = 20.0  # s for one docking manoeuvre before it backs out
     events: list = field(default_factory=list)
     counters: AgentCounters = field(default_factory=AgentCounters)
 
@@ -82,6 +85,9 @@ class RoundAgent:
         self.magnet = False
         self.path = None
         self._last_poll = -math.inf
+        self.failures: dict[SlotRef, int] = {}  # failed tasks per source slot
+        self._mode_t0 = 0.0
+        self._budget = math.inf  # s the current leg may take before it is abandoned
         self._v = self._w = 0.0
         self.t = 0.0
 
@@ -121,6 +127,12 @@ class RoundAgent:
             self._decide(pose)
             if self.mode == "decide" or self.mode == "done":
                 return self._brake()
+        if self.mode in ("to_pick", "to_place") and self.t - self._mode_t0 > self._budget:
+            self._timeout(f"{self.mode.replace('_', ' ')} {self.target} took more than {self._budget:.0f} s")
+            return self._brake()
+        if self.mode in ("pick", "place") and self.t - self._mode_t0 > self.dock_timeout \
+                and self.docker.phase not in ("back", "done", "failed"):
+            self.docker.abort(pose)  # back out first, then the failure comes through the docker
         if self.mode in ("to_pick", "to_place"):
             o = self.follower.step(pose)
             if o.done:
@@ -147,7 +159,9 @@ class RoundAgent:
             self._go("to_place", pose)
             return
         ready = {ln.input: self.delays.expected_ready(ln.input) for ln in self.delays.lanes}
-        task = self.policy.next_task(st, robot_xy=tuple(pose[:2]), ready_at={k: v for k, v in ready.items() if v})
+        avoid = {ref for ref, n in self.failures.items() if n >= self.give_up_after}
+        task = self.policy.next_task(st, robot_xy=tuple(pose[:2]), ready_at={k: v for k, v in ready.items() if v},
+                                     avoid=avoid)
         if task != self.task:
             self._event(self.t, f"task: {task}")
         self.task = task
@@ -183,6 +197,9 @@ class RoundAgent:
             return
         self.follower.start(self.path.points, final_heading=goal[2])
         self.mode = mode
+        self._mode_t0 = self.t
+        lim = self.limits  # generous: three times the straight-line time, plus every turn and 10 s
+        self._budget = 10.0 + 3.0 * self.path.length / lim.v_max + len(self.path.points) * math.pi / lim.w_max * 2
 
     def _retreat(self, carrying: bool) -> float:
         """Distance from the slot centre to back out to (m): the approach distance of the footprint the
@@ -201,9 +218,11 @@ class RoundAgent:
         if self.mode == "to_pick":
             self.docker.start_pick(slot, pose, self._retreat(carrying=True))
             self.mode = "pick"
+            self._mode_t0 = self.t
         else:
             self.docker.start_place(slot, pose, self._retreat(carrying=False))
             self.mode = "place"
+            self._mode_t0 = self.t
 
     def _dock_done(self, pose) -> None:
         if self.mode == "pick":
@@ -229,8 +248,18 @@ class RoundAgent:
         self.magnet = False
         self.mode, self.need_state_after = "decide", self.t
 
+    def _timeout(self, text: str) -> None:
+        self.counters.timeouts += 1
+        self._event(self.t, f"timeout: {text}")
+        if self.task is not None and isinstance(self.task, Move) and self.carrying is None:
+            self.failures[self.task.source] = self.failures.get(self.task.source, 0) + 1
+        self.follower.stop()
+        self.mode, self.need_state_after = "decide", self.t
+
     def _dock_failed(self, reason: str, pose) -> None:
         self._event(self.t, f"{self.mode} at {self.target} failed: {reason}")
+        if self.mode == "pick":
+            self.failures[self.target] = self.failures.get(self.target, 0) + 1
         if self.mode == "pick":
             self.counters.pick_failures += 1
             self.magnet = False

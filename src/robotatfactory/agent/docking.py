@@ -151,6 +151,16 @@ class Docker:
             return self._out(out.v, out.w)
         return self._out(0.0, 0.0, done=self.phase == "done")
 
+    def abort(self, pose, reason: str = "timeout") -> None:
+        """Give up: magnet off when picking (on when placing: the part stays held), back straight out,
+        then report ``reason``."""
+        if self.phase in ("done", "failed"):
+            return
+        if self.mode == "pick":
+            self.magnet = False
+        self._failing = reason
+        self._back(pose)
+
     def _back(self, pose) -> None:
         """Back straight out along the slot's normal to ``retreat`` m from its centre."""
         back = pose_in_front(self._slot, self._retreat)

@@ -114,13 +114,13 @@ class TaskPolicy:
             ranked.append(((blocked, self._dist(ln.input, near) if near else 0.0, ln.input.number), ln.input))
         return [r for _, r in sorted(ranked)]
 
-    def candidates(self, state: FactoryState) -> list[Move]:
+    def candidates(self, state: FactoryState, avoid: frozenset[SlotRef] | set[SlotRef] = frozenset()) -> list[Move]:
         """Every part that should move and has a free destination, in picking order."""
         moves = []
         for zone in ZONES:
             for n, part in enumerate(state.zone(zone), start=1):
                 ref = SlotRef(zone, n)
-                if part is None or self.is_settled(ref, part):
+                if part is None or self.is_settled(ref, part) or ref in avoid:
                     continue
                 dest = self.destinations(state, part, ref)
                 if dest:
@@ -133,10 +133,12 @@ class TaskPolicy:
         return _PRIORITY[m.part], m.source not in self._outputs
 
     def next_task(self, state: FactoryState, robot_xy: tuple[float, float] | None = None,
-                  ready_at: dict[SlotRef, float] | None = None) -> Task:
+                  ready_at: dict[SlotRef, float] | None = None,
+                  avoid: frozenset[SlotRef] | set[SlotRef] = frozenset()) -> Task:
         """The next task from the server's state. ``robot_xy`` (m) breaks ties by distance;
-        ``ready_at`` maps machine inputs to the expected ready time of their part (s)."""
-        moves = self.candidates(state)
+        ``ready_at`` maps machine inputs to the expected ready time of their part (s); parts in the slots
+        of ``avoid`` are not picked (the agent gave up on them after repeated failures)."""
+        moves = self.candidates(state, avoid)
         if moves:
             best_rank = self._rank(moves[0])
             same = [m for m in moves if self._rank(m) == best_rank]
