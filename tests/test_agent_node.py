@@ -77,3 +77,17 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_mast
             c.close()
         pub_pose.unregister()
         pub_odom.unregister()
+
+
+def test_launch_parameters_are_checked():
+    from robotatfactory.errors import ConfigError
+    from robotatfactory.ros.agent_node import config_from_params
+
+    cfg = config_from_params({"server_port": 19832, "max_input_age": 0.3, "field": "rules2026"})
+    assert (cfg.server_port, cfg.max_input_age, cfg.server_host) == (19832, 0.3, "127.0.0.1")
+    with pytest.raises(ConfigError, match="unknown agent parameter.*serverport"):
+        config_from_params({"serverport": 1})
+    with pytest.raises(ConfigError, match="server_port"):
+        config_from_params({"server_port": 0})
+    with pytest.raises(ConfigError, match="max_input_age"):
+        config_from_params({"max_input_age": -1.0})

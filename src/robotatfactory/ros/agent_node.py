@@ -177,3 +177,33 @@ class AgentNode:
         st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
         arr.status.append(st)
         return arr
+
+
+def config_from_params(p: dict) -> AgentNodeConfig:
+    """The node's settings from its private parameters (``~server_port`` ...); unknown keys are an error."""
+    from dataclasses import fields
+
+    from ..errors import ConfigError
+
+    known = {f.name: f.type for f in fields(AgentNodeConfig)}
+    unknown = sorted(set(p) - set(known))
+    if unknown:
+        raise ConfigError(f"unknown agent parameter(s) {', '.join(unknown)} (known: {', '.join(known)})")
+    cfg = AgentNodeConfig(**p)
+    if not (isinstance(cfg.server_port, int) and 0 < cfg.server_port < 65536):
+        raise ConfigError(f"server_port must be 1..65535, got {cfg.server_port!r}")
+    if not (isinstance(cfg.max_input_age, (int, float)) and cfg.max_input_age > 0):
+        raise ConfigError(f"max_input_age must be > 0 s, got {cfg.max_input_age!r}")
+    return cfg
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .cli import read_private_params, spin_node
+
+    return spin_node("raf_agent", lambda: AgentNode(config_from_params(read_private_params())).start(), argv)
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())
