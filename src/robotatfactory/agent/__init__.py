@@ -12,6 +12,7 @@ Each module has one job and is usable and testable alone:
 * :mod:`.planner` -- collision-free paths on the field map for the robot's footprint (grid A*, smoothed).
 * :mod:`.follower` -- a path follower on the pose estimate with a speed profile and acceleration limits.
 * :mod:`.docking` -- the final approach: pick with the contact switch and the magnet, place, back out.
+* :mod:`.predict` -- a pose estimate brought forward to now (the estimate's age at constant speeds).
 * :mod:`.behaviour` -- the round's per-cycle state machine tying them together (:class:`RoundAgent`).
 
 docs/agent.md describes the decisions and what was measured.
