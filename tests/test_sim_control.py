@@ -100,6 +100,10 @@ def test_every_request_and_bad_requests(field, robot):
         # step N: the reply comes after N cycles
         r = request(addr, {"op": "step", "cycles": 5, "id": "a"})
         assert r["ok"] and r["id"] == "a" and r["seq"] == 5 and abs(r["time"] - 0.2) < 1e-9
+        # the 5 frames were sent before the reply; the peer's thread may still be decoding them
+        end = time.monotonic() + 5.0
+        while len(ctl_peer.frames) < 5 and time.monotonic() < end:
+            time.sleep(0.01)
         assert len(ctl_peer.take()) == 5
         # teleport
         r = request(addr, {"op": "set_robot_pose", "x": 0.3, "y": -0.2, "theta": 4.0})
