@@ -96,6 +96,15 @@ def test_two_robots_drive_and_are_localized(ros_master, tmp_path):
         listener.unregister()
         p1, p2 = (c.msgs[-1].pose.pose.position for c in gt)
         assert math.hypot(p1.x - p2.x, p1.y - p2.y) > 0.1  # two robots, not one seen twice
+        # robot 2's sim/set_robot_pose (through the teleport labels of its Commands) moves robot 2 only
+        from robotatfactory.srv import SetRobotPose
+
+        rospy.wait_for_service("/robot2/sim/set_robot_pose", 10)
+        r = rospy.ServiceProxy("/robot2/sim/set_robot_pose", SetRobotPose)(0.3, -0.2, 0.5)
+        assert r.success, r.message
+        g2 = gt[1].msgs[-1].pose.pose.position
+        g1 = gt[0].msgs[-1].pose.pose.position
+        assert math.hypot(g2.x - 0.3, g2.y + 0.2) < 0.01 and math.hypot(g1.x - p1.x, g1.y - p1.y) < 0.005
         for c in (*gt, *pose):
             c.close()
     finally:

@@ -291,3 +291,31 @@ def test_raf_sim_prints_each_robots_ports(raf_cmd, tmp_path):
                          "127.0.0.1:9"], capture_output=True, text=True, timeout=60)
     assert ok.returncode == 0, ok.stderr
     assert "start pose (-0.200, 0.300, 3.140)" in ok.stdout
+
+
+def test_teleport_labels_move_that_robot_or_a_part_once(field, robot):
+    from robotatfactory.simtwo.teleport import Teleport
+
+    sim = make(field, robot, 2, (A, (-0.2, -0.35, math.pi / 2)))
+    runner = MultiRunner(sim, RunnerConfig(port=0, camera_bind=None, server_port=None, quiet=True))
+    r2 = runner.runners[1]
+    src = ("127.0.0.1", 5555)
+    p1 = sim.units[0].pose
+
+    def send(tp, v=0.0):
+        r2._accept(Command(v, 0.0, False, 0).encode() + tp.labels(), src, None)
+
+    send(Teleport(1, 0.3, -0.2, 1.0))
+    assert sim.units[1].pose == pytest.approx((0.3, -0.2, 1.0), abs=1e-6)
+    assert sim.units[0].pose == p1  # robot 1 untouched
+    sim.step_all([None, None])
+    moved = sim.units[1].pose
+    send(Teleport(1, 0.5, 0.1, 0.0))  # the same TpId again (the bridge repeats it): applied once
+    assert sim.units[1].pose == moved
+    pid = sim.parts.ids[0]
+    send(Teleport(2, 0.1, 0.45, 0.5, 0.0021, f"Part{pid}"))
+    assert sim.part_pose(pid)[:2] == pytest.approx((0.1, 0.45), abs=1e-6)
+    send(Teleport(3, 0.0, 0.0, 0.0, 0.0, "AGV7"))  # unknown target: ignored
+    assert r2.teleports == 2 and r2.command.v == 0.0
+    assert runner.runners[0].teleports == 0
+    sim.close()

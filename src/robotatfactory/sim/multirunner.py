@@ -4,7 +4,11 @@ Robot k (1-based) has its own command socket, SensorFrame destination and camera
 derived from robot 1's by ``PORT_STRIDE`` (:func:`robot_ports`): with the defaults robot 1 uses 9808
 (commands), 9810 (frames to its bridge) and tcp 9899 (camera), robot 2 uses 9818, 9820 and 9909, and so on.
 The factory-state server is one (robot 1's endpoints open it) and sees every robot; there is no control
-channel with several robots (sim/control.py drives one robot).
+channel with several robots (sim/control.py drives one robot). Instead each robot's Command datagrams may
+carry SimTwo's teleport labels (simtwo/teleport.py, docs/protocol.md), applied as simtwo/control.pas does
+(each TpId once): no TpTarget moves that robot (at rest, magnet released), ``PartN`` moves part N. So the
+bridges' ``sim/set_robot_pose``, ``sim/place_part`` and ``sim/reset`` (robot only) work per robot, as with
+SimTwo.
 
 Each cycle: every robot's command socket is drained (lockstep: the replies awaited in turn, robot 1
 first), the scene advances once (:meth:`Simulator.step_all`), every robot's camera frames are published,
@@ -19,6 +23,8 @@ import threading
 import time
 
 from ..errors import ConfigError
+from ..simtwo import ProtocolError
+from ..simtwo.teleport import Teleport
 from .runner import RunnerConfig, RunResult, SimRunner
 
 PORT_STRIDE = 10  # robot k's ports: robot 1's + PORT_STRIDE * (k - 1)
@@ -50,6 +56,43 @@ def robot_ports(config: RunnerConfig, k: int) -> RunnerConfig:
         server_port=None, control_port=None, start_paused=False, quiet=True, status_every=0.0)
 
 
+class UnitRunner(SimRunner):
+    """One robot's endpoints in a :class:`MultiRunner`: a :class:`SimRunner` that also applies the teleport
+    labels of the Commands it accepts (SimTwo's, see the module docstring)."""
+
+    def __init__(self, sim, config: RunnerConfig | None = None, *, out=None):
+        super().__init__(sim, config, out=out)
+        self._last_teleport: int | None = None
+        self.teleports = 0
+
+    def _accept(self, data: bytes, addr, expect_seq: int | None) -> bool:
+        before = self.counters.commands
+        got = super()._accept(data, addr, expect_seq)
+        if self.counters.commands != before:  # a valid command from the controller
+            try:
+                tp = Teleport.from_datagram(data)
+            except (ProtocolError, ValueError) as e:
+                self._rlog.warn("rx-teleport", f"teleport labels from {addr[0]}:{addr[1]} ignored: {e}")
+                return got
+            if tp is not None and tp.id != self._last_teleport:
+                self._last_teleport = tp.id
+                self._teleport(tp)
+        return got
+
+    def _teleport(self, tp: Teleport) -> None:
+        sim = self.sim
+        target = tp.target
+        if not target:
+            sim.set_pose(tp.x, tp.y, tp.theta)
+        elif target.startswith("Part") and target[4:].isdigit() and int(target[4:]) in sim.parts.qadr:
+            sim.place_part(int(target[4:]), tp.x, tp.y, tp.theta)
+        else:
+            self._rlog.warn("teleport-target", f"teleport {tp.id}: unknown target {target!r} ignored (no TpTarget: "
+                                               "this robot; Part1..N: a part)")
+            return
+        self.teleports += 1
+
+
 class MultiRunner:
     """Runs a :class:`~robotatfactory.sim.Simulator` of several robots (``sim.units``) against the outside
     world: one :class:`SimRunner` per robot for its endpoints and commands. See the module docstring."""
@@ -63,7 +106,7 @@ class MultiRunner:
         self.sim = sim
         self.config = config
         self.out = out if out is not None else sys.stdout
-        self.runners = [SimRunner(u, robot_ports(config, k), out=self.out) for k, u in enumerate(sim.units, 1)]
+        self.runners = [UnitRunner(u, robot_ports(config, k), out=self.out) for k, u in enumerate(sim.units, 1)]
         self._stop = threading.Event()
 
     def open(self) -> "MultiRunner":
