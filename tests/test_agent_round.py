@@ -56,8 +56,9 @@ def test_a_round_scores_the_maximum(field, robot, round_no, seed):
     assert moved_early == 0  # nothing before the part list
     assert touched == 0  # the outline never met a wall or rib
     assert agent.counters.pick_failures == agent.counters.place_failures == 0
-    if round_no == 3:  # the machines' 10 s learned from the server, polled every 0.5 s
-        assert 10.0 <= agent.delays.estimate <= 10.0 + agent.state_period + 0.2
+    if round_no == 3:  # the machines' 10 s learned from the server: measured from the magnet's release, it
+        # also holds the robot backing out past 0.17 m (about 1 s) and the 0.5 s poll period; never below
+        assert 10.0 <= agent.delays.estimate <= 10.0 + 1.5 + agent.state_period + 0.2
 
 
 def test_a_blocked_robot_times_out_gives_up_and_never_loops_forever(field, robot):

@@ -88,6 +88,7 @@ class RoundAgent:
         self.failures: dict[SlotRef, int] = {}  # failed tasks per source slot
         self._mode_t0 = 0.0
         self._budget = math.inf  # s the current leg may take before it is abandoned
+        self._released_t: float | None = None  # when the magnet let go of the part being placed
         self._v = self._w = 0.0
         self.t = 0.0
 
@@ -141,6 +142,8 @@ class RoundAgent:
         if self.mode in ("pick", "place"):
             o = self.docker.step(pose, contact)
             self.magnet = o.magnet
+            if self.mode == "place" and not o.magnet and self._released_t is None:
+                self._released_t = self.t  # the part is free from now: the delay is measured from here
             if o.failed:
                 self._dock_failed(o.failed, pose)
             elif o.done:
@@ -221,6 +224,7 @@ class RoundAgent:
             self._mode_t0 = self.t
         else:
             self.docker.start_place(slot, pose, self._retreat(carrying=False))
+            self._released_t = None
             self.mode = "place"
             self._mode_t0 = self.t
 
@@ -241,8 +245,8 @@ class RoundAgent:
             return
         self.counters.places += 1
         self._event(self.t, f"placed the {self.carrying.label} part in {self.target}")
-        if self.target.zone.startswith("machine"):
-            self.delays.placed(self.target, self.carrying, self.t)
+        if self.target.zone.startswith("machine"):  # from the release: t_seen - t_placed bounds the delay from above
+            self.delays.placed(self.target, self.carrying, self._released_t if self._released_t is not None else self.t)
         self.state = self.state.with_slot(self.target, self.carrying)
         self.carrying = None
         self.magnet = False
