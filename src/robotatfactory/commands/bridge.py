@@ -15,7 +15,7 @@ The node needs a ROS master (ROS_MASTER_URI); --roscore starts a private one on 
 examples:
   raf bridge                                     # raf sim on this machine, default ports
   raf bridge --sim-host 192.168.1.20 --camera tcp://192.168.1.20:9899   # SimTwo on another machine
-  raf bridge --ns robot1 --frame-prefix robot1 --port 9811              # a second robot
+  raf bridge --ns robot2 --frame-prefix robot2 --port 9820 --camera tcp://127.0.0.1:9909   # raf sim --robots 2's second
 """
 
 
