@@ -1,0 +1,328 @@
+"""``raf experiment competition``: the autonomous robot (issue 11) plays rounds 1-3 over several seeds.
+
+Mode (every key and the table carry it, ``mode`` key):
+
+- ``bare_truth`` (the only mode so far): the agent's :class:`~robotatfactory.agent.behaviour.RoundAgent`
+  around the in-process stand-in :class:`~robotatfactory.sim.Simulator` with its default (SimTwo-like)
+  behaviour, the real :class:`~robotatfactory.competition.FactoryServer` on loopback and the agent's UDP
+  client. **The pose the agent gets is the simulator's ground truth**, not the EKF's: no bridge, no
+  ``raf localize``, no ROS. The issue wants the whole stack (sim + bridge + localization + agent); that is
+  not measured here yet (docs/agent.md gives the recipe for one run by hand). The pose-error target (the
+  agent's pose within 2 cm of the truth while it picks or places) is therefore not measurable in this mode
+  and reported as such.
+
+Per run (keys ``{mode}_r{round}_s{seed}_...``): score and maximum score, time of the last scoring
+delivery, referee rule notes, picks attempted / failed, places, timeouts, collisions of the robot's outline
+with walls or ribs (checked every 5 cycles), parts pushed (a part not on the magnet moving 2 mm - 5 cm
+within 5 cycles: a push, not a machine's teleport). Per round: success rate at maximum score, median and
+worst time of the last scoring delivery, and the targets of the issue:
+
+- maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
+  but one tenth of them), 0 false starts (referee notes), 0 parts pushed;
+- median last-delivery time: round 1 <= 60 s, round 2 <= 80 s, round 3 <= 120 s (simulated).
+
+Runs go in parallel over ``--jobs`` processes (default 2: the machine's cores). With ``--out DIR``: a
+top-view figure of the first seed's run per round (path, pick and place events) and ``runs.json`` with
+every run's events.
+"""
+from __future__ import annotations
+
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+NAME = "competition"
+HELP = ("the autonomous robot plays rounds 1-3 over seeds (bare stand-in, ground truth as the pose): "
+        "score, last-delivery time, failures, per-round success rate and median time")
+MODES = ("bare_truth",)
+TIME_TARGETS = {1: 60.0, 2: 80.0, 3: 120.0}  # s, median time of the last scoring delivery (issue 11)
+TARGETS = {}
+for _m in MODES:
+    for _r, _t in TIME_TARGETS.items():
+        TARGETS[f"{_m}_r{_r}_max_score_rate"] = ">= 0.9 (9 of 10 seeds)"
+        TARGETS[f"{_m}_r{_r}_last_score_median_s"] = f"<= {_t:.0f} s (simulated)"
+        TARGETS[f"{_m}_r{_r}_false_starts"] = "== 0"
+        TARGETS[f"{_m}_r{_r}_parts_pushed"] = "== 0"
+DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "slow_distance", "lookahead", "heading_tolerance", "w_max",
+                  "alpha_max", "v_final")
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--mode", choices=MODES, default="bare_truth",
+                        help="bare_truth: the agent around the in-process stand-in, ground truth as its pose "
+                             "(the only mode so far; the whole stack is not yet measured)")
+    parser.add_argument("--rounds", default="1,2,3", help="comma-separated rounds (default 1,2,3)")
+    parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 per round (default 10)")
+    parser.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--jobs", type=int, default=2, help="parallel processes (default 2)")
+    parser.add_argument("--limit", type=float, default=300.0, help="simulated seconds per run (default 300)")
+    parser.add_argument("--drive", metavar="NAME=VALUE", action="append", default=[],
+                        help="a DriveLimits setting for the agent, e.g. k_heading=8 (repeatable; "
+                             f"one of {', '.join(DRIVE_SETTINGS)})")
+
+
+def parse_drive(items) -> dict:
+    from ..errors import ConfigError
+
+    out = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or name not in DRIVE_SETTINGS:
+            raise ConfigError(f"--drive {item!r}: expected NAME=VALUE with NAME one of {', '.join(DRIVE_SETTINGS)}")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise ConfigError(f"--drive {item!r}: {value!r} is not a number") from None
+    return out
+
+
+def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | None = None,
+               field_name: str | None = None, record_path: bool = False) -> dict:
+    """One round on the bare stand-in with ground truth as the agent's pose; a flat dict of the run's
+    figures (plus ``path`` [(t, x, y)] and ``events`` [(t, text, x, y)] when ``record_path``)."""
+    from ..agent.behaviour import RoundAgent
+    from ..agent.client import FactoryClient
+    from ..agent.follower import DriveLimits
+    from ..agent.footprint import carrying_footprint, robot_footprint
+    from ..agent.obstacles import FieldObstacles
+    from ..competition import FactoryServer
+    from ..field import load_field
+    from ..robot import load_robot
+    from ..sim import SimConfig, Simulator
+    from ..simtwo import Command
+
+    field = load_field(field_name) if field_name else load_field()
+    robot = load_robot()
+    limits = DriveLimits.from_robot(robot, **(drive or {}))
+    wall0 = time.perf_counter()
+    sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, round_no=round_no, seed=seed,
+                                            start_after=1.0))
+    server = FactoryServer(sim.factory, port=0, clock=lambda: sim.time).start()
+    walls = FieldObstacles(field, [])
+    fp, fc = robot_footprint(robot), carrying_footprint(robot, field.part)
+    moved_early = touched = pushed = 0
+    path, events = [], []
+    n_events = 0
+    part_ids = list(sim.parts.qadr) if hasattr(sim.parts, "qadr") else []
+    last_xy = {}
+    try:
+        with FactoryClient(*server.address, timeout=0.5) as client:
+            client.wait_pong()
+            agent = RoundAgent(field, robot, limits=limits)
+            contact = False
+            while sim.time < limit and agent.mode != "done":
+                if agent.wants_state:
+                    st = client.poll_state()
+                    if st is not None:
+                        agent.on_state(st, sim.time)
+                c = agent.step(sim.time, sim.pose, contact)
+                if not sim.factory.started and (c.v or c.w or c.magnet):
+                    moved_early += 1
+                contact = sim.step_cycle(Command(c.v, c.w, c.magnet)).contact
+                if sim.seq % 5 == 0:
+                    x, y, _ = sim.pose
+                    if walls.collides(fc if sim.held is not None else fp, sim.pose):
+                        touched += 1
+                    if record_path:
+                        path.append((round(sim.time, 3), round(x, 4), round(y, 4)))
+                    for pid in part_ids:
+                        px, py, _ = sim.part_pose(pid)
+                        if pid in last_xy and sim.held != pid:
+                            d = math.hypot(px - last_xy[pid][0], py - last_xy[pid][1])
+                            if 0.002 < d < 0.05 and last_xy[pid][2] != "held":
+                                pushed += 1
+                        last_xy[pid] = (px, py, "held" if sim.held == pid else "")
+                while n_events < len(agent.events):
+                    t, text = agent.events[n_events]
+                    n_events += 1
+                    if record_path:
+                        events.append((round(t, 2), text, round(sim.pose[0], 4), round(sim.pose[1], 4)))
+        rep = sim.referee.report(sim.time)
+        cnt = agent.counters
+        out = {
+            "round": round_no, "seed": seed, "points": rep.points, "max_points": rep.max_points,
+            "max_score": rep.points == rep.max_points,
+            "last_score_s": rep.last_score_time if rep.last_score_time is not None else math.nan,
+            "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
+            "picks_attempted": cnt.picks + cnt.pick_failures, "pick_failures": cnt.pick_failures,
+            "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
+            "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "collision_checks_hit": touched,
+            "parts_pushed": pushed, "agent_done": agent.mode == "done", "sim_s": sim.time,
+            "wall_s": time.perf_counter() - wall0,
+            "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
+        }
+        if record_path:
+            out["path"], out["events"] = path, events
+        return out
+    finally:
+        server.stop()
+        sim.close()
+
+
+def _job(spec):
+    round_no, seed, limit, drive, field_name, record = spec
+    try:
+        return play_round(round_no, seed, limit, drive, field_name, record)
+    except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
+        return {"round": round_no, "seed": seed, "error": f"{type(e).__name__}: {e}", "max_score": False,
+                "points": 0, "max_points": -1, "last_score_s": math.nan, "notes": [], "false_start": False,
+                "parts_pushed": 0}
+
+
+def summarize(mode: str, runs: list[dict]) -> dict:
+    """Flat keys per run and per round (see the module docstring)."""
+    out: dict = {"mode": mode, "pose_source": "ground truth (bare simulator, no EKF)" if mode == "bare_truth"
+                 else "EKF"}
+    rounds = sorted({r["round"] for r in runs})
+    for r in sorted(runs, key=lambda r: (r["round"], r["seed"])):
+        p = f"{mode}_r{r['round']}_s{r['seed']}"
+        if "error" in r:
+            out[f"{p}_error"] = r["error"]
+            continue
+        out[f"{p}_points"] = r["points"]
+        out[f"{p}_max_points"] = r["max_points"]
+        out[f"{p}_last_score_s"] = round(r["last_score_s"], 2)
+        out[f"{p}_picks_attempted"] = r["picks_attempted"]
+        out[f"{p}_pick_failures"] = r["pick_failures"]
+        out[f"{p}_timeouts"] = r["timeouts"]
+        out[f"{p}_collisions"] = r["collision_checks_hit"]
+        out[f"{p}_parts_pushed"] = r["parts_pushed"]
+        out[f"{p}_wall_s"] = round(r["wall_s"], 2)
+        if r["notes"]:
+            out[f"{p}_notes"] = "; ".join(r["notes"])
+    for rn in rounds:
+        rs = [r for r in runs if r["round"] == rn]
+        p = f"{mode}_r{rn}"
+        n = len(rs)
+        ok = sum(bool(r["max_score"]) for r in rs)
+        times = [r["last_score_s"] for r in rs if r["max_score"]]
+        times_all = [r["last_score_s"] if r["max_score"] else math.inf for r in rs]  # a miss is the worst time
+        med = statistics.median(times_all) if times_all else math.inf
+        out[f"{p}_runs"] = n
+        out[f"{p}_max_score_runs"] = ok
+        out[f"{p}_max_score_rate"] = round(ok / n, 3) if n else 0.0
+        out[f"{p}_max_score_target_met"] = bool(n) and n - ok <= n // 10
+        out[f"{p}_last_score_median_s"] = round(med, 2) if math.isfinite(med) else None
+        out[f"{p}_last_score_worst_s"] = round(max(times_all), 2) if times_all and math.isfinite(max(times_all)) \
+            else None
+        out[f"{p}_last_score_best_s"] = round(min(times), 2) if times else None
+        out[f"{p}_last_score_median_target_met"] = bool(math.isfinite(med) and med <= TIME_TARGETS.get(rn, math.inf))
+        fs = sum(bool(r["false_start"]) for r in rs)
+        out[f"{p}_false_starts"] = fs
+        out[f"{p}_false_starts_target_met"] = fs == 0
+        pushed = sum(int(r.get("parts_pushed", 0)) for r in rs)
+        out[f"{p}_parts_pushed"] = pushed
+        out[f"{p}_parts_pushed_target_met"] = pushed == 0
+        out[f"{p}_pick_failures"] = sum(int(r.get("pick_failures", 0)) for r in rs)
+        out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
+        out[f"{p}_errors"] = sum("error" in r for r in rs)
+    out[f"{mode}_pose_error_target"] = "not measured: the pose is ground truth in this mode"
+    return out
+
+
+def table(mode: str, runs: list[dict]) -> str:
+    lines = [f"competition, mode {mode} (pose = ground truth, bare in-process simulator, no bridge/EKF)",
+             f"{'round':>5} {'runs':>4} {'max score':>9} {'median s':>9} {'worst s':>8} {'target s':>8} "
+             f"{'pick fail':>9} {'pushed':>6} {'notes':>5}"]
+    for rn in sorted({r["round"] for r in runs}):
+        rs = [r for r in runs if r["round"] == rn]
+        ts = [r["last_score_s"] if r["max_score"] else math.inf for r in rs]
+        med, worst = statistics.median(ts), max(ts)
+        lines.append(f"{rn:>5} {len(rs):>4} {sum(bool(r['max_score']) for r in rs):>5}/{len(rs):<3} "
+                     f"{med:>9.1f} {worst:>8.1f} {TIME_TARGETS.get(rn, math.nan):>8.0f} "
+                     f"{sum(int(r.get('pick_failures', 0)) for r in rs):>9} "
+                     f"{sum(int(r.get('parts_pushed', 0)) for r in rs):>6} "
+                     f"{sum(len(r.get('notes', [])) for r in rs):>5}")
+    return "\n".join(lines)
+
+
+def figure(run: dict, path: Path, mode: str, field_name: str | None = None) -> Path:
+    """Top view of one run: the field's walls/ribs and slots, the robot's path, pick and place events."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+    from matplotlib.transforms import Affine2D
+
+    from ..field import load_field
+
+    field = load_field(field_name) if field_name else load_field()
+    fig, ax = plt.subplots(figsize=(9, 6.6))
+    for b in field.boxes:
+        cx, cy = b.center[0], b.center[1]
+        sx, sy = b.size[0], b.size[1]
+        rect = Rectangle((cx - sx / 2, cy - sy / 2), sx, sy, color="0.55")
+        rect.set_transform(Affine2D().rotate_around(cx, cy, b.yaw) + ax.transData)
+        ax.add_patch(rect)
+    for s in field.slots:
+        ax.plot(*s.xy, marker="s", ms=4, color="0.75", zorder=1)
+    xy = [(x, y) for _, x, y in run.get("path", [])]
+    if xy:
+        ax.plot([p[0] for p in xy], [p[1] for p in xy], lw=0.8, color="tab:blue", label="path (ground truth)")
+    for kind, mk, col in (("picked", "^", "tab:green"), ("placed", "v", "tab:red")):
+        ev = [(x, y, t) for t, text, x, y in run.get("events", []) if text.startswith(kind)]
+        if ev:
+            ax.scatter([e[0] for e in ev], [e[1] for e in ev], marker=mk, s=60, color=col, zorder=3, label=f"{kind} (logged after backing out)")
+            for x, y, t in ev:
+                ax.annotate(f"{t:.0f}s", (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    last = run["last_score_s"]
+    ax.set_title(f"round {run['round']} seed {run['seed']} ({mode}: pose = ground truth): "
+                 f"{run['points']}/{run['max_points']} points, last at {last:.1f} s")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def run(args, out_dir: Path | None) -> dict:
+    import json
+    import multiprocessing as mp
+
+    from ..errors import ConfigError
+
+    mode = getattr(args, "mode", "bare_truth")
+    if mode not in MODES:
+        raise ConfigError(f"--mode {mode!r}: choose one of {', '.join(MODES)}")
+    try:
+        rounds = [int(x) for x in str(args.rounds).split(",") if x.strip()]
+    except ValueError:
+        raise ConfigError(f"--rounds {args.rounds!r}: expected e.g. 1,2,3") from None
+    if not rounds or any(r not in (1, 2, 3) for r in rounds):
+        raise ConfigError(f"--rounds {args.rounds!r}: rounds are 1, 2 and 3")
+    if args.seeds < 1:
+        raise ConfigError("--seeds must be at least 1")
+    drive = parse_drive(args.drive)
+    field_name = getattr(args, "field", None)
+    first = int(args.first_seed)
+    specs = [(r, s, float(args.limit), drive, field_name, out_dir is not None and s == first)
+             for r in rounds for s in range(first, first + args.seeds)]
+    t0 = time.perf_counter()
+    jobs = max(1, int(args.jobs))
+    if jobs == 1 or len(specs) == 1:
+        runs = [_job(s) for s in specs]
+    else:
+        with mp.get_context("spawn").Pool(min(jobs, len(specs))) as pool:
+            runs = pool.map(_job, specs, chunksize=1)
+    wall = time.perf_counter() - t0
+    print(table(mode, runs), flush=True)
+    for r in runs:
+        if "error" in r:
+            print(f"round {r['round']} seed {r['seed']}: {r['error']}", file=sys.stderr)
+    out = summarize(mode, runs)
+    out["drive_settings"] = json.dumps(drive) if drive else "defaults"
+    out["wall_s"] = round(wall, 1)
+    out["jobs"] = jobs
+    if out_dir is not None:
+        for r in runs:
+            if r.get("path"):
+                figure(r, out_dir / f"round{r['round']}_seed{r['seed']}_{mode}.png", mode, field_name)
+        (out_dir / "runs.json").write_text(json.dumps(runs, indent=1, default=str))
+    return out

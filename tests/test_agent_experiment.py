@@ -1,0 +1,55 @@
+"""``raf experiment competition`` on the smallest set: round 1, one seed, the bare stand-in (ground truth as
+the agent's pose; the mode says so in every key)."""
+import argparse
+import json
+
+import pytest
+
+from robotatfactory.errors import ConfigError
+from robotatfactory.experiments import competition
+
+
+def args(**kw):
+    p = argparse.ArgumentParser()
+    competition.add_arguments(p)
+    a = p.parse_args([])
+    a.field = None
+    for k, v in kw.items():
+        setattr(a, k, v)
+    return a
+
+
+def test_round_1_one_seed_scores_the_maximum_and_writes_its_figure(tmp_path):
+    res = competition.run(args(rounds="1", seeds=1, jobs=1), tmp_path)
+    assert res["mode"] == "bare_truth" and "ground truth" in res["pose_source"]
+    assert all(k.startswith("bare_truth_") for k in res if k.endswith("_target_met"))
+    assert res["bare_truth_r1_s0_points"] == res["bare_truth_r1_s0_max_points"] == 4
+    assert res["bare_truth_r1_max_score_target_met"] is True
+    assert res["bare_truth_r1_false_starts"] == 0 and res["bare_truth_r1_parts_pushed"] == 0
+    assert res["bare_truth_r1_collisions"] == 0 and res["bare_truth_r1_pick_failures"] == 0
+    t = res["bare_truth_r1_last_score_median_s"]
+    assert 10.0 < t < 300.0
+    assert res["bare_truth_r1_last_score_median_target_met"] == (t <= 60.0)
+    assert (tmp_path / "round1_seed0_bare_truth.png").stat().st_size > 10_000
+    runs = json.loads((tmp_path / "runs.json").read_text())
+    assert sum(text.startswith("picked") for _, text, _, _ in runs[0]["events"]) == 4
+
+
+def test_a_missed_run_is_the_worst_time_and_fails_the_rate():
+    ok = {"round": 1, "seed": 0, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 50.0,
+          "notes": [], "false_start": False, "parts_pushed": 0, "picks_attempted": 4, "pick_failures": 0,
+          "timeouts": 0, "collision_checks_hit": 0, "wall_s": 1.0}
+    miss = dict(ok, seed=1, points=3, max_score=False, last_score_s=40.0)
+    res = competition.summarize("bare_truth", [ok, miss, dict(ok, seed=2, last_score_s=55.0)])
+    assert res["bare_truth_r1_max_score_runs"] == 2
+    assert res["bare_truth_r1_max_score_target_met"] is False  # 1 miss in 3 > one tenth
+    assert res["bare_truth_r1_last_score_median_s"] == 55.0  # the miss counts as infinitely slow
+    assert res["bare_truth_r1_last_score_worst_s"] is None
+
+
+def test_bad_options_are_config_errors():
+    with pytest.raises(ConfigError):
+        competition.run(args(rounds="4"), None)
+    with pytest.raises(ConfigError):
+        competition.parse_drive(["warp=9"])
+    assert competition.parse_drive(["k_heading=8"]) == {"k_heading": 8.0}
