@@ -14,7 +14,9 @@ Mode (every key and the table carry it, ``mode`` key):
 Per run (keys ``{mode}_r{round}_s{seed}_...``): score and maximum score, time of the last scoring
 delivery, referee rule notes, picks attempted / failed, places, timeouts, collisions of the robot's outline
 with walls or ribs (checked every 5 cycles), parts pushed (a part not on the magnet moving 2 mm - 5 cm
-within 5 cycles: a push, not a machine's teleport). Per round: success rate at maximum score, median and
+within 5 cycles: a push, not a machine's teleport), and the wheel odometry's error against the truth over
+each second (``odometry_error_per_m``: the sum of those errors over the distance driven; slip that ground
+truth hides from the agent but the EKF would not). Per round: success rate at maximum score, median and
 worst time of the last scoring delivery, and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
@@ -90,6 +92,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     from ..agent.obstacles import FieldObstacles
     from ..competition import FactoryServer
     from ..field import load_field
+    from ..localization.odometry import DiffDriveOdometry
     from ..robot import load_robot
     from ..sim import SimConfig, Simulator
     from ..simtwo import Command
@@ -108,6 +111,10 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     n_events = 0
     part_ids = list(sim.parts.qadr) if hasattr(sim.parts, "qadr") else []
     last_xy = {}
+    odo = DiffDriveOdometry(robot)
+    odo.reset(baseline=(0, 0), t=0.0)
+    slip = []  # per second: |odometry's relative motion - the truth's| (m, rad) and the truth's length (m)
+    prev = None
     try:
         with FactoryClient(*server.address, timeout=0.5) as client:
             client.wait_pong()
@@ -121,7 +128,14 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                 c = agent.step(sim.time, sim.pose, contact)
                 if not sim.factory.started and (c.v or c.w or c.magnet):
                     moved_early += 1
-                contact = sim.step_cycle(Command(c.v, c.w, c.magnet)).contact
+                frame = sim.step_cycle(Command(c.v, c.w, c.magnet))
+                contact = frame.contact
+                o = odo.update(frame.enc_total[0], frame.enc_total[1], sim.time)
+                if sim.seq % 25 == 0:
+                    now = ((o.x, o.y, o.theta), sim.pose)
+                    if prev is not None:
+                        slip.append(_relative_error(prev, now))
+                    prev = now
                 if sim.seq % 5 == 0:
                     x, y, _ = sim.pose
                     if walls.collides(fc if sim.held is not None else fp, sim.pose):
@@ -154,12 +168,31 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
             "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
+        moved = sum(s[2] for s in slip)
+        out["odometry_error_per_m"] = sum(s[0] for s in slip) / moved if moved > 0 else 0.0
+        out["odometry_error_max_per_s_m"] = max((s[0] for s in slip), default=0.0)
+        out["odometry_heading_error_max_per_s_rad"] = max((s[1] for s in slip), default=0.0)
         if record_path:
             out["path"], out["events"] = path, events
         return out
     finally:
         server.stop()
         sim.close()
+
+
+def _relative_error(prev, now) -> tuple[float, float, float]:
+    """Odometry against the truth over one interval: the position (m) and heading (rad) error of the
+    odometry's motion expressed in its own start frame, and the truth's distance (m). Wheel slip (SimTwo's
+    PID has no ramp: harsh acceleration slips the tyres) shows here; ground truth as the pose hides it."""
+    def rel(a, b):
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        c, s = math.cos(a[2]), math.sin(a[2])
+        return c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))
+
+    (o0, t0), (o1, t1) = prev, now
+    ro, rt = rel(o0, o1), rel(t0, t1)
+    dth = math.atan2(math.sin(ro[2] - rt[2]), math.cos(ro[2] - rt[2]))
+    return math.hypot(ro[0] - rt[0], ro[1] - rt[1]), abs(dth), math.hypot(rt[0], rt[1])
 
 
 def _job(spec):
@@ -191,6 +224,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_collisions"] = r["collision_checks_hit"]
         out[f"{p}_parts_pushed"] = r["parts_pushed"]
         out[f"{p}_wall_s"] = round(r["wall_s"], 2)
+        if "odometry_error_per_m" in r:
+            out[f"{p}_odometry_error_per_m"] = round(r["odometry_error_per_m"], 4)
         if r["notes"]:
             out[f"{p}_notes"] = "; ".join(r["notes"])
     for rn in rounds:
@@ -219,6 +254,13 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_pick_failures"] = sum(int(r.get("pick_failures", 0)) for r in rs)
         out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
         out[f"{p}_errors"] = sum("error" in r for r in rs)
+        odo = [r["odometry_error_per_m"] for r in rs if "odometry_error_per_m" in r]
+        if odo:  # slip: the pose would suffer from it on the EKF, not here (ground truth)
+            out[f"{p}_odometry_error_per_m_median"] = round(statistics.median(odo), 4)
+            out[f"{p}_odometry_error_max_per_s_mm"] = round(1000 * max(r["odometry_error_max_per_s_m"] for r in rs
+                                                                        if "odometry_error_max_per_s_m" in r), 2)
+            out[f"{p}_odometry_heading_error_max_per_s_deg"] = round(math.degrees(max(
+                r["odometry_heading_error_max_per_s_rad"] for r in rs if "odometry_heading_error_max_per_s_rad" in r)), 2)
     out[f"{mode}_pose_error_target"] = "not measured: the pose is ground truth in this mode"
     return out
 
@@ -226,7 +268,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
 def table(mode: str, runs: list[dict]) -> str:
     lines = [f"competition, mode {mode} (pose = ground truth, bare in-process simulator, no bridge/EKF)",
              f"{'round':>5} {'runs':>4} {'max score':>9} {'median s':>9} {'worst s':>8} {'target s':>8} "
-             f"{'pick fail':>9} {'pushed':>6} {'notes':>5}"]
+             f"{'pick fail':>9} {'pushed':>6} {'notes':>5} {'collide':>7} {'odo mm/m':>8}"]
     for rn in sorted({r["round"] for r in runs}):
         rs = [r for r in runs if r["round"] == rn]
         ts = [r["last_score_s"] if r["max_score"] else math.inf for r in rs]
@@ -235,7 +277,9 @@ def table(mode: str, runs: list[dict]) -> str:
                      f"{med:>9.1f} {worst:>8.1f} {TIME_TARGETS.get(rn, math.nan):>8.0f} "
                      f"{sum(int(r.get('pick_failures', 0)) for r in rs):>9} "
                      f"{sum(int(r.get('parts_pushed', 0)) for r in rs):>6} "
-                     f"{sum(len(r.get('notes', [])) for r in rs):>5}")
+                     f"{sum(len(r.get('notes', [])) for r in rs):>5} "
+                     f"{sum(int(r.get('collision_checks_hit', 0)) for r in rs):>7} "
+                     f"{1000 * statistics.median([r.get('odometry_error_per_m', math.nan) for r in rs]):>8.2f}")
     return "\n".join(lines)
 
 
