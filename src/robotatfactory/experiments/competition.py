@@ -13,7 +13,7 @@ Mode (every key and the table carry it, ``mode`` key):
 
 Per run (keys ``{mode}_r{round}_s{seed}_...``): score and maximum score, time of the last scoring
 delivery, referee rule notes, picks attempted / failed, places, timeouts, collisions of the robot's outline
-with walls or ribs (checked every 5 cycles), parts pushed (a part not on the magnet moving 2 mm - 5 cm
+with walls or ribs, or beyond the floor's 2 cm overhang allowance (``floor``), checked every 5 cycles, parts pushed (a part not on the magnet moving 2 mm - 5 cm
 within 5 cycles: a push, not a machine's teleport), and the wheel odometry's error against the truth over
 each second (``odometry_error_per_m``: the sum of those errors over the distance driven; slip that ground
 truth hides from the agent but the EKF would not). Per round: success rate at maximum score, median and
@@ -106,7 +106,8 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     server = FactoryServer(sim.factory, port=0, clock=lambda: sim.time).start()
     walls = FieldObstacles(field, [])
     fp, fc = robot_footprint(robot), carrying_footprint(robot, field.part)
-    moved_early = touched = pushed = 0
+    moved_early = touched = pushed = off_floor = 0
+    hits = []
     path, events = [], []
     n_events = 0
     part_ids = list(sim.parts.qadr) if hasattr(sim.parts, "qadr") else []
@@ -138,8 +139,12 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                     prev = now
                 if sim.seq % 5 == 0:
                     x, y, _ = sim.pose
-                    if walls.collides(fc if sim.held is not None else fp, sim.pose):
+                    outline = fc if sim.held is not None else fp
+                    if walls.collides(outline, sim.pose):  # a wall, a rib or beyond the floor's allowance
                         touched += 1
+                        hit_wall = walls.collides(outline, sim.pose, ignore_floor=True)
+                        off_floor += not hit_wall
+                        hits.append((round(sim.time, 2), round(x, 3), round(y, 3), "wall" if hit_wall else "floor"))
                     if record_path:
                         path.append((round(sim.time, 3), round(x, 4), round(y, 4)))
                     for pid in part_ids:
@@ -164,6 +169,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
             "picks_attempted": cnt.picks + cnt.pick_failures, "pick_failures": cnt.pick_failures,
             "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
             "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "collision_checks_hit": touched,
+            "off_floor_checks": off_floor, "collision_hits": hits,
             "parts_pushed": pushed, "agent_done": agent.mode == "done", "sim_s": sim.time,
             "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
@@ -222,6 +228,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_pick_failures"] = r["pick_failures"]
         out[f"{p}_timeouts"] = r["timeouts"]
         out[f"{p}_collisions"] = r["collision_checks_hit"]
+        if r["collision_checks_hit"]:
+            out[f"{p}_collision_where"] = "; ".join(f"{k} at t {t} s ({x}, {y})" for t, x, y, k in r["collision_hits"])
         out[f"{p}_parts_pushed"] = r["parts_pushed"]
         out[f"{p}_wall_s"] = round(r["wall_s"], 2)
         if "odometry_error_per_m" in r:
