@@ -53,3 +53,17 @@ def test_bad_options_are_config_errors():
     with pytest.raises(ConfigError):
         competition.parse_drive(["warp=9"])
     assert competition.parse_drive(["k_heading=8"]) == {"k_heading": 8.0}
+
+
+def test_the_full_stack_mode_names_itself_and_claims_nothing_it_does_not_measure():
+    """The whole-stack run takes minutes (realtime), so only its summary is tested here."""
+    r = {"round": 1, "seed": 0, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 84.3, "notes": [],
+         "false_start": False, "picks_attempted": 4, "pick_failures": 0, "timeouts": 0, "collision_checks_hit": 0,
+         "parts_pushed": 0, "wall_s": 1.0, "logs": "x"}
+    res = competition.summarize("full_stack", [r])
+    assert res["mode"] == "full_stack" and "EKF" in res["pose_source"]
+    assert not any("collision" in k or "pushed" in k for k in res)  # not measured on the whole stack yet
+    assert res["full_stack_r1_last_score_median_s"] == 84.3
+    assert res["full_stack_r1_last_score_median_target_met"] is False
+    with pytest.raises(ConfigError):  # the node takes no drive settings: refused before anything starts
+        competition.run(args(stack="full", rounds="1", seeds=1, drive=["a_max=0.5"]), None)
