@@ -1,6 +1,5 @@
 """The camera node notices a restarted camera publisher (frames carry no sequence number) by ZMQ's connection
 events: it counts the restart and re-synchronises the stamper's frame counting, keeping the SensorFrames."""
-import socket
 import threading
 import time
 from types import SimpleNamespace
@@ -8,12 +7,7 @@ from types import SimpleNamespace
 import zmq
 
 from robotatfactory.ros.camera_node import CameraBridge
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from rosutil import free_port, wait_until
 
 
 def _cfg(endpoint: str):
@@ -30,15 +24,8 @@ def _publish_until(pub, cam, received: int, timeout: float = 10.0) -> None:
     assert cam.counts["received"] >= received, cam.counts
 
 
-def _until(cond, timeout: float = 5.0) -> bool:
-    end = time.monotonic() + timeout
-    while not cond() and time.monotonic() < end:
-        time.sleep(0.02)
-    return cond()
-
-
 def test_a_restarted_publisher_is_counted_and_resynchronises_the_stamper():
-    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
     cam = CameraBridge(_cfg(endpoint))
     cam.stamper.on_sensor_frame(40, time.monotonic())
     resyncs = []
@@ -61,7 +48,7 @@ def test_a_restarted_publisher_is_counted_and_resynchronises_the_stamper():
         pub.bind(endpoint)
         n = cam.counts["received"]
         _publish_until(pub, cam, n + 3)
-        assert _until(lambda: cam.counts["publisher_restarts"] == 1), cam.counts
+        wait_until(lambda: cam.counts["publisher_restarts"] == 1, 5, what="the restart counted")
         assert resyncs == [1]
         assert len(cam.stamper._tms) == 1  # the SensorFrames are kept
     finally:

@@ -172,7 +172,8 @@ def test_services_with_the_stand_in(ros_master, field, tmp_path):
         assert st.x == pytest.approx(sp.x, abs=0.01) and st.y == pytest.approx(sp.y, abs=0.01)
         assert all(p["type"] for p in json.loads(st.state_json)["parts"])
         assert min(c.clock.to_sec() for c in clock.wait(3, timeout=5)) < 0.5  # /clock went back
-        time.sleep(2.0)
+        wait_until(lambda: len([p for p in _probe_lines(probe_out) if p["wall"] > t_reset + 0.8]) >= 8, 15,
+                   what="8 TF lookups after the reset")
         after = [p for p in _probe_lines(probe_out) if p["wall"] > t_reset + 0.8]
         assert len(after) >= 8 and all(p["ok"] for p in after), after[:3]
         assert all(math.hypot(p["x"] - sp.x, p["y"] - sp.y) < 0.02 for p in after), after[-1]
