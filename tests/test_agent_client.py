@@ -1,6 +1,7 @@
 """The agent's factory-state client against the real competition.FactoryServer on loopback."""
 import socket
 import threading
+import time
 
 import pytest
 
@@ -109,3 +110,27 @@ def test_parsing_is_strict():
     s = FactoryState.from_letters("RGBX", machine_A="XXRX")
     assert s.with_slot(SlotRef("machine_A", 3), None).letters("machine_A") == "XXXX"
     assert not s.same_slots(FactoryState.from_letters("RGBX")) and s.same_slots(s)
+
+
+def test_a_late_reply_to_an_earlier_request_does_not_answer_the_next_one():
+    """The server answers PING late (after the client gave up on it); the next request must get its own
+    answer, not the stale PONG."""
+    srv = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    srv.bind(("127.0.0.1", 0))
+    with FactoryClient("127.0.0.1", srv.getsockname()[1], timeout=0.2, retries=0) as c:
+        with pytest.raises(ServerTimeout):
+            c.request("PING")
+        data, addr = srv.recvfrom(512)
+        srv.sendto(b"PONG", addr)  # the late answer to PING
+        time.sleep(0.1)
+
+        def answer():
+            d, a = srv.recvfrom(512)
+            srv.sendto(b"XXXX" if d == b"IWP" else b"?", a)
+
+        th = threading.Thread(target=answer)
+        th.start()
+        assert c.request("IWP") == "XXXX"
+        th.join()
+        assert c.counters.stray == 1
+    srv.close()

@@ -103,6 +103,7 @@ class FactoryClient:
     def request(self, req: str) -> str:
         """Send ``req`` and return the reply (ASCII, stripped). Retries on timeout; raises ServerTimeout."""
         data = req.encode("ascii")
+        self._drain()  # a late reply to an earlier request must not answer this one
         for _ in range(self.retries + 1):
             self._sock.sendto(data, self.address)
             self.counters.sent += 1
@@ -127,6 +128,18 @@ class FactoryClient:
             self.counters.timeouts += 1
         raise ServerTimeout(f"no reply from the factory-state server at udp {self.address[0]}:{self.address[1]} "
                             f"to {req!r} after {self.retries + 1} tries of {self.timeout:g} s")
+
+    def _drain(self) -> None:
+        """Discard whatever is waiting in the socket (counted as stray)."""
+        self._sock.setblocking(False)
+        try:
+            while True:
+                self._sock.recvfrom(RECV_BUFFER)
+                self.counters.stray += 1
+        except (BlockingIOError, ConnectionRefusedError):
+            pass
+        finally:
+            self._sock.settimeout(self.timeout)
 
     # ------------------------------------------------------------------------------------------ sequence
     def wait_pong(self, limit: float = 10.0) -> None:
