@@ -60,6 +60,7 @@ class AgentNode:
         self.contact = False
         self.twist = (0.0, 0.0)  # (v m/s, w rad/s) from the latest odometry
         self.counts = {"bad_pose": 0, "stale_cycles": 0, "server_errors": 0, "cycles": 0}
+        self._stale_at_diag = 0  # stale_cycles at the last diagnostics report
         self._events_logged = 0
         self._path_sent = None
         self._running = False
@@ -166,7 +167,10 @@ class AgentNode:
 
     def _diagnostics(self) -> DiagnosticArray:
         a = self.agent
-        level = DiagnosticStatus.WARN if self.counts["stale_cycles"] and a.mode not in ("done", "wait_start") else DiagnosticStatus.OK
+        # WARN while inputs went stale since the last report (not for good once they were stale at start-up)
+        stale_now = self.counts["stale_cycles"] - self._stale_at_diag
+        self._stale_at_diag = self.counts["stale_cycles"]
+        level = DiagnosticStatus.WARN if stale_now and a.mode not in ("done", "wait_start") else DiagnosticStatus.OK
         values = {"mode": a.mode, "task": str(a.task), **{k: v for k, v in self.counts.items()},
                   **vars(a.counters)}
         arr = DiagnosticArray()
