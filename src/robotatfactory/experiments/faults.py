@@ -51,6 +51,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..simtwo import Command, ProtocolError
+
 NAME = "faults"
 HELP = "fault campaign (issue 10): fuzz, loss, restarts and soak on the real raf sim, bridge and localization"
 TARGETS = {
@@ -260,13 +262,10 @@ class Proxy:
                 if addr == self.bridge:
                     self.counts["replies"] += 1
                     try:
-                        text = data.decode("ascii")
-                        seq = int(text.split("Seq\r\n", 1)[1].split("\r\n", 1)[0])
-                        v = float(text.split("\r\nV\r\n", 1)[1].split("\r\n", 1)[0])
-                        w = float(text.split("\r\nW\r\n", 1)[1].split("\r\n", 1)[0])
+                        c = Command.decode(data)
                         with self.lock:
-                            self.replies.append((now, seq, v, w))
-                    except (IndexError, ValueError, UnicodeDecodeError):
+                            self.replies.append((now, c.seq, c.v, c.w))
+                    except ProtocolError:
                         pass
                     if self.sim_addr is not None:
                         self._out(1, data, self.sim_addr)

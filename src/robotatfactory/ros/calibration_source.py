@@ -17,25 +17,14 @@ from ..errors import ConfigError
 
 
 def image_to_bgr(msg) -> np.ndarray:
-    """A sensor_msgs/Image (bgr8, rgb8, bgra8, rgba8, mono8) as an HxWx3 BGR (or HxW grey) uint8 array."""
-    import cv2
+    """A sensor_msgs/Image as a BGR (or grey) array (:func:`ros.messages.image_to_bgr`); a bad image is a
+    ConfigError naming it."""
+    from .messages import image_to_bgr as convert
 
-    enc = (msg.encoding or "").lower()
-    ch = {"bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4, "mono8": 1, "8uc1": 1, "8uc3": 3}.get(enc)
-    if ch is None:
-        raise ConfigError(f"image encoding {msg.encoding!r} not supported (bgr8, rgb8, bgra8, rgba8, mono8)")
-    buf = np.frombuffer(bytes(msg.data), dtype=np.uint8)
-    step = int(msg.step) or int(msg.width) * ch
-    if buf.size < step * int(msg.height):
-        raise ConfigError(f"image of {buf.size} bytes is smaller than {msg.height} rows of {step} bytes")
-    a = buf[:step * msg.height].reshape(msg.height, step)[:, :msg.width * ch].reshape(msg.height, msg.width, ch)
-    if enc in ("rgb8",):
-        return cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
-    if enc == "rgba8":
-        return cv2.cvtColor(a, cv2.COLOR_RGBA2BGR)
-    if enc == "bgra8":
-        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
-    return a[:, :, 0] if ch == 1 else a.copy()
+    try:
+        return convert(msg)
+    except ValueError as e:
+        raise ConfigError(f"camera image: {e} (bgr8, rgb8, bgra8, rgba8, mono8 are read)") from None
 
 
 def odom_pose(msg) -> tuple[float, float, float, float]:
