@@ -59,6 +59,17 @@ def test_a_jump_ahead_confirmed_by_a_chain_is_a_gap():
     assert tr.counters.jumps_confirmed == 1 and tr.counters.held == 0
 
 
+def test_a_confirmed_chain_whose_sequence_went_back_is_a_restart_not_a_negative_gap():
+    """Seq back while Tms is not (a simulator restarted with another clock origin): a restart once confirmed,
+    never a gap with a negative number of lost frames."""
+    tr = StreamTracker(max_jump=250, restart_confirm=3)
+    for s in range(101):
+        tr.offer(s, 4000 + (s - 100) * 40, float(s))
+    events = [tr.offer(s, 5000 + (s - 50) * 40, 200.0 + s) for s in (50, 51, 52)]
+    assert events[-1].verdict is Verdict.RESTART
+    assert tr.counters.lost == 0 and tr.counters.restarts == 1
+
+
 def test_a_single_restart_like_frame_does_not_restart_the_stream():
     tr = StreamTracker()
     for s in range(100):

@@ -199,7 +199,7 @@ class StreamTracker:
             for k in kinds[:-1]:  # they were counted as dropped when they came; they belonged to the new stream
                 setattr(c, k, getattr(c, k) - 1)
             start = run[0]
-            if time_ms < last_t:  # the clock went back: the simulator restarted
+            if time_ms < last_t or seq <= last:  # the clock or the sequence went back: the simulator restarted
                 c.restarts += 1
                 return self._accept(Event(Verdict.RESTART, seq, time_ms, from_zero=self.restart_like(*start),
                                           run_length=n), arrival, totals)
