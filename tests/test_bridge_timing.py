@@ -303,7 +303,7 @@ def test_sim_clock_real_time_factor():
 
 import numpy as np  # noqa: E402
 
-from robotatfactory.simtwo.timing import SweepAssembler  # noqa: E402
+from robotatfactory.simtwo.scan import PerRayAssembler as SweepAssembler  # noqa: E402
 
 
 class Ranger:

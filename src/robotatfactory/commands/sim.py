@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
+from ..sim.config import PID_TIMINGS, SPEED_CONTROLS
 
 NAME = "sim"
 HELP = "run the stand-in simulator: MuJoCo physics, SimTwo's UDP/ZMQ protocol, the competition and its server"
@@ -103,10 +104,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "each ray as soon as measured (default sweep)")
     g.add_argument("--no-lidar-self-hits", action="store_true",
                    help="let the LIDAR's rays pass through the robot's own wheels (SimTwo's hit them)")
-    g.add_argument("--speed-control", choices=("simtwo", "simtwo_per_cycle", "ideal_pi"), default="simtwo",
+    g.add_argument("--speed-control", choices=SPEED_CONTROLS, default="simtwo",
                    help="simtwo: SimTwo's CalcPID set once (default); simtwo_per_cycle: its integral reset every "
                         "cycle (SetMotorControllerState each cycle); ideal_pi: the stand-in's own 1 ms PI")
-    g.add_argument("--pid-timing", choices=("script_enabled", "scene_enabled", "script_holds_voltage"),
+    g.add_argument("--pid-timing", choices=PID_TIMINGS,
                    default="script_enabled",
                    help="when SimTwo's PID runs against the script calls: script_enabled (0 V for 9 ms after each "
                         "call, default), scene_enabled or script_holds_voltage (no gap)")

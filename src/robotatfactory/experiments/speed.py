@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..sim.config import PID_TIMINGS, SPEED_CONTROLS
+
 NAME = "speed"
 HELP = "the paper's figure 5: a 0 -> 0.3 m/s cubic Hermite speed reference through ROS cmd_vel, encoder speed vs reference"
 TARGETS = {"speed_rmse_mps": "<= 0.01 m/s (issue 4)"}
@@ -54,9 +56,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--settle", type=float, default=0.5,
                         help="simulation seconds at rest before the reference starts (default 0.5)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed")
-    parser.add_argument("--speed-control", choices=("simtwo", "simtwo_per_cycle", "ideal_pi"), default="simtwo",
+    parser.add_argument("--speed-control", choices=SPEED_CONTROLS, default="simtwo",
                         help="the simulator's wheel speed controller (raf sim --speed-control; default simtwo)")
-    parser.add_argument("--pid-timing", choices=("script_enabled", "scene_enabled", "script_holds_voltage"),
+    parser.add_argument("--pid-timing", choices=PID_TIMINGS,
                         default="script_enabled", help="raf sim --pid-timing (default script_enabled)")
     parser.add_argument("--no-lockstep", dest="lockstep", action="store_false",
                         help="run the simulator free instead of waiting for each reply")

@@ -520,7 +520,7 @@ class SimRunner:
         if not frames:
             return
         bottom_up = self.sim.robot.camera.bottom_up
-        paced = getattr(self.sim.config, "camera_timing", "grid") == "simtwo"
+        paced = self.sim.config.camera_timing == "simtwo"
         if not paced:  # realtime: together, just before the SensorFrame (at its time)
             self._pace(self.sim.time)
         for f in frames:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import time
 from collections import deque
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -183,8 +184,6 @@ class Simulator:
         self._next_frame: ScheduledFrame = next(self._schedule)
         self._frames: list[CameraFrame] = []
         self._renderer: Renderer | None = None
-        self.render_seconds = 0.0  # wall time spent rendering (for benchmarks)
-        self.frames_rendered = 0
         self.render_times: deque[float] = deque(maxlen=10000)  # seconds per camera frame, latest last
 
     def _start_robot(self) -> None:
@@ -762,14 +761,9 @@ class Simulator:
         return self._renderer
 
     def _render_frame(self, sf: ScheduledFrame) -> None:
-        import time as _time
-
-        t0 = _time.perf_counter()
+        t0 = time.perf_counter()
         rgb = self._get_renderer().render(self.data).copy()
-        dt = _time.perf_counter() - t0
-        self.render_seconds += dt
-        self.render_times.append(dt)
-        self.frames_rendered += 1
+        self.render_times.append(time.perf_counter() - t0)
         self._frames.append(CameraFrame(index=sf.index, tick=sf.tick, tick_time=sf.tick_time, time=self.time,
                                         rgb_bottom_up=rgb, wall=sf.wall))
 

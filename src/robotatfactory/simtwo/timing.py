@@ -458,13 +458,3 @@ class SimClock:
         (a0, t0), (a1, t1) = recent[0], recent[-1]
         span = max(now - a0, a1 - a0) if now - a1 < 0.5 else now - a0
         return (t1 - t0) / 1000 / span if span > 0 else 0.0
-
-
-def __getattr__(name: str):
-    """The LIDAR sweep assembly moved to :mod:`robotatfactory.simtwo.scan` (SimTwo's whole-sweep delivery is
-    its default there); the per-ray assembler keeps its former name here, imported on first use (numpy)."""
-    if name in ("SweepAssembler", "Sweep"):
-        from . import scan
-
-        return scan.PerRayAssembler if name == "SweepAssembler" else scan.Sweep
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
