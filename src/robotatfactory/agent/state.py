@@ -10,9 +10,10 @@ from dataclasses import dataclass, replace
 from typing import Optional, Tuple
 
 from ..competition.parts import PartType, letters_of
+from ..competition.server import ZONE_OF
 
 Letters = Tuple[Optional[PartType], Optional[PartType], Optional[PartType], Optional[PartType]]
-ZONE_REQUESTS = {"incoming": "IWP", "outgoing": "OWP", "machine_A": "MAP", "machine_B": "MBP"}
+ZONE_REQUESTS = {zone: req for req, zone in ZONE_OF.items()}  # the server's requests, by zone
 ZONES = tuple(ZONE_REQUESTS)
 
 

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from ..simtwo.ports import SERVER_UDP_PORT
+
 NAME = "agent"
 HELP = "run the autonomous robot: factory-state server, pose from raf localize, cmd_vel and electromagnet out"
 ORDER = 37
@@ -22,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--robot", default="simtwo", help="robot file name or path (default simtwo)")
     parser.add_argument("--server-host", default="127.0.0.1", help="factory-state server host")
-    parser.add_argument("--server-port", type=int, default=44832, help="factory-state server UDP port")
+    parser.add_argument("--server-port", type=int, default=SERVER_UDP_PORT,
+                        help=f"factory-state server UDP port (default {SERVER_UDP_PORT})")
     parser.add_argument("--max-input-age", type=float, default=0.5,
                         help="seconds after which pose/odom count as stale (the robot stops)")
     add_node_arguments(parser, "raf_agent")

@@ -30,6 +30,7 @@ from ..agent.client import FactoryClient, ServerReplyError, ServerTimeout
 from ..agent.predict import extrapolate
 from ..field import load_field
 from ..robot import load_robot
+from ..simtwo.ports import SERVER_UDP_PORT
 from . import messages as rm
 
 SUBSCRIBED = ("pose", "odom", "contact")  # the only inputs; a test checks no other is subscribed
@@ -42,7 +43,7 @@ class AgentNodeConfig:
     field: str = "rules2026"
     robot: str = "simtwo"
     server_host: str = "127.0.0.1"
-    server_port: int = 44832
+    server_port: int = SERVER_UDP_PORT
     max_input_age: float = 0.5
     map_frame: str = "map"
 
