@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..localization.geometry import wrap_angle as wrap  # (-pi, pi], the project's one angle wrap
+
 PLATE_THICKNESS = 0.002  # m the ferromagnetic plate stands proud of the part's front face
 MAGNET_DEPTH = 0.01  # m the electromagnet's housing, behind its face
 MAGNET_WIDTH = 0.02  # m
@@ -96,10 +98,3 @@ def pose_in_front(slot, distance: float) -> tuple[float, float, float]:
     y = slot.xy[1] + distance * math.sin(f)
     return (x, y, wrap(f + math.pi))
 
-
-def wrap(a: float) -> float:
-    """An angle in (-pi, pi] (rad)."""
-    a = math.fmod(a + math.pi, 2 * math.pi)
-    if a <= 0:
-        a += 2 * math.pi
-    return a - math.pi

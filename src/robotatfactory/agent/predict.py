@@ -4,18 +4,11 @@
 """
 from __future__ import annotations
 
-import math
+from ..localization.geometry import compose2, se2_exp
 
 
 def extrapolate(pose: tuple[float, float, float], v: float, w: float, age: float) -> tuple[float, float, float]:
     """The pose (x, y, theta; m, rad) after ``age`` s at speeds (v, w); exact on the arc."""
-    x, y, th = pose
     if age <= 0.0:
-        return (x, y, th)
-    dth = w * age
-    if abs(dth) < 1e-9:
-        return (x + v * age * math.cos(th), y + v * age * math.sin(th), th)
-    r = v / w
-    th2 = th + dth
-    return (x + r * (math.sin(th2) - math.sin(th)), y - r * (math.cos(th2) - math.cos(th)),
-            math.atan2(math.sin(th2), math.cos(th2)))
+        return tuple(pose)
+    return compose2(pose, se2_exp((v * age, 0.0, w * age)))
