@@ -122,7 +122,6 @@ class Lidar:
         self.self_groups = None if self_groups is None else np.asarray(self_groups, dtype=np.uint8)
         self.self_hits: np.ndarray | None = None  # per ray: distance to the robot's own wheels, -1 = none
         self.bodyexclude = -1  # body id the rays never hit (several robots: the robot's own base), -1: none
-        self.rays_cast = 0
         self._dt = float(physics_step)
         self._period = float(spec.period)
         # SimTwo's counters (sweep mode): TimeFromLastMeasure and the number of rays enabled per step
@@ -257,7 +256,6 @@ class Lidar:
                 z = self.rng.standard_normal(m)
                 d = np.maximum(d + z * self.spec.noise_sigma(np.where(valid, d, 0.0)), 0.0)
             vals = np.where(valid, d, -1.0)
-            self.rays_cast += m
         k = 0
         meas = self._measures
         for rays, latch in items:

@@ -74,7 +74,6 @@ class Simulator:
                 eq.solref = [0.01, 1.0]
                 per[pid] = name
             eq_names.append(per)
-        self._eq_names = eq_names[0]
         self.spec = spec
         self.model = m = spec.compile()
         self.data = d = mujoco.MjData(m)
@@ -837,7 +836,6 @@ class RobotUnit(Simulator):
         self._ray_gid = np.zeros(1, dtype=np.int32)
         self._renderer = None
         self.index = k
-        self._eq_names = eq_names
         self._init_robot(names, eq_names, k)
 
     def step_cycle(self, cmd: Command | None = None) -> SensorFrame:
