@@ -787,21 +787,3 @@ def interpolate_odometry(odom: Sequence[tuple[float, float, float, float]], stam
                     float(a[i - 1, 2] + f * (a[i, 2] - a[i - 1, 2])),
                     float(wrap_angle(th[i - 1] + f * (th[i] - th[i - 1])))))
     return out
-
-
-def frames_from_images(images: Iterable[tuple[float, np.ndarray]], fld: Field,
-                       odom: Sequence[tuple[float, float, float, float]] | None = None,
-                       detector=None) -> tuple[list[FrameData], int]:
-    """Detect the field's markers in (stamp, BGR image) pairs; attach interpolated odometry. Returns the
-    frames with at least one known marker and the number of images looked at."""
-    from .detect import DetectorConfig, MarkerDetector
-
-    det = detector or MarkerDetector(DetectorConfig(dictionary=fld.dictionary))
-    kept, n = [], 0
-    for stamp, img in images:
-        n += 1
-        dets = [d for d in det.detect(img) if fld.has_marker(d.id)]
-        if dets:
-            kept.append((float(stamp), dets))
-    o = interpolate_odometry(odom or [], [s for s, _ in kept])
-    return [FrameData(s, d, oo) for (s, d), oo in zip(kept, o)], n
