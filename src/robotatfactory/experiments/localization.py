@@ -27,7 +27,6 @@ logs.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -65,8 +64,8 @@ LABELS = {"odometry": "odometry alone", "closest": "closest marker (paper)", "cl
           "closest marker + mount check", "all_pnp": "all-marker PnP", "planar": "planar fit (mount fixed)",
           "ekf": "EKF (odometry + planar fixes + beacons)"}
 
-#: idealisations of the stand-in for --ideal: (option of raf sim, its value or None, what it does). Each is
-#: applied when ``raf sim`` offers the option (the results list the ones applied and the ones missing).
+#: idealisations of the stand-in for --ideal: (option of raf sim, its value or None, what it does); the results
+#: list the ones applied.
 IDEAL_SIM_OPTIONS = (
     ("--lockstep", None, "lockstep: the simulator waits for the reply to each frame"),
     ("--lockstep-timeout", "2.0", "lockstep timeout"),
@@ -75,7 +74,7 @@ IDEAL_SIM_OPTIONS = (
     ("--no-lidar-self-hits", None, "LIDAR rays pass through the robot's own wheels"),
     ("--speed-control", "ideal_pi", "the project's own speed PI with feed-forward every 1 ms"),
 )
-#: bridge settings for --ideal (``--set KEY=VALUE``), each applied when the bridge has the setting
+#: bridge settings for --ideal (``--set KEY=VALUE``)
 IDEAL_BRIDGE_SETS = (
     ("camera/use_grid", "true", "camera stamps on the render grid"),
     ("camera/bracket", "nearest", "camera frame assigned to the nearer SensorFrame (with the grid: exact stamps)"),
@@ -710,22 +709,6 @@ def tf_tree(env: dict, out_dir: Path, log_dir: Path) -> str:
 # ------------------------------------------------------------------------------------------- run
 
 
-def _known_options(command: str) -> set[str]:
-    """The option strings a ``raf`` subcommand accepts (from its parser, without running it)."""
-    import importlib
-
-    mod = importlib.import_module(f"robotatfactory.commands.{command}")
-    p = argparse.ArgumentParser(add_help=False)
-    mod.add_arguments(p)
-    return {o for a in p._actions for o in a.option_strings}
-
-
-def _has_command(name: str) -> bool:
-    from importlib.util import find_spec
-
-    return find_spec(f"robotatfactory.commands.{name}") is not None
-
-
 def sim_robot(plan: Plan, work: Path):
     """The robot the stand-in simulates (the nominal one with the wheel and camera errors) and its JSON file,
     or (nominal robot, None) when it is the nominal one."""
@@ -760,8 +743,7 @@ class Session:
         self.speed = speed if speed is not None else plan.speed
         self.rec = None
         self.notes: list[str] = []
-        self.applied: list[str] = []  # simulator options applied for the mode
-        self.missing: list[str] = []  # idealisations raf sim does not offer
+        self.applied: list[str] = []  # simulator and bridge options applied for the mode
 
     def __enter__(self):
         return self
@@ -771,60 +753,23 @@ class Session:
             self.rec.stop()
         self.procs.stop_all()
 
-    def _calibration_args(self, command: str) -> list[str]:
-        if self.calibration_file is None:
-            return []
-        if "--calibration" in _known_options(command):
-            return ["--calibration", str(self.calibration_file)]
-        # until the command takes --calibration: the same values through its settings
-        from ..localization.calibration import load_calibration
-
-        cam = load_calibration(self.calibration_file).camera
-        if command == "bridge":
-            out = []
-            for k in ("fx", "fy", "cx", "cy", "pitch_down_deg"):
-                if k in cam:
-                    out += ["--set", f"camera/{k}={cam[k]}"]
-            if "xyz" in cam:
-                out += ["--set", "camera/xyz=[" + ",".join(str(v) for v in cam["xyz"]) + "]"]
-            self.notes.append("bridge: calibration passed as camera settings (raf bridge has no --calibration yet)")
-            return out
-        from ..localization.calibration import calibrated_robot, write_robot_json
-        from ..robot import load_robot
-
-        f = write_robot_json(calibrated_robot(load_robot(), self.calibration_file),
-                             self.log_dir / "robot_calibrated.json")
-        self.notes.append("localize: calibration passed as a robot file (raf localize has no --calibration yet)")
-        return ["--set", f"robot={f}"]
+    def _calibration_args(self) -> list[str]:
+        return [] if self.calibration_file is None else ["--calibration", str(self.calibration_file)]
 
     def _bridge_mode_args(self) -> list[str]:
         if self.plan.mode != "ideal":
             return []
-        from ..ros.config import default_params
-
-        params = default_params()
         out = []
-        for key, val, what in IDEAL_BRIDGE_SETS:
-            d = params
-            for part in key.split("/")[:-1]:
-                d = d.get(part, {}) if isinstance(d, dict) else {}
-            if isinstance(d, dict) and key.split("/")[-1] in d:
-                out += ["--set", f"{key}={val}"]
-                self.applied.append(f"bridge {key}={val}")
-            else:
-                self.missing.append(f"bridge {key} ({what})")
+        for key, val, _what in IDEAL_BRIDGE_SETS:
+            out += ["--set", f"{key}={val}"]
+            self.applied.append(f"bridge {key}={val}")
         return out
 
     def _sim_mode_args(self) -> list[str]:
-        known = _known_options("sim")
-        table = IDEAL_SIM_OPTIONS if self.plan.mode == "ideal" else SIMTWO_SIM_OPTIONS
         out = []
-        for opt, val, what in table:
-            if opt in known:
-                out += [opt] + ([val] if val is not None else [])
-                self.applied.append(opt + (f" {val}" if val is not None else ""))
-            else:
-                self.missing.append(f"{opt} ({what})")
+        for opt, val, _what in IDEAL_SIM_OPTIONS if self.plan.mode == "ideal" else SIMTWO_SIM_OPTIONS:
+            out += [opt] + ([val] if val is not None else [])
+            self.applied.append(opt + (f" {val}" if val is not None else ""))
         return out
 
     def start(self) -> None:
@@ -836,11 +781,11 @@ class Session:
         bport, sport, cport = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM), free_port()
         cam = f"tcp://127.0.0.1:{cport}"
         self.procs.start("bridge", _raf("--field", args.field, "bridge", "--port", str(bport), "--camera", cam,
-                                        "--sim-host", "127.0.0.1", *self._calibration_args("bridge"),
+                                        "--sim-host", "127.0.0.1", *self._calibration_args(),
                                         *self._bridge_mode_args()), env)
         if self.localize:
             loc_args = ["--field", args.field, "localize", "--set", "node/all_methods=true",
-                        *self._calibration_args("localize")]
+                        *self._calibration_args()]
             for s_ in args.set:
                 loc_args += ["--set", s_]
             self.procs.start("localize", _raf(*loc_args), env)
@@ -851,8 +796,7 @@ class Session:
                     "--status-every", "5", *self._sim_mode_args()]
         if not args.no_beacons:
             sim_args.append("--beacons")
-        if "--no-control" in _known_options("sim"):  # SimTwo has no control channel; nor a port clash here
-            sim_args.append("--no-control")
+        sim_args.append("--no-control")  # SimTwo has no control channel; nor a port clash here
         if self.robot_file is not None:
             sim_args += ["--robot", str(self.robot_file)]
         self.procs.start("sim", _raf(*sim_args), env)
@@ -893,14 +837,10 @@ class Session:
 def calibration_drive(args, plan: Plan, master, log_dir: Path, work: Path, robot_file: Path | None, robot,
                       out_dir: Path | None, notes: list) -> tuple[Path | None, dict]:
     """``--calibration auto``: drive the calibration route recording a rosbag of camera/image_raw (every 3rd
-    frame), camera_info and odom, then ``raf calibrate --bag`` on it. Returns the calibration file (None if
-    raf calibrate is not available) and result keys."""
+    frame), camera_info and odom, then ``raf calibrate --bag`` on it. Returns the calibration file and result keys."""
     from ..localization.route import make_route
 
     out: dict = {}
-    if not _has_command("calibrate"):
-        notes.append("calibration: raf calibrate is not available: the drives use the robot file's nominal camera")
-        return None, {"calibration_source": "none (raf calibrate not available)"}
     bag = work / "calibration.bag"  # ~130 MB: deleted with the work directory (the YAML is kept)
     route = make_route("calibration", 1)
     with Session(args, plan, master, log_dir, "calibration", route, robot_file, None, localize=False, bag=bag,
@@ -952,7 +892,7 @@ def run_route(args, plan: Plan, master, log_dir: Path, work: Path, name: str, la
         notes.extend(ses.notes)
         if out_dir is not None and name == plan.routes[0][0]:
             _pictures(args, master, data, out_dir, log_dir, notes)
-        applied, missing = list(ses.applied), list(ses.missing)
+        applied = list(ses.applied)
     if len(data["gt"]) < 10:
         raise RuntimeError(f"{name}: no ground truth recorded: did the simulator and the bridge run? "
                            f"(logs in {log_dir})")
@@ -975,8 +915,6 @@ def run_route(args, plan: Plan, master, log_dir: Path, work: Path, name: str, la
             except ValueError:
                 pass
     out["mode_options"] = " ".join(applied) or "(raf sim and raf bridge defaults)"
-    if missing:
-        out["mode_options_missing"] = "; ".join(missing)
     return out
 
 
