@@ -128,6 +128,9 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(ros_m
 
     def run_and_close():
         try:
+            # the GL context (this thread's) made before the clock starts: its first render takes a few hundred
+            # ms, which would stall the real-time loop and send the next SensorFrames in a burst
+            sim.render_camera()
             runner.run()
         finally:
             sim.close()  # the GL context belongs to this thread
