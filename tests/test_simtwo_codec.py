@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from robotatfactory.simtwo import (FRAME_BYTES, MAX_DATAGRAM, Command, LabelledValues, ProtocolError,
@@ -148,6 +148,9 @@ values = st.text(alphabet="0123456789.-+e ;:,", max_size=30)
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.tuples(labels, values), max_size=20))
 def test_labelled_strings_round_trip_first_wins(items):
+    # a value equal to a label is a line SimTwo's reader (the first line equal to the label) takes for the
+    # label itself: the format cannot carry it, so such inputs are outside the round trip
+    assume(not {v for _, v in items} & {k for k, _ in items})
     expect = {}
     for k, v in items:
         expect.setdefault(k, v)
