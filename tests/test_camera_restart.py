@@ -26,7 +26,9 @@ def _publish_until(pub, cam, received: int, timeout: float = 10.0) -> None:
 
 def test_a_restarted_publisher_is_counted_and_resynchronises_the_stamper():
     endpoint = f"tcp://127.0.0.1:{free_port()}"
-    cam = CameraBridge(_cfg(endpoint))
+    logged = []
+    node = SimpleNamespace(warn=logged.append, error=logged.append, ok=lambda: True, name="/raf_bridge_camera")
+    cam = CameraBridge(_cfg(endpoint), node)
     cam.stamper.on_sensor_frame(40, time.monotonic())
     resyncs = []
     original = cam.stamper.resync_frames
@@ -50,6 +52,7 @@ def test_a_restarted_publisher_is_counted_and_resynchronises_the_stamper():
         _publish_until(pub, cam, n + 3)
         wait_until(lambda: cam.counts["publisher_restarts"] == 1, 5, what="the restart counted")
         assert resyncs == [1]
+        assert any("restarted" in line for line in logged), logged
         assert len(cam.stamper._tms) == 1  # the SensorFrames are kept
     finally:
         cam._running = False

@@ -144,13 +144,37 @@ class FakeSock:
         self.sent.append((Command.decode(data), addr))
 
 
+class LogNode:
+    """The little of a middleware node that frame handling uses: its log lines."""
+
+    name = "/raf_bridge"
+
+    def __init__(self):
+        self.lines = []
+
+    def log(self, level, text, throttle=0.0):
+        self.lines.append((level, text))
+
+    def info(self, text):
+        self.log("info", text)
+
+    def warn(self, text, throttle=0.0):
+        self.log("warn", text)
+
+    def error(self, text):
+        self.log("error", text)
+
+    def ok(self):
+        return True
+
+
 @pytest.fixture
 def bridge(field):
     from robotatfactory.ros.bridge_node import Bridge
     from robotatfactory.ros.config import load_config
 
     b = Bridge(load_config({"camera": {"enabled": False}, "lidar": {"enabled": False},
-                            "stream": {"takeover_after": 2.0}}), field=field)
+                            "stream": {"takeover_after": 2.0}}), LogNode(), field=field)
     b.sock = FakeSock()
     b.bound_port = 9810
     b.published = []
@@ -168,6 +192,7 @@ def test_bridge_binds_the_first_sender_and_ignores_a_second_one(bridge):
     feed(b, SIM, range(5))
     assert b.gate.bound == SIM
     assert [p[0] for p in b.published] == [0, 1, 2, 3, 4]  # the chain that bound it is published, in order
+    assert any(lv == "info" and "stream bound to" in t for lv, t in b.node.lines), b.node.lines
     n_pub, n_sent = len(b.published), len(b.sock.sent)
     feed(b, OTHER, range(100, 110), t0=0.3)  # a second simulator on the same port, a consistent stream
     feed(b, SIM, range(5, 8), t0=0.5)
@@ -288,7 +313,7 @@ def test_sim_takes_commands_from_one_controller(field, robot):
 
 
 def test_nodes_listen_on_loopback_when_the_master_is_local(monkeypatch):
-    from robotatfactory.ros.cli import loopback_ros_default
+    from robotatfactory.ros.mw.ros1 import loopback_ros_default
 
     for uri, ros_ip, expect in (("http://127.0.0.1:11311/", None, "127.0.0.1"),
                                 ("http://localhost:11311/", None, "127.0.0.1"),

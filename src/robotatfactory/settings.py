@@ -54,3 +54,29 @@ def parse_set(items: list[str]) -> dict:
             d = d.setdefault(s, {})
         d[keys[-1]] = yaml.safe_load(v) if v.strip() else ""
     return out
+
+
+def yaml_comments(path: str | Path, sep: str = ".") -> dict:
+    """The end-of-line comments of a block-style YAML settings file by parameter path (``udp.port`` ->
+    "SimTwo scripts send SensorFrames here"): the descriptions ROS 2 parameters are declared with."""
+    out: dict = {}
+    stack: list[tuple[int, str]] = []
+    try:
+        lines = Path(path).read_text().splitlines()
+    except OSError:
+        return out
+    for line in lines:
+        body = line.split(" #", 1)
+        text = body[0].rstrip()
+        if not text.strip() or text.lstrip().startswith("#") or ":" not in text:
+            continue
+        indent = len(text) - len(text.lstrip())
+        key = text.strip().split(":", 1)[0].strip()
+        while stack and stack[-1][0] >= indent:
+            stack.pop()
+        full = sep.join([k for _, k in stack] + [key])
+        if text.rstrip().endswith(":"):  # a section
+            stack.append((indent, key))
+        elif len(body) > 1:
+            out[full] = body[1].strip()
+    return out

@@ -47,7 +47,7 @@ def run(args) -> int:
         return 0
     from ..ros.cli import run_node
 
-    def make_node():
+    def make_node(node):
         from ..ros.agent_node import AgentNode
 
         return AgentNode(cfg).start()

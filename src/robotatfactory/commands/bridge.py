@@ -84,10 +84,10 @@ def run(args) -> int:
         return 0
     from ..ros.cli import run_node
 
-    def make_node():  # imported only once the master is known (--roscore sets ROS_MASTER_URI)
+    def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.bridge_node import Bridge
 
-        return Bridge(cfg).start()
+        return Bridge(cfg, node).start()
 
     return run_node(args, "bridge", cfg.flat_params(), make_node,
                     lambda b: f"{args.name} listening on udp {cfg.bind_host}:{b.bound_port}")

@@ -69,7 +69,7 @@ def run(args) -> int:
         return 0
     from ..ros.cli import run_node
 
-    def make_node():  # imported only once the master is known (--roscore sets ROS_MASTER_URI)
+    def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.localization_node import LocalizationNode
 
         return LocalizationNode(cfg).start()

@@ -203,9 +203,9 @@ def config_from_params(p: dict) -> AgentNodeConfig:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .cli import read_private_params, spin_node
+    from .cli import spin_node
 
-    return spin_node("raf_agent", lambda: AgentNode(config_from_params(read_private_params())).start(), argv)
+    return spin_node("raf_agent", lambda node: AgentNode(config_from_params(node.params())).start(), argv)
 
 
 if __name__ == "__main__":

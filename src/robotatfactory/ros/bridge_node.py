@@ -27,18 +27,14 @@ from collections import deque
 import sys
 import threading
 import time
-import warnings
 
 import numpy as np
-import rospy
-import tf2_ros
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import Bool
-from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from ..localization.odometry import DiffDriveOdometry
@@ -52,8 +48,10 @@ from ..simtwo.selfhits import SelfFilter
 from ..simtwo.timing import SimClock
 from ..simtwo.watchdog import CommandWatchdog
 from . import messages as rm
-from .cli import publish_every, read_private_params, spin_node
-from .config import BridgeConfig, load_config
+from .cli import publish_every, spin_node
+from .config import BridgeConfig, default_params, load_config
+from .mw import QoS
+from .mw.base import OK, WARN, Node
 from .udp import TimestampedUDP
 
 JOINT_NAMES = ("left_wheel_joint", "right_wheel_joint")
@@ -78,10 +76,12 @@ def classify_protocol_error(data: bytes) -> str:
 
 
 class Bridge:
-    """One robot's bridge. ``start()`` opens the sockets and threads, ``stop()`` ends them."""
+    """One robot's bridge on a middleware node (:mod:`.mw`). ``start()`` opens the sockets and threads,
+    ``stop()`` ends them."""
 
-    def __init__(self, cfg: BridgeConfig, field=None):
+    def __init__(self, cfg: BridgeConfig, node: Node, field=None):
         self.cfg = cfg
+        self.node = node
         if field is None:
             from ..field import load_field
 
@@ -130,40 +130,36 @@ class Bridge:
         # the GIL is handed between threads every 5 ms by default: a camera frame being converted would
         # delay the control path (and the arrival times the camera stamping compares) by that much
         sys.setswitchinterval(0.0005)
-        self.pub_clock = rospy.Publisher(t["clock"], Clock, queue_size=10)
-        # odom is the control path: written to the subscribers' sockets in this thread (no hand-over to a
+        node = self.node
+        self.pub_clock = node.publisher(t["clock"], Clock, QoS.RELIABLE, 10)
+        # odom is the control path: written to the subscribers in this thread (ROS 1: no hand-over to a
         # writer thread, which would wait for the GIL while the rest of the frame is published)
-        with warnings.catch_warnings():  # rospy warns about queue_size=None: here it is deliberate
-            warnings.simplefilter("ignore", SyntaxWarning)
-            self.pub_odom = rospy.Publisher(t["odom"], Odometry, queue_size=None)
-        self.pub_gt = rospy.Publisher(t["ground_truth"], Odometry, queue_size=10)
-        self.pub_joints = rospy.Publisher(t["joint_states"], JointState, queue_size=10)
-        self.pub_scan = rospy.Publisher(t["scan"], LaserScan, queue_size=10)
-        self.pub_contact = rospy.Publisher(t["contact"], Bool, queue_size=10)
-        self.pub_magnet = rospy.Publisher(t["magnet_state"], Bool, queue_size=10)
-        self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=10)
-        self.pub_tf = rospy.Publisher("/tf", TFMessage, queue_size=100)
-        self.static_tf = tf2_ros.StaticTransformBroadcaster()
-        self.sub_cmd = rospy.Subscriber(t["cmd_vel"], Twist, self._on_cmd_vel, queue_size=1, tcp_nodelay=True)
-        self.sub_magnet = rospy.Subscriber(t["magnet"], Bool, self._on_magnet, queue_size=1, tcp_nodelay=True)
+        self.pub_odom = node.publisher(t["odom"], Odometry, QoS.SYNCHRONOUS, 10)
+        self.pub_gt = node.publisher(t["ground_truth"], Odometry, QoS.RELIABLE, 10)
+        self.pub_joints = node.publisher(t["joint_states"], JointState, QoS.RELIABLE, 10)
+        self.pub_scan = node.publisher(t["scan"], LaserScan, QoS.SENSOR, 10)
+        self.pub_contact = node.publisher(t["contact"], Bool, QoS.RELIABLE, 10)
+        self.pub_magnet = node.publisher(t["magnet_state"], Bool, QoS.RELIABLE, 10)
+        self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, QoS.RELIABLE, 10)
+        node.subscribe(t["cmd_vel"], Twist, self._on_cmd_vel, QoS.CONTROL, 1)
+        node.subscribe(t["magnet"], Bool, self._on_magnet, QoS.CONTROL, 1)
         self._send_static()
         if cfg.publish_field:
             from .field_markers import field_marker_array
 
-            self.pub_markers = rospy.Publisher(t["field_markers"], MarkerArray, queue_size=1, latch=True)
+            self.pub_markers = node.publisher(t["field_markers"], MarkerArray, QoS.LATCHED, 1)
             self.pub_markers.publish(field_marker_array(self.field, cfg.frames["map"]))
         self._running = True
         if cfg.camera_enabled:
             from .camera_node import CameraLink
 
-            self.camera = CameraLink(cfg.params, f"{rospy.get_name().rsplit('/', 1)[-1]}_camera",
-                                     rospy.get_namespace())
+            self.camera = CameraLink(cfg.params, f"{node.name.rsplit('/', 1)[-1]}_camera", node.namespace)
         self._spawn(self._udp_loop, "udp")
         self._spawn(self._diag_loop, "diagnostics")
         from .sim_services import SimServices
 
         self.sim_services = SimServices(self, cfg.sim_control).start()
-        rospy.loginfo(f"bridge: SensorFrames on udp {cfg.bind_host}:{self.bound_port} from "
+        node.info(f"bridge: SensorFrames on udp {cfg.bind_host}:{self.bound_port} from "
                       f"{'any host' if cfg.sim_host == '*' else cfg.sim_host}, camera "
                       f"{cfg.camera_endpoint if cfg.camera_enabled else 'off'}, field {self.field.name}, "
                       f"frame prefix {cfg.frame_prefix or '(none)'}")
@@ -176,13 +172,13 @@ class Bridge:
 
     def _guard(self, fn):
         """Run a thread body; an unexpected exception is logged and the loop restarts (never dies)."""
-        while self._running and not rospy.is_shutdown():
+        while self._running and self.node.ok():
             try:
                 fn()
                 return
             except Exception as e:  # noqa: BLE001 - a bridge thread must not die
                 if self._running:
-                    rospy.logerr(f"bridge: {fn.__name__} failed: {e!r}; restarting it")
+                    self.node.error(f"bridge: {fn.__name__} failed: {e!r}; restarting it")
                     time.sleep(0.2)
 
     def stop(self) -> None:
@@ -206,8 +202,8 @@ class Bridge:
         if cfg.map_to_odom == "identity":
             tfs.append(rm.transform(cfg.frames["map"], cfg.frames["odom"], np.eye(4)))
         elif map_odom is not None:
-            tfs.append(rm.planar_transform(cfg.frames["map"], cfg.frames["odom"], *map_odom, rospy.Time(0)))
-        self.static_tf.sendTransform(tfs)
+            tfs.append(rm.planar_transform(cfg.frames["map"], cfg.frames["odom"], *map_odom, rm.zero_stamp()))
+        self.node.send_static_tf(tfs)
 
     # ---- commands ----------------------------------------------------------------------------------------
     def _on_cmd_vel(self, msg: Twist) -> None:
@@ -262,12 +258,12 @@ class Bridge:
     def _warn(self, key: str, text: str) -> None:
         suffix = self.log(key)
         if suffix is not None:
-            rospy.logwarn(text + suffix)
+            self.node.warn(text + suffix)
 
     # ---- the control path --------------------------------------------------------------------------------
     def _udp_loop(self) -> None:
         udp = self.udp
-        while self._running and not rospy.is_shutdown():
+        while self._running and self.node.ok():
             try:
                 data, addr, arrival = udp.recv()
             except socket.timeout:
@@ -315,9 +311,9 @@ class Bridge:
                 self._foreign(addr)
             return
         if previous is None:
-            rospy.loginfo(f"bridge: SensorFrame stream bound to {source_key(addr)}")
+            self.node.info(f"bridge: SensorFrame stream bound to {source_key(addr)}")
         else:
-            rospy.logwarn(f"bridge: {source_key(previous)} silent for more than {cfg.takeover_after} s; "
+            self.node.warn(f"bridge: {source_key(previous)} silent for more than {cfg.takeover_after} s; "
                           f"{source_key(addr)} takes over the SensorFrame stream")
         tr.reset()
         for i, (f, a) in enumerate(chain):  # the chain's frames, in order (the earlier ones were held back)
@@ -380,13 +376,13 @@ class Bridge:
         try:
             self.publish_frame(frame, arrival)
             self._published += 1
-        except (rospy.ROSException, ValueError) as e:
+        except Exception as e:  # noqa: BLE001 - a middleware's publish error (ROSException, ...) or a bad value
             self.counts["publish_errors"] += 1
             self._warn("publish", f"bridge: publishing frame Seq {frame.seq} failed: {e}")
 
     def _start_stream(self, ev, frame: SensorFrame) -> None:
         if ev.verdict is Verdict.RESTART:
-            rospy.logwarn(f"bridge: the simulator restarted (Seq {frame.seq}, Tms {frame.time_ms}): resetting "
+            self.node.warn(f"bridge: the simulator restarted (Seq {frame.seq}, Tms {frame.time_ms}): resetting "
                           "odometry, clock and camera stamping")
         if self.camera is not None:
             self.camera.reset()
@@ -410,14 +406,14 @@ class Bridge:
                                           s.pose_cov, s.twist_cov))
         if arrival is not None:
             self.odom_delay.append(time.monotonic() - arrival)
-        self.pub_clock.publish(Clock(stamp))
+        self.pub_clock.publish(Clock(clock=stamp))
         tfs = [rm.wheel_transform(fr["base_link"], fr["left_wheel"], cfg.track / 2, cfg.wheel_radius,
                                   s.left_angle, stamp),
                rm.wheel_transform(fr["base_link"], fr["right_wheel"], -cfg.track / 2, cfg.wheel_radius,
                                   s.right_angle, stamp)]
         if cfg.publish_odom_tf:
             tfs.insert(0, rm.planar_transform(fr["odom"], fr["base_link"], s.x, s.y, s.theta, stamp))
-        self.pub_tf.publish(TFMessage(tfs))
+        self.node.send_tf(tfs)
         # ground truth, with its twist (body frame) from consecutive poses
         v = w = 0.0
         if self._gt_prev is not None:
@@ -431,8 +427,8 @@ class Bridge:
                                         np.zeros((3, 3)), np.zeros((2, 2))))
         self.pub_joints.publish(rm.joint_states(stamp, JOINT_NAMES, (s.left_angle, s.right_angle),
                                                 (s.left_rate, s.right_rate)))
-        self.pub_contact.publish(Bool(f.contact))
-        self.pub_magnet.publish(Bool(f.magnet))
+        self.pub_contact.publish(Bool(data=bool(f.contact)))
+        self.pub_magnet.publish(Bool(data=bool(f.magnet)))
         if cfg.lidar_enabled and len(f.ranges):
             self._publish_scan(f, stamp)
 
@@ -489,17 +485,17 @@ class Bridge:
 
     # ---- diagnostics ---------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:
-        publish_every(self.cfg.diag_period, lambda: self._running and not rospy.is_shutdown(), self.pub_diag,
-                      self.diagnostics, errors=(rospy.ROSException,))
+        publish_every(self.cfg.diag_period, lambda: self._running and self.node.ok(), self.pub_diag,
+                      self.diagnostics, errors=(Exception,))
 
     def diagnostics(self, now: float | None = None) -> DiagnosticArray:
         now = time.monotonic() if now is None else now
         cfg, tr, c = self.cfg, self.tracker, self.counts
-        name = rospy.get_name()
+        name = self.node.name
         hw = f"simtwo@{cfg.sim_host}->udp:{self.bound_port}"
         arr = DiagnosticArray()
         ms = self.clock.time_ms
-        arr.header.stamp = rm.stamp_ms(ms) if ms is not None else rospy.Time(0)
+        arr.header.stamp = rm.stamp_ms(ms) if ms is not None else rm.zero_stamp()
 
         # the SensorFrame stream
         stale = tr.staleness(now)
@@ -535,7 +531,7 @@ class Bridge:
                     "watchdog_stops": c["watchdog_stops"], "cmd_vel_received": c["cmd_vel"],
                     "cmd_vel_rejected": c["cmd_vel_rejected"], "magnet_on": wd.magnet,
                     "v": wd.v, "w": wd.w}
-            level = DiagnosticStatus.WARN if wd.stopping else DiagnosticStatus.OK
+            level = WARN if wd.stopping else OK
             text = (f"watchdog: cmd_vel older than {cfg.watchdog_timeout} s, sending V = W = 0"
                     if wd.stopping else ("following cmd_vel" if wd.have_velocity else "no cmd_vel yet"))
         ss = self.sim_services
@@ -547,7 +543,10 @@ class Bridge:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return spin_node("raf_bridge", lambda: Bridge(load_config(read_private_params())).start(), argv)
+    from .config import describe_param
+
+    return spin_node("raf_bridge", lambda node: Bridge(load_config(node.params(default_params(), describe_param)),
+                                                       node).start(), argv)
 
 
 if __name__ == "__main__":

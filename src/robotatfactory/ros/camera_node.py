@@ -1,6 +1,6 @@
 """The bridge's camera half: ZMQ frames to ``camera/image_raw`` + ``camera/camera_info``, in its own process.
 
-Why a separate process: converting and serialising a 1.2 MB frame in rospy holds Python's GIL for around a
+Why a separate process: converting and serialising a 1.2 MB frame in the middleware holds Python's GIL for around a
 millisecond at a time; in the bridge's process that delay lands on the control path (the Command reply and
 odom). The bridge node starts this node (``<bridge name>_camera``, same namespace) with
 ``python -m robotatfactory.ros.camera_node`` and feeds it, over a local SOCK_SEQPACKET socket pair, the
@@ -32,11 +32,12 @@ RCVHWM = 64  # camera frames queued in ZMQ before it drops any (77 MB at 640x480
 
 
 class CameraBridge:
-    def __init__(self, cfg, timing_sock: socket.socket | None = None):
+    def __init__(self, cfg, node, timing_sock: socket.socket | None = None):
         from ..simtwo.stream import LogLimiter, RateMeter
         from ..simtwo.timing import CameraStamper
 
         self.cfg = cfg
+        self.node = node  # the middleware's node (.mw)
         self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
                                      use_grid=cfg.use_grid, rule=cfg.camera_bracket, latency=cfg.camera_latency)
         self.timing_sock = timing_sock
@@ -57,14 +58,15 @@ class CameraBridge:
         self.parent_gone = threading.Event()
 
     def start(self) -> "CameraBridge":
-        import rospy
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import CameraInfo, Image
 
-        t = self.cfg.topics
-        self.pub_image = rospy.Publisher(t["image"], Image, queue_size=2)
-        self.pub_info = rospy.Publisher(t["camera_info"], CameraInfo, queue_size=2)
-        self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=10)
+        from .mw import QoS
+
+        t, node = self.cfg.topics, self.node
+        self.pub_image = node.publisher(t["image"], Image, QoS.SENSOR, 2)
+        self.pub_info = node.publisher(t["camera_info"], CameraInfo, QoS.SENSOR, 2)
+        self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, QoS.RELIABLE, 10)
         self._running = True
         for fn in (self._rx, self._publish, self._diag_loop) + ((self._timing,) if self.timing_sock else ()):
             th = threading.Thread(target=self._guard, args=(fn,), daemon=True, name=f"raf-camera-{fn.__name__}")
@@ -80,23 +82,19 @@ class CameraBridge:
             th.join(2.0)
 
     def _guard(self, fn):
-        import rospy
-
-        while self._running and not rospy.is_shutdown():
+        while self._running and self.node.ok():
             try:
                 fn()
                 return
             except Exception as e:  # noqa: BLE001 - never die on bad input
                 if self._running:
-                    rospy.logerr(f"camera: {fn.__name__} failed: {e!r}; restarting it")
+                    self.node.error(f"camera: {fn.__name__} failed: {e!r}; restarting it")
                     time.sleep(0.2)
 
     def _warn(self, key, text):
-        import rospy
-
         suffix = self.log(key)
         if suffix is not None:
-            rospy.logwarn(text + suffix)
+            self.node.warn(text + suffix)
 
     # -- the SensorFrame timing from the bridge --------------------------------------------------------------
     def _timing(self) -> None:
@@ -202,7 +200,6 @@ class CameraBridge:
 
     def _publish(self) -> None:
         import numpy as np
-        import rospy
 
         from . import messages as rm
 
@@ -210,7 +207,7 @@ class CameraBridge:
         w, h = cfg.width, cfg.height
         expected = w * h * 4
         frame_id = cfg.frames["camera_optical"]
-        info = rm.camera_info(rospy.Time(0), frame_id, w, h, cfg.fx, cfg.fy, cfg.cx, cfg.cy, cfg.distortion)
+        info = rm.camera_info(rm.zero_stamp(), frame_id, w, h, cfg.fx, cfg.fy, cfg.cx, cfg.cy, cfg.distortion)
         carried = 0  # skipped frames counted with a wrong-sized message, passed on to the next frame
         while self._running:
             with self._cv:
@@ -262,28 +259,28 @@ class CameraBridge:
 
     # -- diagnostics -------------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:
-        import rospy
-
         from .cli import publish_every
 
         publish_every(self.cfg.diag_period, lambda: self._running, self.pub_diag, self.diagnostics,
-                      errors=(rospy.ROSException,))
+                      errors=(Exception,))
 
     def diagnostics(self, now: float | None = None):
-        import rospy
-        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        from . import messages as rm
+        from .mw.base import ERROR, OK, WARN
 
         now = time.monotonic() if now is None else now
         cfg, c = self.cfg, self.counts
         age = self.rate.age(now)
         if age is None:
-            level, text = DiagnosticStatus.WARN, f"no camera frame yet from {cfg.camera_endpoint}"
+            level, text = WARN, f"no camera frame yet from {cfg.camera_endpoint}"
         elif age > cfg.stale_error:
-            level, text = DiagnosticStatus.ERROR, f"stale: no camera frame for {age:.1f} s"
+            level, text = ERROR, f"stale: no camera frame for {age:.1f} s"
         elif age > 4 * cfg.stale_warn:
-            level, text = DiagnosticStatus.WARN, f"no camera frame for {age:.1f} s"
+            level, text = WARN, f"no camera frame for {age:.1f} s"
         else:
-            level, text = DiagnosticStatus.OK, "receiving"
+            level, text = OK, "receiving"
         phase = self.stamper.locked_phase
         vals = {"frame_rate_hz": self.rate.rate(now), "staleness_s": -1.0 if age is None else age,
                 "received": c["received"], "published": c["published"], "skipped": c["skipped"],
@@ -292,11 +289,8 @@ class CameraBridge:
                 "timing_messages": c["timing_messages"]}
         vals.update({f"stamps_{k}": v for k, v in self.stamper.counters.as_dict().items()})
         arr = DiagnosticArray()
-        arr.header.stamp = rospy.Time(0)
-        arr.status = [DiagnosticStatus(level=level, name=f"{rospy.get_name()}: camera", message=text,
-                                       hardware_id=cfg.camera_endpoint,
-                                       values=[KeyValue(k, f"{v:.3f}" if isinstance(v, float) else str(v))
-                                               for k, v in vals.items()])]
+        arr.header.stamp = rm.zero_stamp()
+        arr.status = [rm.diagnostic_status(f"{self.node.name}: camera", level, text, cfg.camera_endpoint, vals)]
         return arr
 
 
@@ -310,7 +304,7 @@ class CameraLink:
         self.parent_sock.setblocking(False)
         self.dropped = 0
         args = [sys.executable, "-m", "robotatfactory.ros.camera_node", "--fd", str(child.fileno()),
-                "--params", json.dumps(params), f"__name:={name}", f"__ns:={namespace or '/'}"]
+                "--params", json.dumps(params), "--name", name, "--ns", namespace or "/"]
         self.proc = subprocess.Popen(args, pass_fds=[child.fileno()])
         child.close()
 
@@ -341,35 +335,37 @@ class CameraLink:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import rospy
-
     from ..errors import ConfigError
     from .config import load_config
+    from .mw import api
 
+    mw = api()
     argv = list(sys.argv if argv is None else argv)
     ap = argparse.ArgumentParser(prog="camera_node", description=__doc__.splitlines()[0])
     ap.add_argument("--fd", type=int, help="SOCK_SEQPACKET socket with the bridge's SensorFrame timing")
     ap.add_argument("--params", default="{}", help="the bridge's parameters as JSON")
-    args = ap.parse_args(rospy.myargv(argv)[1:])
-    rospy.init_node("raf_bridge_camera", argv=argv, disable_signals=True)
+    ap.add_argument("--name", default="raf_bridge_camera", help="node name")
+    ap.add_argument("--ns", default="/", help="node namespace")
+    args = ap.parse_args(mw.myargv(argv)[1:])
+    node = mw.init_node(args.name, argv=[argv[0]], signals=False, namespace=args.ns)
     sys.setswitchinterval(0.0005)
     try:
         cfg = load_config(json.loads(args.params))
     except ConfigError as e:
-        rospy.logfatal(f"camera: {e}")
+        node.fatal(f"camera: {e}")
         return 2
     sock = socket.socket(fileno=args.fd) if args.fd is not None else None
-    cam = CameraBridge(cfg, sock).start()
+    cam = CameraBridge(cfg, node, sock).start()
     ppid = os.getppid()
     try:
-        while not rospy.is_shutdown() and not cam.parent_gone.is_set():
+        while node.ok() and not cam.parent_gone.is_set():
             if sock is not None and os.getppid() != ppid:
                 break
             time.sleep(0.2)
     except KeyboardInterrupt:
         pass
     cam.stop()
-    rospy.signal_shutdown("bridge gone")
+    node.shutdown("bridge gone")
     return 0
 
 

@@ -122,8 +122,36 @@ def merge(defaults: dict, overrides: dict | None, path: tuple[str, ...] = ()) ->
     return out
 
 
+#: The numeric ranges the validation below allows, by parameter path (recorded as it runs): ROS 2 declares
+#: the parameters with them (:func:`describe_param`).
+RANGES: dict[tuple[str, ...], tuple[float, float]] = {}
+
+
+def _note_range(path, lo, hi, big=1e9) -> None:
+    if lo is not None or hi is not None:
+        RANGES[path] = (-big if lo is None else lo, big if hi is None else hi)
+
+
+def describe_param(flat: str) -> tuple[str, tuple[float, float] | None]:
+    """(description, (min, max) or None) of a parameter (``udp.port``): the comment in config/bridge.yaml
+    and the range the validation allows."""
+    from ..settings import yaml_comments
+
+    global _COMMENTS
+    if _COMMENTS is None:
+        from .master import ROOT
+
+        _COMMENTS = yaml_comments(ROOT / "config" / "bridge.yaml")
+        load_config({})  # records RANGES
+    return _COMMENTS.get(flat, ""), RANGES.get(tuple(flat.split(".")))
+
+
+_COMMENTS: dict | None = None
+
+
 def _real(d: dict, path: tuple[str, ...], lo: float | None = None, hi: float | None = None,
           lo_open: bool = False) -> float:
+    _note_range(path, lo, hi)
     v = _get(d, path)
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ConfigError(f"parameter {_name(path)} must be a number, got {v!r}")
@@ -138,6 +166,7 @@ def _real(d: dict, path: tuple[str, ...], lo: float | None = None, hi: float | N
 
 
 def _int(d: dict, path: tuple[str, ...], lo: int | None = None, hi: int | None = None) -> int:
+    _note_range(path, lo, hi, big=2**31 - 1)
     v = _get(d, path)
     if isinstance(v, bool) or not isinstance(v, int):
         if isinstance(v, float) and v.is_integer():

@@ -36,7 +36,7 @@ from ..localization.geometry import inv, matrix_se2, se2_matrix
 from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from . import messages as rm
-from .cli import publish_every, read_private_params, spin_node
+from .cli import publish_every, spin_node
 
 
 class LocalizationNode:
@@ -358,7 +358,7 @@ class LocalizationNode:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return spin_node("raf_localization", lambda: LocalizationNode(from_dict(read_private_params())).start(), argv)
+    return spin_node("raf_localization", lambda node: LocalizationNode(from_dict(node.params())).start(), argv)
 
 
 if __name__ == "__main__":

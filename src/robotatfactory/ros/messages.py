@@ -1,10 +1,13 @@
-"""ROS messages built from the bridge's pure objects. Stamps are simulation time (``Tms``), never wall time."""
+"""ROS messages built from the bridge's pure objects. Stamps are simulation time (``Tms``), never wall time.
+
+Written once for both middlewares (:mod:`.mw`): the message classes have the same Python names in ROS 1 and
+ROS 2; what differs (the time type, CameraInfo's ``K``/``k`` spelling, DiagnosticStatus's byte level,
+positional constructors, which ROS 2 lacks) is handled here, so node files never see it."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
-import rospy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Pose, Quaternion, Transform, TransformStamped, Vector3
 from nav_msgs.msg import Odometry
@@ -14,19 +17,35 @@ COV_FLOOR = 1e-9  # variances never exactly zero (filters invert covariances)
 PLANAR_VAR = 1e-6  # z, roll, pitch of a robot on a flat floor: known, tiny
 
 
-def stamp_ms(ms: int) -> rospy.Time:
-    """Integer milliseconds of simulation time to a rospy.Time (exact)."""
-    ms = int(ms)
-    return rospy.Time(ms // 1000, (ms % 1000) * 1_000_000)
+from .mw import api
+from .mw.base import level_int, stamp_ns, stamp_s as stamp_to_s  # noqa: F401  (re-exported)
+
+_time_msg = None
 
 
-def stamp_s(t: float) -> rospy.Time:
-    ns = int(round(t * 1e9))
-    return rospy.Time(ns // 1_000_000_000, ns % 1_000_000_000)
+def stamp_from_ns(ns: int):
+    """Nanoseconds to the middleware's time message (rospy.Time / builtin_interfaces/Time)."""
+    global _time_msg
+    if _time_msg is None:
+        _time_msg = api().time_msg
+    return _time_msg(ns)
+
+
+def stamp_ms(ms: int):
+    """Integer milliseconds of simulation time to a stamp (exact)."""
+    return stamp_from_ns(int(ms) * 1_000_000)
+
+
+def stamp_s(t: float):
+    return stamp_from_ns(int(round(t * 1e9)))
+
+
+def zero_stamp():
+    return stamp_from_ns(0)
 
 
 def yaw_quaternion(theta: float) -> Quaternion:
-    return Quaternion(0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2))
+    return Quaternion(x=0.0, y=0.0, z=math.sin(theta / 2), w=math.cos(theta / 2))
 
 
 def quaternion_yaw(q: Quaternion) -> float:
@@ -38,26 +57,27 @@ def matrix_quaternion(R: np.ndarray) -> Quaternion:
     from scipy.spatial.transform import Rotation
 
     x, y, z, w = Rotation.from_matrix(np.asarray(R)[:3, :3]).as_quat()
-    return Quaternion(float(x), float(y), float(z), float(w))
+    return Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
 
 
-def transform(parent: str, child: str, T: np.ndarray, stamp: rospy.Time | None = None) -> TransformStamped:
+def transform(parent: str, child: str, T: np.ndarray, stamp=None) -> TransformStamped:
     """A TransformStamped parent <- child from a 4x4 homogeneous matrix."""
     m = TransformStamped()
-    m.header.stamp = stamp or rospy.Time(0)
+    m.header.stamp = stamp if stamp is not None else zero_stamp()
     m.header.frame_id = parent
     m.child_frame_id = child
-    m.transform = Transform(Vector3(*map(float, T[:3, 3])), matrix_quaternion(T[:3, :3]))
+    x, y, z = (float(v) for v in T[:3, 3])
+    m.transform = Transform(translation=Vector3(x=x, y=y, z=z), rotation=matrix_quaternion(T[:3, :3]))
     return m
 
 
-def planar_transform(parent: str, child: str, x: float, y: float, theta: float, stamp: rospy.Time,
+def planar_transform(parent: str, child: str, x: float, y: float, theta: float, stamp,
                      z: float = 0.0) -> TransformStamped:
     m = TransformStamped()
     m.header.stamp = stamp
     m.header.frame_id = parent
     m.child_frame_id = child
-    m.transform.translation = Vector3(x, y, z)
+    m.transform.translation = Vector3(x=float(x), y=float(y), z=float(z))
     m.transform.rotation = yaw_quaternion(theta)
     return m
 
@@ -68,8 +88,8 @@ def wheel_transform(parent: str, child: str, y: float, radius: float, angle: flo
     m.header.stamp = stamp
     m.header.frame_id = parent
     m.child_frame_id = child
-    m.transform.translation = Vector3(0.0, y, radius)
-    m.transform.rotation = Quaternion(0.0, math.sin(angle / 2), 0.0, math.cos(angle / 2))
+    m.transform.translation = Vector3(x=0.0, y=float(y), z=float(radius))
+    m.transform.rotation = Quaternion(x=0.0, y=math.sin(angle / 2), z=0.0, w=math.cos(angle / 2))
     return m
 
 
@@ -104,11 +124,11 @@ def odometry(stamp, frame: str, child: str, x: float, y: float, theta: float, v:
     m.header.frame_id = frame
     m.child_frame_id = child
     p = m.pose.pose
-    p.position.x, p.position.y = x, y
+    p.position.x, p.position.y = float(x), float(y)
     p.orientation = yaw_quaternion(theta)
     m.pose.covariance = pose_cov6(pose_cov)
-    m.twist.twist.linear.x = v
-    m.twist.twist.angular.z = w
+    m.twist.twist.linear.x = float(v)
+    m.twist.twist.angular.z = float(w)
     m.twist.covariance = _twist_cov6(twist_cov)
     return m
 
@@ -151,11 +171,26 @@ def camera_info(stamp, frame: str, width: int, height: int, fx: float, fy: float
     m.header.frame_id = frame
     m.width, m.height = width, height
     m.distortion_model = "plumb_bob"
-    m.D = [float(v) for v in D] if D is not None else [0.0] * 5
-    m.K = [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]
-    m.R = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-    m.P = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    fx, fy, cx, cy = float(fx), float(fy), float(cx), float(cy)
+    set_camera_matrices(m, [float(v) for v in D] if D is not None else [0.0] * 5,
+                        [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                        [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
     return m
+
+
+def set_camera_matrices(m: CameraInfo, D, K, R, P) -> None:
+    """CameraInfo's matrices: ``D K R P`` in ROS 1, ``d k r p`` in ROS 2."""
+    if hasattr(m, "k"):
+        m.d, m.k, m.r, m.p = D, K, R, P
+    else:
+        m.D, m.K, m.R, m.P = D, K, R, P
+
+
+def camera_matrices(m: CameraInfo) -> tuple:
+    """(D, K, R, P) of a CameraInfo of either middleware, as lists."""
+    if hasattr(m, "k"):
+        return list(m.d), list(m.k), list(m.r), list(m.p)
+    return list(m.D), list(m.K), list(m.R), list(m.P)
 
 
 def image_bgr8(stamp, frame: str, data: bytes, width: int, height: int) -> Image:
@@ -205,5 +240,7 @@ def pose_from_matrix(T: np.ndarray) -> Pose:
 def diagnostic_status(name: str, level: int, message: str, hardware_id: str, values: dict,
                       real_format: str = ".3f") -> DiagnosticStatus:
     """A DiagnosticStatus whose values are ``{key: number or text}``, reals written with ``real_format``."""
-    kv = [KeyValue(str(k), format(v, real_format) if isinstance(v, float) else str(v)) for k, v in values.items()]
-    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id, values=kv)
+    kv = [KeyValue(key=str(k), value=format(v, real_format) if isinstance(v, float) else str(v))
+          for k, v in values.items()]
+    return DiagnosticStatus(level=api().diag_level(level_int(level)), name=name, message=message,
+                            hardware_id=hardware_id, values=kv)

@@ -22,13 +22,9 @@ import math
 import threading
 import time
 
-import rospy
-
 from ..sim.control import ControlClient
 from ..simtwo.teleport import TeleportSender
-from ..srv import (GetSimulationState, GetSimulationStateResponse, PlacePart, PlacePartResponse, ResetSimulation,
-                   ResetSimulationResponse, SetRobotPose, SetRobotPoseResponse, StepSimulation,
-                   StepSimulationResponse, Trigger, TriggerResponse)
+from .mw import api
 
 SERVICES = ("reset", "pause", "resume", "step", "set_robot_pose", "place_part", "get_state")
 SIMTWO_SERVICES = ("reset", "set_robot_pose", "place_part", "get_state")
@@ -55,20 +51,21 @@ class SimServices:
 
     # ------------------------------------------------------------------------------------------ setup
     def start(self) -> "SimServices":
-        ns = self.namespace
-        for name, typ, fn in (("reset", ResetSimulation, self._reset), ("pause", Trigger, self._pause),
-                              ("resume", Trigger, self._resume), ("step", StepSimulation, self._step),
-                              ("set_robot_pose", SetRobotPose, self._set_robot_pose),
-                              ("place_part", PlacePart, self._place_part),
-                              ("get_state", GetSimulationState, self._get_state)):
-            self.services.append(rospy.Service(f"{ns}/{name}", typ, fn))
+        ns, srv, node = self.namespace, api().srv_types(), self.bridge.node
+        for name, typ, fn in (("reset", srv.ResetSimulation, self._reset), ("pause", srv.Trigger, self._pause),
+                              ("resume", srv.Trigger, self._resume), ("step", srv.StepSimulation, self._step),
+                              ("set_robot_pose", srv.SetRobotPose, self._set_robot_pose),
+                              ("place_part", srv.PlacePart, self._place_part),
+                              ("get_state", srv.GetSimulationState, self._get_state)):
+            self.services.append(node.service(f"{ns}/{name}", typ, fn))
         # the first probe in the background: the node's start-up does not wait for a simulator's answer
         threading.Thread(target=self.probe, kwargs={"log": True}, name="raf-sim-services-probe", daemon=True).start()
         return self
 
     def shutdown(self) -> None:
         for s in self.services:
-            s.shutdown()
+            if hasattr(s, "shutdown"):  # ROS 1; ROS 2's go with their node
+                s.shutdown()
 
     def probe(self, log: bool = False) -> str:
         """Which simulator is connected: the stand-in when its control channel answers, else SimTwo."""
@@ -83,10 +80,10 @@ class SimServices:
             where = (f"control channel udp {self.client.address[0]}:{self.client.address[1]}"
                      if self.client else "no control channel configured")
             if kind == STANDIN:
-                rospy.loginfo(f"bridge: simulation services {self.namespace}/*: the stand-in ({where}) supports "
+                self.bridge.node.info(f"bridge: simulation services {self.namespace}/*: the stand-in ({where}) supports "
                               f"all: {', '.join(SERVICES)}")
             else:
-                rospy.loginfo(f"bridge: simulation services {self.namespace}/*: SimTwo assumed ({where}: no "
+                self.bridge.node.info(f"bridge: simulation services {self.namespace}/*: SimTwo assumed ({where}: no "
                               f"answer): supported {', '.join(SIMTWO_SERVICES)} (reset: the robot only) through "
                               f"the Command datagram's teleport labels (simtwo/control.pas); pause, resume, step: "
                               "not supported")
@@ -133,7 +130,7 @@ class SimServices:
             time.sleep(0.01)
 
     # ------------------------------------------------------------------------------------------ services
-    def _reset(self, req):
+    def _reset(self, req, resp):
         kind = self.probe()
         if kind == STANDIN:
             fields = {}
@@ -149,16 +146,16 @@ class SimServices:
             ok, msg, r = self._call("reset", **fields)
             if not ok:
                 self.bridge.expect_restart(False)
-                return ResetSimulationResponse(False, msg)
+                return _answer(resp, False, msg)
             self.bridge._reset_commands()
             if r.get("paused"):
-                return ResetSimulationResponse(True, "reset (paused: the new stream starts at the next step or "
+                return _answer(resp, True, "reset (paused: the new stream starts at the next step or "
                                                      "resume)")
             ok = self.bridge.wait_restarted(3.0)
-            return ResetSimulationResponse(ok, "reset: the new stream is published" if ok else
+            return _answer(resp, ok, "reset: the new stream is published" if ok else
                                            "reset done, but no frame of the new stream within 3 s")
         if req.round or req.set_seed or req.parts:
-            return ResetSimulationResponse(False, "SimTwo resets the robot only (round, seed and parts: restart "
+            return _answer(resp, False, "SimTwo resets the robot only (round, seed and parts: restart "
                                                   "the scene in SimTwo)")
         sp = self.bridge.field.start_pose
         x, y, th = (req.x, req.y, req.theta) if req.set_start_pose else (sp.x, sp.y, sp.theta)
@@ -168,39 +165,39 @@ class SimServices:
             self.bridge.expect_restart(True, odometry_only=True)
             ok = self.bridge.wait_restarted(2.0)
             msg = "robot reset, odometry restarted: " + msg if ok else "robot moved, but no frame since"
-        return ResetSimulationResponse(ok, msg)
+        return _answer(resp, ok, msg)
 
-    def _pause(self, req):
+    def _pause(self, req, resp):
         if self.probe() != STANDIN:
-            return TriggerResponse(False, self._unsupported("pause"))
+            return _answer(resp, False, self._unsupported("pause"))
         ok, msg, r = self._call("pause")
-        return TriggerResponse(ok, msg or f"paused at t = {r['time']:.3f} s")
+        return _answer(resp, ok, msg or f"paused at t = {r['time']:.3f} s")
 
-    def _resume(self, req):
+    def _resume(self, req, resp):
         if self.probe() != STANDIN:
-            return TriggerResponse(False, self._unsupported("resume"))
+            return _answer(resp, False, self._unsupported("resume"))
         ok, msg, r = self._call("resume")
-        return TriggerResponse(ok, msg or f"running from t = {r['time']:.3f} s")
+        return _answer(resp, ok, msg or f"running from t = {r['time']:.3f} s")
 
-    def _step(self, req):
+    def _step(self, req, resp):
         if self.probe() != STANDIN:
-            return StepSimulationResponse(False, self._unsupported("step"))
+            return _answer(resp, False, self._unsupported("step"))
         ok, msg, r = self._call("step", cycles=int(req.steps))
-        return StepSimulationResponse(ok, msg or f"stepped to Seq {r['seq']}, t = {r['time']:.3f} s")
+        return _answer(resp, ok, msg or f"stepped to Seq {r['seq']}, t = {r['time']:.3f} s")
 
-    def _set_robot_pose(self, req):
+    def _set_robot_pose(self, req, resp):
         if self.probe() == STANDIN:
             ok, msg, r = self._call("set_robot_pose", x=req.x, y=req.y, theta=req.theta)
-            return SetRobotPoseResponse(ok, msg or "robot at ({:.3f}, {:.3f}, {:.3f})".format(*r["pose"]))
+            return _answer(resp, ok, msg or "robot at ({:.3f}, {:.3f}, {:.3f})".format(*r["pose"]))
         if not self.bridge.field.floor.contains(req.x, req.y):
-            return SetRobotPoseResponse(False, f"out_of_field: ({req.x:g}, {req.y:g}) is not on the floor")
-        return SetRobotPoseResponse(*self._teleport(req.x, req.y, req.theta))
+            return _answer(resp, False, f"out_of_field: ({req.x:g}, {req.y:g}) is not on the floor")
+        return _answer(resp, *self._teleport(req.x, req.y, req.theta))
 
-    def _place_part(self, req):
+    def _place_part(self, req, resp):
         if self.probe() == STANDIN:
             if req.remove:
                 ok, msg, r = self._call("remove_part", part=int(req.part))
-                return PlacePartResponse(ok, msg or f"part {req.part} removed")
+                return _answer(resp, ok, msg or f"part {req.part} removed")
             fields = {"part": int(req.part)}
             if req.slot:
                 fields["slot"] = req.slot
@@ -209,37 +206,38 @@ class SimServices:
             if req.type:
                 fields["type"] = req.type
             ok, msg, r = self._call("place_part", **fields)
-            return PlacePartResponse(ok, msg or "part {} at ({:.3f}, {:.3f}, {:.3f})".format(req.part, *r["part_pose"]))
+            return _answer(resp, ok, msg or "part {} at ({:.3f}, {:.3f}, {:.3f})".format(req.part, *r["part_pose"]))
         if req.type:
-            return PlacePartResponse(False, "SimTwo cannot recolour a part (type must be empty)")
+            return _answer(resp, False, "SimTwo cannot recolour a part (type must be empty)")
         if req.part < 1:
-            return PlacePartResponse(False, f"unknown_part: {req.part} (SimTwo's parts are Part1..Part4)")
+            return _answer(resp, False, f"unknown_part: {req.part} (SimTwo's parts are Part1..Part4)")
         field = self.bridge.field
         if req.remove:
             x, y, facing = field.floor.x[1] + 20.0 + 0.5 * req.part, field.floor.y[0], 0.0
         elif req.slot:
             slots = {s.name: s for s in field.slots}
             if req.slot not in slots:
-                return PlacePartResponse(False, f"unknown_slot: {req.slot!r}")
+                return _answer(resp, False, f"unknown_slot: {req.slot!r}")
             s = slots[req.slot]
             x, y, facing = s.xy[0], s.xy[1], s.facing
         else:
             if not field.floor.contains(req.x, req.y):
-                return PlacePartResponse(False, f"out_of_field: ({req.x:g}, {req.y:g}) is not on the floor")
+                return _answer(resp, False, f"out_of_field: ({req.x:g}, {req.y:g}) is not on the floor")
             x, y, facing = req.x, req.y, req.facing
-        return PlacePartResponse(*self._teleport(x, y, math.remainder(facing + math.pi / 2, 2 * math.pi),
+        return _answer(resp, *self._teleport(x, y, math.remainder(facing + math.pi / 2, 2 * math.pi),
                                                  SIMTWO_PART_Z, f"{SIMTWO_PART_PREFIX}{int(req.part)}"))
 
-    def _get_state(self, req):
+    def _get_state(self, req, resp):
         kind = self.probe()
-        out = GetSimulationStateResponse(success=True, simulator=kind, supported=self.supported())
+        out = resp
+        out.success, out.simulator, out.supported = True, kind, self.supported()
         if kind == STANDIN:
             ok, msg, r = self._call("get_state")
             if not ok:
-                return GetSimulationStateResponse(success=False, message=msg, simulator=kind,
-                                                  supported=self.supported())
+                out.success, out.message = False, msg
+                return out
             out.paused, out.time, out.seq = bool(r["paused"]), float(r["time"]), int(r["seq"])
-            out.x, out.y, out.theta = r["pose"]
+            out.x, out.y, out.theta = (float(v) for v in r["pose"])
             out.state_json = json.dumps(r)
             out.message = "stand-in: " + ("paused" if out.paused else "running")
             return out
@@ -248,7 +246,13 @@ class SimServices:
         if gt is None:
             out.message = "SimTwo: no SensorFrame yet"
             return out
-        out.time, out.x, out.y, out.theta = gt
+        out.time, out.x, out.y, out.theta = (float(v) for v in gt)
         out.seq = tr.last_seq if tr.last_seq is not None else 0
         out.message = "SimTwo: from the last SensorFrame (pause state unknown)"
         return out
+
+
+def _answer(resp, success: bool, message: str):
+    """Fill a response with ``success`` and ``message`` fields."""
+    resp.success, resp.message = bool(success), str(message)
+    return resp

@@ -1,0 +1,178 @@
+"""The node interface both middlewares implement (:mod:`.ros1`, :mod:`.ros2`), and what they share.
+
+Nodes state *intents*, each middleware maps them to its own means:
+
+==============  =======================================  ==================================================
+QoS             ROS 1 (rospy)                            ROS 2 (rclpy)
+==============  =======================================  ==================================================
+``SENSOR``      queue ``depth``                          best effort, volatile, keep last ``depth``
+``RELIABLE``    queue ``depth``                          reliable, volatile, keep last ``depth``
+``CONTROL``     queue 1, ``tcp_nodelay``                 reliable, keep last 1 (commands: latest wins)
+``LATCHED``     ``latch=True``                           reliable, transient local, keep last 1 (the map,
+                                                         ``/tf_static``)
+``SYNCHRONOUS`` ``queue_size=None``: written in the      reliable, keep last ``depth`` (rclpy's publish is
+                caller's thread (the control path)       synchronous already)
+==============  =======================================  ==================================================
+
+Stamps are the middleware's own time message (``rospy.Time`` / ``builtin_interfaces/Time``); build them with
+the implementation's ``time_msg(ns)`` and read them with ``stamp_ns(stamp)`` (which reads either kind).
+
+An implementation module also provides (module level): ``NAME``, ``time_msg(ns)``, ``duration_msg(s)``,
+``diag_level(level)``, ``srv_types()``, ``init_node(...) -> Node``, ``run_node(...)`` (a node from the
+command line) and ``spin_node(...)`` (a node's ``main`` under a launch file).
+"""
+from __future__ import annotations
+
+import enum
+from abc import ABC, abstractmethod
+from typing import Any, Callable
+
+
+class QoS(enum.Enum):
+    SENSOR = "sensor"
+    RELIABLE = "reliable"
+    CONTROL = "control"
+    LATCHED = "latched"
+    SYNCHRONOUS = "synchronous"
+
+
+# diagnostic_msgs/DiagnosticStatus levels as plain ints (ROS 2 spells them as bytes: see diag_level)
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+
+
+def stamp_ns(stamp) -> int:
+    """Nanoseconds of a ROS 1 (``secs``/``nsecs``) or ROS 2 (``sec``/``nanosec``) time message."""
+    if hasattr(stamp, "nanosec"):
+        return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return int(stamp.secs) * 1_000_000_000 + int(stamp.nsecs)
+
+
+def stamp_s(stamp) -> float:
+    return stamp_ns(stamp) * 1e-9
+
+
+def level_int(level) -> int:
+    """A DiagnosticStatus level (int in ROS 1, one byte in ROS 2) as an int."""
+    return level[0] if isinstance(level, (bytes, bytearray)) else int(level)
+
+
+def flatten(tree: dict, sep: str, prefix: str = "") -> dict:
+    """``{"udp": {"port": 1}}`` -> ``{"udp<sep>port": 1}``."""
+    out = {}
+    for k, v in tree.items():
+        key = f"{prefix}{sep}{k}" if prefix else str(k)
+        if isinstance(v, dict) and v:
+            out.update(flatten(v, sep, key))
+        else:
+            out[key] = v
+    return out
+
+
+def unflatten(flat: dict, sep: str) -> dict:
+    out: dict = {}
+    for key, v in flat.items():
+        parts = key.split(sep)
+        d = out
+        for p in parts[:-1]:
+            d = d.setdefault(p, {})
+        d[parts[-1]] = v
+    return out
+
+
+class Publisher(ABC):
+    @abstractmethod
+    def publish(self, msg) -> None: ...
+
+    @abstractmethod
+    def subscriber_count(self) -> int: ...
+
+
+class Node(ABC):
+    """One node of one middleware. Topic and service names resolve against the node's namespace (a
+    leading ``/`` makes them global, ``~`` private), as in both ROS generations."""
+
+    middleware: str = ""
+
+    # -- identity ------------------------------------------------------------------------------------
+    @property
+    @abstractmethod
+    def name(self) -> str:
+        """The fully qualified node name (``/robot1/raf_bridge``)."""
+
+    @property
+    @abstractmethod
+    def namespace(self) -> str:
+        """The node's namespace (``/`` or ``/robot1``)."""
+
+    @abstractmethod
+    def resolve(self, name: str) -> str:
+        """A topic or service name resolved against the node's namespace."""
+
+    # -- communication -------------------------------------------------------------------------------
+    @abstractmethod
+    def publisher(self, topic: str, msg_type, qos: QoS = QoS.RELIABLE, depth: int = 10) -> Publisher: ...
+
+    @abstractmethod
+    def subscribe(self, topic: str, msg_type, callback: Callable[[Any], None], qos: QoS = QoS.RELIABLE,
+                  depth: int = 10, large: bool = False):
+        """Subscribe; ``large``: messages of megabytes (images: ROS 1 grows its receive buffer)."""
+
+    @abstractmethod
+    def service(self, name: str, srv_type, handler: Callable[[Any, Any], Any]):
+        """Serve ``name``; ``handler(request, response)`` fills and returns the response."""
+
+    @abstractmethod
+    def timer(self, period: float, callback: Callable[[], None]):
+        """Call ``callback()`` every ``period`` seconds of the node's clock (simulation time under sim time)."""
+
+    # -- TF --------------------------------------------------------------------------------------------
+    @abstractmethod
+    def send_tf(self, transforms: list) -> None:
+        """Publish TransformStamped messages on ``/tf``."""
+
+    @abstractmethod
+    def send_static_tf(self, transforms: list) -> None:
+        """Publish on latched ``/tf_static``; transforms with a child frame sent before replace the old one."""
+
+    # -- time ------------------------------------------------------------------------------------------
+    @abstractmethod
+    def now(self):
+        """The node clock's time as a stamp message (simulation time under sim time; zero before /clock)."""
+
+    def now_s(self) -> float:
+        return stamp_s(self.now())
+
+    # -- parameters ------------------------------------------------------------------------------------
+    @abstractmethod
+    def params(self, defaults: dict | None = None, describe: Callable[[str], tuple] | None = None) -> dict:
+        """The node's private parameters as a nested dict. ROS 2 declares every leaf of ``defaults`` first
+        (``udp.port``; ``describe(flat_name)`` -> (description, (min, max) or None)) so that
+        ``ros2 param describe`` shows them; ROS 1 reads ``~`` as it is."""
+
+    # -- logging and life --------------------------------------------------------------------------------
+    @abstractmethod
+    def log(self, level: str, text: str, throttle: float = 0.0) -> None:
+        """``level`` in debug, info, warn, error, fatal; ``throttle`` s: at most one such line that often."""
+
+    def info(self, text: str) -> None:
+        self.log("info", text)
+
+    def warn(self, text: str, throttle: float = 0.0) -> None:
+        self.log("warn", text, throttle)
+
+    def error(self, text: str) -> None:
+        self.log("error", text)
+
+    def fatal(self, text: str) -> None:
+        self.log("fatal", text)
+
+    @abstractmethod
+    def ok(self) -> bool:
+        """False once the node is shutting down."""
+
+    @abstractmethod
+    def shutdown(self, reason: str = "") -> None: ...
+
+    @abstractmethod
+    def spin(self) -> None:
+        """Serve callbacks until shutdown."""

@@ -1,0 +1,343 @@
+"""The node interface on ROS 2 Jazzy (rclpy from the ``ros-jazzy-*`` PyPI wheels, ``.venv-ros2``).
+
+Callbacks run on a multi-threaded executor in one reentrant callback group, as rospy runs each
+subscription in a thread of its own: a slow image callback never holds up odometry. Parameters are
+declared (name ``udp.port``, the type of the default, a description, a range where one is known) before
+they are read, so ``ros2 param list/describe`` shows every one. Discovery stays on this machine unless
+``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from typing import Callable
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+import rclpy  # noqa: E402
+from builtin_interfaces.msg import Duration, Time  # noqa: E402
+from rclpy.callback_groups import ReentrantCallbackGroup  # noqa: E402
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # noqa: E402
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+
+from ...errors import ConfigError  # noqa: E402
+from .base import Node, Publisher, QoS, flatten, unflatten  # noqa: E402
+
+NAME = "ros2"
+
+
+def time_msg(ns: int) -> Time:
+    ns = int(ns)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def duration_msg(s: float) -> Duration:
+    ns = int(round(s * 1e9))
+    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def diag_level(level: int) -> bytes:
+    return bytes([int(level)])
+
+
+def srv_types():
+    """The package's service types: ``robotatfactory_msgs`` (built by scripts/bootstrap_ros2.sh from srv/*.srv)
+    and std_srvs' Trigger."""
+    import types
+
+    import robotatfactory_msgs.srv as own
+    from std_srvs.srv import Trigger
+
+    ns = types.SimpleNamespace(**{k: getattr(own, k) for k in dir(own) if not k.startswith("_")})
+    if not hasattr(ns, "Trigger"):
+        ns.Trigger = Trigger
+    return ns
+
+
+def qos_profile(qos: QoS, depth: int = 10) -> QoSProfile:
+    depth = max(1, int(depth or 10))
+    if qos is QoS.SENSOR:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.VOLATILE)
+    if qos is QoS.LATCHED:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    if qos is QoS.CONTROL:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def subscriber_qos(qos: QoS, depth: int = 10) -> QoSProfile:
+    """What a subscriber asks for: best effort for sensor data (it then matches reliable publishers too),
+    transient local for latched topics, reliable otherwise."""
+    return qos_profile(qos, depth)
+
+
+class _Pub(Publisher):
+    def __init__(self, pub):
+        self._pub = pub
+
+    def publish(self, msg) -> None:
+        self._pub.publish(msg)
+
+    def subscriber_count(self) -> int:
+        return self._pub.get_subscription_count()
+
+
+class Ros2Node(Node):
+    middleware = NAME
+
+    def __init__(self, node: "rclpy.node.Node"):
+        self.node = node
+        self.group = ReentrantCallbackGroup()
+        self._shutdown = threading.Event()
+        self._lock = threading.Lock()
+        self._tf_pub = None
+        self._static_pub = None
+        self._static: dict = {}
+        self._keep: list = []
+        self.executor: MultiThreadedExecutor | None = None
+
+    @property
+    def name(self) -> str:
+        return self.node.get_fully_qualified_name()
+
+    @property
+    def namespace(self) -> str:
+        return self.node.get_namespace()
+
+    def resolve(self, name: str) -> str:
+        return self.node.resolve_topic_name(name)
+
+    def publisher(self, topic, msg_type, qos=QoS.RELIABLE, depth=10) -> Publisher:
+        return _Pub(self.node.create_publisher(msg_type, topic, qos_profile(qos, depth)))
+
+    def subscribe(self, topic, msg_type, callback, qos=QoS.RELIABLE, depth=10, large=False):
+        sub = self.node.create_subscription(msg_type, topic, callback, subscriber_qos(qos, depth),
+                                           callback_group=self.group)
+        self._keep.append(sub)
+        return sub
+
+    def service(self, name, srv_type, handler):
+        srv = self.node.create_service(srv_type, name, handler, callback_group=self.group)
+        self._keep.append(srv)
+        return srv
+
+    def timer(self, period, callback):
+        t = self.node.create_timer(period, callback, callback_group=self.group)
+        self._keep.append(t)
+        return t
+
+    def send_tf(self, transforms) -> None:
+        from tf2_msgs.msg import TFMessage
+
+        if self._tf_pub is None:
+            with self._lock:
+                if self._tf_pub is None:  # tf2_ros's TransformBroadcaster's QoS: reliable, keep last 100
+                    self._tf_pub = self.node.create_publisher(TFMessage, "/tf", qos_profile(QoS.RELIABLE, 100))
+        self._tf_pub.publish(TFMessage(transforms=list(transforms)))
+
+    def send_static_tf(self, transforms) -> None:
+        from tf2_msgs.msg import TFMessage
+
+        with self._lock:
+            if self._static_pub is None:  # tf2_ros's StaticTransformBroadcaster: transient local, keep last 1
+                self._static_pub = self.node.create_publisher(TFMessage, "/tf_static", qos_profile(QoS.LATCHED))
+            for t in transforms:
+                self._static[t.child_frame_id] = t
+            self._static_pub.publish(TFMessage(transforms=list(self._static.values())))
+
+    def now(self):
+        return self.node.get_clock().now().to_msg()
+
+    def params(self, defaults=None, describe=None) -> dict:
+        """Declare every leaf of ``defaults`` (``udp.port``) and return the values as a nested dict; a
+        parameter given to the node that no default names is an error (as the ROS 1 nodes' ``~`` check)."""
+        from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+        from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+        from rclpy.parameter import Parameter
+
+        flat = flatten(defaults or {}, ".")
+        for key, value in flat.items():
+            if self.node.has_parameter(key):
+                continue
+            text, rng = describe(key) if describe else ("", None)
+            d = ParameterDescriptor(name=key, description=text or "")
+            if isinstance(value, (list, tuple)):
+                value = _homogeneous(list(value))
+                if not value:
+                    d.dynamic_typing = True
+                    value = None
+            elif isinstance(value, float) and rng is not None:
+                d.floating_point_range = [FloatingPointRange(from_value=float(rng[0]), to_value=float(rng[1]))]
+            elif isinstance(value, int) and not isinstance(value, bool) and rng is not None:
+                d.integer_range = [IntegerRange(from_value=int(rng[0]), to_value=int(rng[1]), step=0)]
+            if value is None:
+                d.dynamic_typing = True
+            try:
+                self.node.declare_parameter(key, value, d)
+            except InvalidParameterTypeException as e:
+                want = type(value).__name__
+                raise ConfigError(f"parameter {key}: {e} (the default {value!r} is a {want}; write 1.0, not 1, "
+                                  "for a real number)") from None
+            except InvalidParameterValueException as e:
+                raise ConfigError(f"parameter {key}: {e}") from None
+        unknown = sorted(k for k in getattr(self.node, "_parameter_overrides", {})
+                         if k not in flat and k != "use_sim_time" and not k.startswith("qos_overrides."))
+        if unknown and defaults:
+            raise ConfigError(f"unknown parameter(s) {', '.join(unknown)}; known: see the node's YAML file")
+        out = {}
+        for key in flat:
+            p = self.node.get_parameter(key)
+            v = p.value
+            if p.type_ == Parameter.Type.NOT_SET:
+                v = flat[key]
+            out[key] = list(v) if isinstance(v, (list, tuple)) or type(v).__name__ == "array" else v
+        return unflatten(out, ".")
+
+    def log(self, level, text, throttle=0.0) -> None:
+        lg = self.node.get_logger()
+        fn = {"debug": lg.debug, "info": lg.info, "warn": lg.warning, "error": lg.error, "fatal": lg.fatal}[level]
+        if throttle > 0:
+            _throttled(fn, throttle, text)
+        else:
+            fn(text)
+
+    def ok(self) -> bool:
+        return not self._shutdown.is_set() and rclpy.ok(context=self.node.context)
+
+    def shutdown(self, reason: str = "") -> None:
+        if reason:
+            self.node.get_logger().info(f"shutting down: {reason}")
+        self._shutdown.set()
+
+    def spin(self) -> None:
+        ex = self.executor or MultiThreadedExecutor(num_threads=4, context=self.node.context)
+        self.executor = ex
+        ex.add_node(self.node)
+        try:
+            while self.ok():
+                ex.spin_once(timeout_sec=0.1)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            self._shutdown.set()
+
+    def destroy(self) -> None:
+        self._shutdown.set()
+        try:
+            if self.executor is not None:
+                self.executor.shutdown(timeout_sec=1.0)
+            self.node.destroy_node()
+        except Exception:  # noqa: BLE001 - already torn down
+            pass
+
+
+def _homogeneous(values: list) -> list:
+    """ROS 2 arrays hold one type: ints among floats become floats."""
+    if any(isinstance(v, float) for v in values) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                         for v in values):
+        return [float(v) for v in values]
+    return values
+
+
+_last_throttled: dict = {}
+
+
+def _throttled(fn, period: float, text: str) -> None:
+    import time
+
+    key = (fn, text[:40])
+    now = time.monotonic()
+    if now - _last_throttled.get(key, -1e18) >= period:
+        _last_throttled[key] = now
+        fn(text)
+
+
+# ---- the process's node ---------------------------------------------------------------------------------
+
+def init_node(name: str, argv: list[str] | None = None, anonymous: bool = False, signals: bool = True,
+              namespace: str = "", params: dict | None = None, sim_time: bool | None = None) -> Ros2Node:
+    """``rclpy.init`` (once per process) and a node. ``params``: overrides, nested or flat (``a/b`` or
+    ``a.b`` keys); ``sim_time``: set ``use_sim_time``."""
+    from rclpy.node import Node as RclNode
+    from rclpy.parameter import Parameter
+
+    if not rclpy.ok():
+        rclpy.init(args=argv if argv is not None else sys.argv,
+                   signal_handler_options=None if signals else rclpy.signals.SignalHandlerOptions.NO)
+    if anonymous:
+        import uuid
+
+        name = f"{name}_{uuid.uuid4().hex[:8]}"
+    overrides = []
+    for key, value in flatten(params or {}, ".").items():
+        key = key.replace("/", ".")
+        if isinstance(value, (list, tuple)):
+            value = _homogeneous(list(value))
+        overrides.append(Parameter(key, value=value))
+    if sim_time is not None:
+        overrides.append(Parameter("use_sim_time", value=bool(sim_time)))
+    n = RclNode(name, namespace=("/" + namespace.strip("/")) if namespace.strip("/") else None,
+                parameter_overrides=overrides or None)
+    return Ros2Node(n)
+
+
+def myargv(argv: list[str]) -> list[str]:
+    """The command line without ROS 2's ``--ros-args ...`` part."""
+    from rclpy.utilities import remove_ros_args
+
+    return remove_ros_args(argv)
+
+
+def run_node(args, who: str, params: dict, make_node: Callable[[Node], object],
+             started: Callable[[object], str]) -> int:
+    """Run one node from the command line until Ctrl-C: the node gets ``params`` as parameter overrides (so
+    ``ros2 param get`` shows them) and ``use_sim_time`` unless ``--no-sim-time``."""
+    if getattr(args, "roscore", False):
+        print(f"raf {who}: --roscore: ROS 2 has no master (discovery is peer to peer; ROS_DOMAIN_ID="
+              f"{os.environ.get('ROS_DOMAIN_ID', '0')}, range {os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']})",
+              flush=True)
+    tree = params.get("", None) if "" in params else unflatten({k.replace("/", "."): v for k, v in params.items()}, ".")
+    node = init_node(args.name, argv=[sys.argv[0]], namespace=args.ns, params=tree,
+                     sim_time=not args.no_sim_time)
+    obj = None
+    try:
+        obj = make_node(node)
+        print(f"raf {who}: {started(obj)}", flush=True)
+        node.spin()
+    finally:
+        if obj is not None:
+            obj.stop()
+        node.destroy()
+        if rclpy.ok():
+            rclpy.try_shutdown()
+    return 0
+
+
+def spin_node(name: str, make_node: Callable[[Node], object], argv: list[str] | None = None) -> int:
+    """A node's ``main`` under ``ros2 launch`` / ``ros2 run``: init (parameters from ``--ros-args``), build,
+    spin, stop. A bad parameter is logged as fatal and ends the node with exit code 2."""
+    node = init_node(name, argv=argv if argv is not None else sys.argv)
+    try:
+        obj = make_node(node)
+    except ConfigError as e:
+        node.fatal(f"{name}: {e}")
+        node.destroy()
+        rclpy.try_shutdown()
+        return 2
+    try:
+        node.spin()
+    finally:
+        obj.stop()
+        node.destroy()
+        rclpy.try_shutdown()
+    return 0
+
+
+def flat_params(tree: dict) -> dict:
+    """ROS 2 parameter names of a nested tree (``udp.port``)."""
+    return flatten(tree, ".")
