@@ -60,6 +60,7 @@ class RoundAgent:
     state_period: float = 0.5  # s between server polls (5 requests each)
     give_up_after: int = 3  # failures at one slot before its part is left alone
     dock_timeout: float = 20.0  # s for one docking manoeuvre before it backs out
+    smooth: bool = True  # paths with arcs, the last leg along the slot's normal (False: stop at every corner)
     events: list = field(default_factory=list)
     counters: AgentCounters = field(default_factory=AgentCounters)
 
@@ -93,6 +94,21 @@ class RoundAgent:
         self.t = 0.0
 
     # ------------------------------------------------------------------------------------------ inputs
+    @property
+    def activity(self) -> str:
+        """What the robot is doing this cycle, for the time split (docs/agent.md): ``wait_start``,
+        ``decide`` (deciding or waiting for a machine), ``drive`` (moving along a path, turning on the way
+        included), ``turn`` (turning in place on a path), ``final_turn``, ``dock_approach``, ``dock_wait``
+        (magnet on/off, standing), ``dock_back`` (backing out), ``done``."""
+        if self.mode in ("wait_start", "decide", "done"):
+            return self.mode
+        if self.mode in ("to_pick", "to_place"):
+            ph = self.follower.phase
+            return "drive" if ph in ("drive", "done") else ph
+        ph = self.docker.phase
+        return {"approach": "dock_approach", "grip": "dock_wait", "release": "dock_wait",
+                "back": "dock_back"}.get(ph, "dock_back")
+
     @property
     def wants_state(self) -> bool:
         """True when the caller should poll the server now and call :meth:`on_state`."""
@@ -192,17 +208,26 @@ class RoundAgent:
         pl = PathPlanner(self._obstacles())
         try:
             goal = pl.approach_pose(slot, self.d_dock, fp)
-            self.path = pl.plan(tuple(pose[:2]), goal[:2], fp)
+            if self.smooth:  # the last leg along the slot's normal: docking follows on at speed
+                path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp)
+            else:
+                path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
         except NoPath as e:
             self.counters.no_path += 1
             self._event(self.t, f"no path to {self.target}: {e}")
             self.mode, self.need_state_after = "decide", self.t + self.state_period
             return
-        self.follower.start(self.path.points, final_heading=goal[2])
+        self.path = path
+        if self.smooth:
+            sp = pl.smooth(path, fp, final_straight=0.02 if aligned else 0.0)
+            end_speed = self.docker.entry_speed("pick" if mode == "to_pick" else "place") if aligned else 0.0
+            self.follower.start(sp, final_heading=None if end_speed > 0 else goal[2], end_speed=end_speed)
+        else:
+            self.follower.start(path.points, final_heading=goal[2])
         self.mode = mode
         self._mode_t0 = self.t
         lim = self.limits  # generous: three times the straight-line time, plus every turn and 10 s
-        self._budget = 10.0 + 3.0 * self.path.length / lim.v_max + len(self.path.points) * math.pi / lim.w_max * 2
+        self._budget = 10.0 + 3.0 * path.length / lim.v_max + len(path.points) * math.pi / lim.w_max * 2
 
     def _retreat(self, carrying: bool) -> float:
         """Distance from the slot centre to back out to (m): the approach distance of the footprint the
@@ -218,12 +243,14 @@ class RoundAgent:
 
     def _start_dock(self, pose) -> None:
         slot = self.field.slot(self.target.zone, self.target.number)
+        v0 = self.follower.v
+        self.follower.v = self.follower.w = 0.0  # the docker drives from here (at the speed it arrived with)
         if self.mode == "to_pick":
-            self.docker.start_pick(slot, pose, self._retreat(carrying=True))
+            self.docker.start_pick(slot, pose, self._retreat(carrying=True), v0=v0)
             self.mode = "pick"
             self._mode_t0 = self.t
         else:
-            self.docker.start_place(slot, pose, self._retreat(carrying=False))
+            self.docker.start_place(slot, pose, self._retreat(carrying=False), v0=v0)
             self._released_t = None
             self.mode = "place"
             self._mode_t0 = self.t

@@ -30,11 +30,13 @@ from .footprint import HOLD_GAP, PLATE_THICKNESS, pose_in_front
 class DockSettings:
     """Speeds (m/s), distances (m), times (s) of the final approach."""
 
-    v_dock: float = 0.06
-    overshoot: float = 0.012  # m past the dock pose the pick approach aims at (the contact stops it first)
+    v_dock: float = 0.1  # pick approach (the contact switch stops it; braking from there takes ~6 mm)
+    v_place: float = 0.2  # place approach (to a pose, no contact needed)
+    overshoot: float = 0.01  # m past the dock pose the pick approach aims at (the contact stops it first)
     gap: float = 0.003  # m between the magnet face and the plate at the nominal dock pose
-    settle: float = 0.2  # s standing still with the magnet switched on/off
-    v_back: float = 0.15
+    settle: float = 0.1  # s standing still with the magnet switched on/off
+    v_back: float = 0.25
+    magnet_early: bool = True  # the magnet on during the pick approach: it takes the plate within its beam
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,7 @@ class Docker:
         self.part = part
         self.approach_limits = replace(limits, v_max=settings.v_dock, v_final=settings.v_dock, slow_distance=0.0,
                                        position_tolerance=0.002)
+        self.place_limits = replace(self.approach_limits, v_max=settings.v_place, v_final=settings.v_place)
         self.back_limits = replace(limits, v_max=settings.v_back, v_final=settings.v_back, slow_distance=0.0,
                                    position_tolerance=0.003)
         self.follower = PathFollower(self.approach_limits, dt)
@@ -81,33 +84,40 @@ class Docker:
         return self.part.depth / 2 + PLATE_THICKNESS + self.magnet_x + HOLD_GAP
 
     # ------------------------------------------------------------------------------------------ start
-    def start_pick(self, slot, pose, retreat: float) -> None:
-        """Pick the part in ``slot`` from ``pose`` (the approach pose); back out to ``retreat`` m from the
-        slot centre afterwards."""
-        self._begin("pick", slot, pose, retreat, self.dock_distance() - self.settings.overshoot)
-        self.magnet = False
+    def entry_speed(self, mode: str) -> float:
+        """The speed (m/s) a path may arrive at the approach pose with when the manoeuvre follows on."""
+        return self.settings.v_dock if mode == "pick" else self.settings.v_place
 
-    def start_place(self, slot, pose, retreat: float) -> None:
+    def start_pick(self, slot, pose, retreat: float, v0: float = 0.0) -> None:
+        """Pick the part in ``slot`` from ``pose`` (the approach pose, arriving at ``v0`` m/s); back out to
+        ``retreat`` m from the slot centre afterwards."""
+        self._begin("pick", slot, pose, retreat, self.dock_distance() - self.settings.overshoot, v0)
+        self.magnet = self.settings.magnet_early
+
+    def start_place(self, slot, pose, retreat: float, v0: float = 0.0) -> None:
         """Leave the carried part on ``slot``; the magnet stays on until the place pose is reached."""
-        self._begin("place", slot, pose, retreat, self.place_distance())
+        self._begin("place", slot, pose, retreat, self.place_distance(), v0)
         self.magnet = True
 
-    def _begin(self, mode: str, slot, pose, retreat: float, distance: float) -> None:
+    def _begin(self, mode: str, slot, pose, retreat: float, distance: float, v0: float = 0.0) -> None:
         self.mode, self._slot, self._retreat = mode, slot, float(retreat)
         self._failing = None
         target = pose_in_front(slot, distance)
-        self.follower.limits = self.approach_limits
+        self.follower.limits = self.approach_limits if mode == "pick" else self.place_limits
         # from the point of the slot's normal nearest the robot: the approach follows the normal
         start = self._on_normal(pose)
         self.follower.start([start, target[:2]], final_heading=None)
-        self.follower.phase = "drive" if abs(math.remainder(pose[2] - target[2], 2 * math.pi)) < 0.1 else "turn"
+        self.follower.v = max(0.0, min(float(v0), self.follower.limits.v_max))
+        aligned = abs(math.remainder(pose[2] - target[2], 2 * math.pi)) < 0.1
+        self.follower.phase = "drive" if aligned else "turn"  # turning: it brakes first, then turns in place
         self.phase = "approach"
 
-    def _on_normal(self, pose) -> tuple[float, float]:
+    def _on_normal(self, pose, ahead: float = 0.01) -> tuple[float, float]:
         s = self._slot
         u = (math.cos(s.facing), math.sin(s.facing))
         along = (pose[0] - s.xy[0]) * u[0] + (pose[1] - s.xy[1]) * u[1]
-        along = max(along, self.dock_distance() + 0.01)
+        if ahead:
+            along = max(along, self.dock_distance() + ahead)
         return (s.xy[0] + along * u[0], s.xy[1] + along * u[1])
 
     # ------------------------------------------------------------------------------------------ step
@@ -122,8 +132,9 @@ class Docker:
                 out = self.follower.step(pose)
                 return self._out(out.v, out.w)
             if out.done:
-                if self.mode == "pick":  # nothing there: back out, then report
+                if self.mode == "pick":  # nothing there: magnet off, back out, then report
                     self._failing = "no_contact"
+                    self.magnet = False
                     self._back(pose)
                     return self._out(0.0, 0.0)
                 self.phase, self._wait = "release", 0.0
@@ -165,7 +176,8 @@ class Docker:
         """Back straight out along the slot's normal to ``retreat`` m from its centre."""
         back = pose_in_front(self._slot, self._retreat)
         self.follower.limits = self.back_limits
-        self.follower.start([tuple(pose[:2]), back[:2]], reverse=True)
+        # along the slot's normal, from the point of it nearest the robot (a lateral error is steered out)
+        self.follower.start([self._on_normal(pose, 0.0), back[:2]], reverse=True)
         self.follower.phase = "drive"
         self.phase = "back"
 

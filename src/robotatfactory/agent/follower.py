@@ -1,19 +1,23 @@
-"""A path follower on the pose estimate: turn in place, then drive along each segment with a speed profile.
+"""A path follower on the pose estimate: turns while it drives on a smooth path (lines and arcs), stops and
+turns in place only where the path has a corner it could not round.
 
 Input each control cycle: the robot's pose estimate (x, y, theta) in the field frame (m, rad), e.g. the
 EKF's ``pose``. Output: body speeds (v m/s forward, w rad/s counter-clockwise) for ``cmd_vel``.
 
-Behaviour (the stack that won RobotAtFactory 4.0 in 2022/2023 did the same, on an omnidirectional robot):
+The path is a :class:`~.smooth.SmoothPath` (the planner's, whose arcs are checked against the robot's
+exact outline) or a bare polyline (rounded only where an arc stays within 3 mm of the corner).
 
-* **No translation while the heading error exceeds** ``heading_tolerance`` (0.2 rad): the robot turns
-  in place towards the segment first. Driving, the heading is steered back onto the line through a
-  point ``lookahead`` m ahead (cross-track correction).
-* **Speed profile** with acceleration limits: v never changes by more than ``a_max * dt`` per cycle (SimTwo's
-  speed controller has no ramp: a step in the command slips the tyres), braking as ``sqrt(v_c^2 + 2 a d)``
-  to a stop at every waypoint where the path turns by more than the heading tolerance and at the end,
-  and to ``v_max (1 - turn / tolerance)`` (at least ``v_final``) at gentler corners.
-* **Slow in the last** ``slow_distance`` (0.05 m) before the end: at most ``v_final``.
-* At the end, an optional final heading is turned to in place. ``reverse=True`` drives the path backwards
+* **Steering:** feed-forward from the path's curvature (w = v kappa, kappa read a little ahead for the
+  acceleration limit) plus feedback on the heading towards a point ``lookahead`` m ahead on the path's
+  tangent (cross-track correction): w = v kappa + k_heading * heading error.
+* **No translation while the heading error exceeds** ``heading_tolerance`` (0.2 rad): at the start of each
+  piece (after a stop) the robot turns in place first (the stack that won RobotAtFactory 4.0 did the same).
+* **Speed profile** with acceleration limits: v never changes by more than ``a_max * dt`` per cycle
+  (SimTwo's speed controller has no ramp: a step slips the tyres); on arcs at most the speed where the
+  outer wheel reaches ``v_wheel``, w reaches ``w_max`` or the lateral acceleration ``a_lat``; braking as
+  ``sqrt(v_c^2 + 2 a d)`` before every slower stretch, every stop and the end; at most ``v_final`` in the
+  last ``slow_distance`` unless the path ends at ``end_speed`` > 0 (the docking approach follows on).
+* At the end an optional final heading is turned to in place. ``reverse=True`` drives the path backwards
   (the robot's back first), for backing out of a slot.
 """
 from __future__ import annotations
@@ -24,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .footprint import wrap
+from .smooth import Piece, SmoothPath, smooth_path
 
 
 @dataclass(frozen=True)
@@ -41,6 +46,9 @@ class DriveLimits:
     k_heading: float = 8.0  # 1/s: w = k_heading * heading error, within the limits (4: slow tails of turns)
     position_tolerance: float = 0.005  # m: the end is reached within this distance along the path
     heading_goal_tolerance: float = 0.015  # rad: the final heading is reached within this
+    v_wheel: float = 0.46  # m/s at either wheel's rim (from_robot: the same fraction of the top speed)
+    a_lat: float = 1.0  # m/s^2 lateral acceleration on arcs
+    half_track: float = 0.0675  # m, half the wheel track (the wheel-speed limit on arcs)
 
     @classmethod
     def from_robot(cls, robot, fraction: float = 0.45, a_max: float = 0.8, **kw) -> DriveLimits:
@@ -52,7 +60,8 @@ class DriveLimits:
         v_max = min(kw.pop("v_max", 0.4), fraction * top)
         half = robot.track / 2
         return cls(v_max=v_max, w_max=kw.pop("w_max", min(3.0, fraction * top / half)), a_max=a_max,
-                   alpha_max=kw.pop("alpha_max", a_max / half), **kw)
+                   alpha_max=kw.pop("alpha_max", a_max / half), v_wheel=kw.pop("v_wheel", fraction * top),
+                   half_track=half, **kw)
 
 
 @dataclass(frozen=True)
@@ -63,9 +72,9 @@ class FollowerOutput:
     w: float
     done: bool
     phase: str  # "turn", "drive", "final_turn", "done"
-    segment: int
-    cross_track: float  # signed distance to the current segment's line, left positive
-    heading_error: float  # to the segment (or the final heading), rad
+    segment: int  # the piece being driven (pieces are separated by stops)
+    cross_track: float  # signed distance to the path, left positive
+    heading_error: float  # to the aim point (or the final heading), rad
     remaining: float  # path length left (m)
 
 
@@ -75,44 +84,72 @@ class PathFollower:
     def __init__(self, limits: DriveLimits, dt: float):
         self.limits = limits
         self.dt = float(dt)
-        self.points = np.zeros((0, 2))
+        self.path = SmoothPath(())
         self.final_heading: float | None = None
         self.reverse = False
+        self.end_speed = 0.0
         self.k = 0
         self.v = 0.0
         self.w = 0.0
         self.phase = "done"
-        self._stop_at: list[bool] = []
-        self._seg_len = np.zeros(0)
+        self._s = 0.0
+        self._i = 0
+        self._prof: list[np.ndarray] = []
 
-    def start(self, points, final_heading: float | None = None, reverse: bool = False) -> None:
-        """A new path ((x, y) waypoints, m; the first is where the robot is). The commanded speeds carry
-        over (no jump when a path replaces another while moving)."""
-        pts = np.asarray(points, dtype=float).reshape(-1, 2)
-        keep = [0] + [i for i in range(1, len(pts)) if np.hypot(*(pts[i] - pts[i - 1])) > 1e-6]
-        self.points = pts[keep]
+    @property
+    def points(self) -> np.ndarray:
+        return self.path.points
+
+    def start(self, path, final_heading: float | None = None, reverse: bool = False,
+              end_speed: float = 0.0) -> None:
+        """A new path: a :class:`SmoothPath` or (x, y) waypoints (m; the first is where the robot is).
+        ``end_speed`` (m/s) > 0: the path ends without stopping (no final heading then), ``done`` is
+        reported when its end is passed. The commanded speeds carry over (no jump when a path replaces
+        another while moving)."""
+        if not isinstance(path, SmoothPath):
+            path = smooth_path(path)
+        self.path = path
         self.final_heading = final_heading
         self.reverse = reverse
+        self.end_speed = float(end_speed)
         self.k = 0
-        self._seg_len = np.hypot(*np.diff(self.points, axis=0).T) if len(self.points) > 1 else np.zeros(0)
-        n = len(self.points) - 1
-        tol = self.limits.heading_tolerance
-        self._stop_at = []
-        self._corner_v = []  # the speed allowed at the end of segment i (m/s)
-        for i in range(n):  # stop at the end of segment i?
-            if i == n - 1:
-                self._stop_at.append(True)
-                self._corner_v.append(0.0)
-            else:
-                turn = abs(wrap(self._heading(i + 1) - self._heading(i)))
-                self._stop_at.append(turn > tol)
-                self._corner_v.append(0.0 if turn > tol else
-                                      max(self.limits.v_final, self.limits.v_max * (1.0 - turn / tol)))
-        self.phase = "turn" if n > 0 else ("final_turn" if final_heading is not None else "done")
+        self._s, self._i = 0.0, 0
+        self._prof = [self._profile(p, last=(j == len(path.pieces) - 1)) for j, p in enumerate(path.pieces)]
+        total = path.length
+        if total <= 1e-9:
+            self.phase = "final_turn" if final_heading is not None else "done"
+        else:
+            self.phase = "turn"
+            while self.path.pieces[self.k].length <= 1e-9 and self.k < len(self.path.pieces) - 1:
+                self.k += 1
 
-    def _heading(self, i: int) -> float:
-        a, b = self.points[i], self.points[i + 1]
-        return math.atan2(b[1] - a[1], b[0] - a[0])
+    def _profile(self, p: Piece, last: bool) -> np.ndarray:
+        """The speed allowed at each sample of a piece (m/s): curvature limits, then braking backwards from
+        its end (a stop, or ``end_speed`` at the path's end), and the slow end."""
+        L = self.limits
+        k = np.abs(p.kappa)
+        with np.errstate(divide="ignore"):
+            v = np.minimum.reduce([np.full(len(k), L.v_max), L.v_wheel / (1.0 + k * L.half_track),
+                                   np.where(k > 1e-9, L.w_max / np.maximum(k, 1e-9), np.inf),
+                                   np.where(k > 1e-9, np.sqrt(L.a_lat / np.maximum(k, 1e-9)), np.inf)])
+        # the turn rate needs time to build up at the entry of an arc (alpha_max): at most half the arc goes by
+        run = np.zeros(len(k))  # length of the stretch of constant curvature each sample lies on
+        i = 0
+        while i < len(k):
+            j = i
+            while j + 1 < len(k) and abs(p.kappa[j + 1] - p.kappa[i]) < 1e-6:
+                j += 1
+            run[i:j + 1] = p.s[j] - p.s[i]
+            i = j + 1
+        v = np.minimum(v, np.where(k > 1e-9, np.sqrt(0.5 * L.alpha_max * np.maximum(run, 0.01) / np.maximum(k, 1e-9)),
+                                   np.inf))
+        end = self.end_speed if last else 0.0
+        if last and end <= 0.0:
+            v = np.minimum(v, np.where(p.s >= p.length - L.slow_distance, L.v_final, np.inf))
+        v[-1] = min(v[-1], end)
+        for i in range(len(v) - 2, -1, -1):
+            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * L.a_max * (p.s[i + 1] - p.s[i])))
+        return v
 
     @property
     def done(self) -> bool:
@@ -120,12 +157,43 @@ class PathFollower:
 
     def stop(self) -> None:
         """Abandon the path (the next step brakes to a stop within the limits)."""
-        self.points = self.points[:1]
-        self._seg_len = np.zeros(0)
+        self.path = SmoothPath(())
+        self._prof = []
         self.final_heading = None
+        self.end_speed = 0.0
         self.phase = "done"
 
     # ------------------------------------------------------------------------------------------ step
+    def _project(self, p: Piece, x: float, y: float) -> tuple[float, float]:
+        """Arc length of the point of ``p`` nearest (x, y), searched forward from the last one (m), and the
+        signed cross-track distance (left positive)."""
+        xy = p.xy
+        n = len(xy)
+        if n == 1:
+            return 0.0, 0.0
+        i0 = max(self._i - 2, 0)
+        i1 = min(n - 1, self._i + 40)
+        a = xy[i0:i1]
+        b = xy[i0 + 1:i1 + 1]
+        d = b - a
+        dd = np.maximum(np.einsum("ij,ij->i", d, d), 1e-12)
+        u = np.clip(((x - a[:, 0]) * d[:, 0] + (y - a[:, 1]) * d[:, 1]) / dd, 0.0, 1.0)
+        q = a + u[:, None] * d
+        dist = np.hypot(q[:, 0] - x, q[:, 1] - y)
+        j = int(np.argmin(dist))
+        self._i = i0 + j
+        s = float(p.s[self._i] + u[j] * (p.s[self._i + 1] - p.s[self._i]))
+        if j == len(dist) - 1 and u[j] >= 1.0:  # beyond the end: extend the last tangent
+            t = np.array([math.cos(p.psi[-1]), math.sin(p.psi[-1])])
+            s = p.length + float((x - xy[-1, 0]) * t[0] + (y - xy[-1, 1]) * t[1])
+        _, _, psi, _ = p.at(min(s, p.length))
+        qx, qy, _, _ = p.at(min(max(s, 0.0), p.length))
+        cross = -(x - qx) * math.sin(psi) + (y - qy) * math.cos(psi)
+        if s > p.length:
+            ex, ey = xy[-1]
+            cross = -(x - ex) * math.sin(psi) + (y - ey) * math.cos(psi)
+        return s, float(cross)
+
     def step(self, pose) -> FollowerOutput:
         """One control cycle from the pose estimate (x, y, theta); returns the command to send."""
         L = self.limits
@@ -135,52 +203,49 @@ class PathFollower:
         cross = herr = 0.0
         remaining = 0.0
         v_t = w_t = 0.0
-        n = len(self.points) - 1
-        if self.phase in ("turn", "drive") and n > 0:
-            # advance past segments whose end is reached (projection beyond the end)
-            while True:
-                a, b = self.points[self.k], self.points[self.k + 1]
-                d = b - a
-                u = d / self._seg_len[self.k]
-                along = float((x - a[0]) * u[0] + (y - a[1]) * u[1])
-                to_end = self._seg_len[self.k] - along
-                if to_end <= L.position_tolerance and self.k < n - 1 and (not self._stop_at[self.k] or self.v == 0.0):
-                    self.k += 1
-                    if self._stop_at[self.k - 1]:
-                        self.phase = "turn"
-                    continue
-                break
-            cross = float(-(x - a[0]) * u[1] + (y - a[1]) * u[0])
-            seg_th = math.atan2(u[1], u[0])
-            remaining = max(to_end, 0.0) + float(np.sum(self._seg_len[self.k + 1:]))
-            if to_end <= L.position_tolerance and self.k == n - 1:
-                self.phase = "final_turn" if self.final_heading is not None else "done"
+        pieces = self.path.pieces
+        passed_end = False
+        if self.phase in ("turn", "drive") and pieces:
+            p = pieces[self.k]
+            s, cross = self._project(p, x, y)
+            to_end = p.length - s
+            last = self.k == len(pieces) - 1
+            remaining = max(to_end, 0.0) + sum(q.length for q in pieces[self.k + 1:])
+            if to_end <= L.position_tolerance and not last and self.v == 0.0:
+                self.k += 1  # stopped at a corner: the next piece starts with a turn in place
+                self._i = 0
+                self.phase = "turn"
+                return self.step(pose)
+            if last and (to_end <= L.position_tolerance or (self.end_speed > 0.0 and to_end <= self.v * self.dt / 2)):
+                if self.end_speed > 0.0:
+                    passed_end = True
+                    self.phase = "done"
+                else:
+                    self.phase = "final_turn" if self.final_heading is not None else "done"
             else:
-                # the speed allowed now: braking to each coming corner's speed, up to the next stop
-                j = self.k
-                d_c = max(to_end, 0.0) - self.v * self.dt
-                v_allowed = L.v_max
-                while True:
-                    v_allowed = min(v_allowed, math.sqrt(self._corner_v[j] ** 2 + 2 * L.a_max * max(d_c, 0.0)))
-                    if self._stop_at[j]:
-                        break
-                    j += 1
-                    d_c += self._seg_len[j]
-                aim = seg_th + math.atan2(-cross, L.lookahead)
+                _, _, psi, _ = p.at(s)
+                aim = psi + math.atan2(-cross, L.lookahead)
                 herr = wrap(aim - th)
                 if self.phase == "turn" and abs(herr) <= L.heading_tolerance / 2:
                     self.phase = "drive"
                 if abs(herr) > L.heading_tolerance:
                     self.phase = "turn"
-                # turning in place only once stopped: no translation while the heading error is large
-                w_t = self._turn_rate(herr) if (self.phase == "drive" or self.v == 0.0) else 0.0
-                if self.phase == "drive" and not (self._stop_at[self.k] and to_end <= L.position_tolerance):
-                    v_t = v_allowed
-                    # at most v_final in the last slow_distance: braking for it starts before
-                    gap = max(remaining - L.slow_distance - self.v * self.dt, 0.0)
-                    v_t = min(v_t, math.sqrt(L.v_final ** 2 + 2 * L.a_max * gap))
-                    v_t = min(v_t, max(remaining / self.dt, 0.0))  # never past the end in one cycle
+                if self.phase == "drive":
+                    prof = self._prof[self.k]
+                    ahead = s + self.v * self.dt
+                    v_allowed = float(np.interp(ahead, p.s, prof)) if len(p.s) > 1 else 0.0
+                    v_t = min(v_allowed, max(to_end, 0.0) / self.dt if not (last and self.end_speed > 0) else v_allowed)
                     v_t *= max(0.0, math.cos(herr))
+                    # feed-forward: the curvature where the robot will be once w has changed
+                    vv = max(self.v, v_t)
+                    _, _, _, kap = p.at(s + 2 * vv * self.dt)
+                    # start turning before the arc: half the distance the turn rate needs to build up
+                    _, _, _, kap = p.at(s + max(2 * vv * self.dt, 0.5 * vv * vv * abs(kap) / L.alpha_max))
+                    v_ff = max(self.v, 0.0)
+                    w_t = v_ff * kap + self._turn_rate(herr, drive=True)
+                    w_t = max(-L.w_max, min(L.w_max, w_t))
+                elif self.v == 0.0:  # turning in place only once stopped
+                    w_t = self._turn_rate(herr)
         if self.phase == "final_turn":
             target = self.final_heading if not self.reverse else wrap(self.final_heading + math.pi)
             herr = wrap(target - th)
@@ -188,18 +253,22 @@ class PathFollower:
                 self.phase = "done"
             else:
                 w_t = self._turn_rate(herr)
+        if passed_end:
+            v_t, w_t = self.v, self.w  # hand over at speed: the caller's next manoeuvre continues
         # acceleration limits
         dv, dw = L.a_max * self.dt, L.alpha_max * self.dt
         self.v += max(-dv, min(dv, v_t - self.v))
         self.w += max(-dw, min(dw, w_t - self.w))
-        if self.phase == "done" and abs(self.v) < 1e-9 and abs(self.w) < 1e-9:
+        if self.phase == "done" and not passed_end and abs(self.v) < 1e-9 and abs(self.w) < 1e-9:
             self.v = self.w = 0.0
         v_out = -self.v if self.reverse else self.v
-        return FollowerOutput(v_out, self.w, self.phase == "done" and self.v == 0.0 and self.w == 0.0, self.phase,
-                              self.k, cross, herr, remaining)
+        done = self.phase == "done" and (passed_end or (self.v == 0.0 and self.w == 0.0))
+        return FollowerOutput(v_out, self.w, done, self.phase, self.k, cross, herr, remaining)
 
-    def _turn_rate(self, err: float) -> float:
+    def _turn_rate(self, err: float, drive: bool = False) -> float:
         L = self.limits
+        if drive:  # a correction on top of the feed-forward
+            return math.copysign(min(L.w_max, L.k_heading * abs(err)), err)
         # braking-distance limited so an in-place turn stops on the heading
         cap = min(L.w_max, math.sqrt(2 * L.alpha_max * abs(err)), L.k_heading * abs(err) + 0.05)
         return math.copysign(cap, err) if abs(err) > 1e-4 else 0.0

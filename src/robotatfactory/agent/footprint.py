@@ -64,6 +64,11 @@ class Footprint:
         R = np.array([[c, s], [-s, c]])  # row vectors: p_world = p_local @ R + t
         return [r.corners() @ R + (x, y) for r in self.rects]
 
+    def inflated(self, margin: float) -> Footprint:
+        """Every rectangle grown by ``margin`` m on each side (a safety margin for exact checks)."""
+        m = float(margin)
+        return Footprint(tuple(Rect(r.x0 - m, r.x1 + m, r.y0 - m, r.y1 + m) for r in self.rects))
+
     def with_part(self, depth: float, width: float, magnet_x: float) -> Footprint:
         """The outline while carrying a part (``depth`` x ``width`` m) on the magnet whose face is at x
         ``magnet_x``."""

@@ -22,6 +22,7 @@ import numpy as np
 
 from .footprint import Footprint, pose_in_front
 from .obstacles import FieldObstacles
+from .smooth import SmoothPath, smooth_path
 
 _NEIGHBOURS = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)]
 
@@ -173,6 +174,92 @@ class PathPlanner:
                     changed = True
                     break
         return pts
+
+    # ------------------------------------------------------------------------------------------ smoothing
+    def smooth(self, path: Path, footprint: Footprint, final_straight: float = 0.0,
+               inflate: float = 0.012) -> SmoothPath:
+        """``path`` with its corners rounded into arcs (:func:`~.smooth.smooth_path`) wherever the robot's
+        exact outline, grown by ``inflate`` m and heading along the arc, stays clear of every obstacle and
+        within the floor's allowance. Where the turning circle is clear (the grid) the outline is too."""
+        fp = footprint.inflated(inflate)
+        need = footprint.radius + inflate
+        ob = self.obstacles
+        pts = list(path.points)
+        # a short first leg (the start snapped to the grid) is dropped where the straight line replacing it
+        # is clear for the exact outline: the robot turns in place once, at the start
+        while len(pts) > 2 and math.hypot(pts[1][0] - pts[0][0], pts[1][1] - pts[0][1]) < 0.04 \
+                and self.straight_clear(pts[0], pts[2], footprint, inflate):
+            del pts[1]
+
+        def arc_clear(xy, psi) -> bool:
+            n = len(xy)
+            order = sorted(range(n), key=lambda i: abs(i - (n - 1) / 2))  # the bulge first
+            for i in order:
+                x, y = float(xy[i, 0]), float(xy[i, 1])
+                if ob.clearance_at(x, y) >= need:
+                    continue
+                if ob.collides(fp, (x, y, float(psi[i]))):
+                    return False
+            return True
+
+        return smooth_path(pts, arc_clear, final_straight=final_straight)
+
+    def plan_to_pose(self, start, goal, footprint: Footprint, distances=(0.3, 0.24, 0.19, 0.15, 0.12, 0.09, 0.06),
+                     turn_cost: float = 0.08) -> tuple[Path, bool]:
+        """A path from ``start`` (x, y) to the approach pose ``goal`` (x, y, theta facing the slot) whose last
+        leg runs along the slot's normal from a point ``d`` m behind ``goal`` (one of ``distances`` whose
+        turning circle and line to ``goal`` are clear), so the robot arrives aligned and docking follows on
+        without a turn. One A* search to ``goal``; the normal's point is joined to the latest point of that
+        path that sees it, the choice the shortest (plus ``turn_cost`` m per radian of corner). Returns the
+        path and whether it ends along the normal (False: the plain path to ``goal``; turn there)."""
+        need = self.required(footprint)
+        path = self.plan(start, goal[:2], footprint)
+        pts = list(path.points)
+        ob = self.obstacles
+        bx, by = -math.cos(goal[2]), -math.sin(goal[2])  # away from the slot
+        cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.asarray(pts), axis=0).T))])
+
+        def turn(a, b, c) -> float:
+            h1 = math.atan2(b[1] - a[1], b[0] - a[0])
+            h2 = math.atan2(c[1] - b[1], c[0] - b[0])
+            return abs(math.remainder(h2 - h1, 2 * math.pi))
+
+        best = None
+        for d in distances:
+            pre = (goal[0] + d * bx, goal[1] + d * by)
+            # the approach pose's own circle is just clear (5 mm steps): the grid's bound is a few mm short
+            if not (self.is_free(pre, footprint) and ob.segment_clear(pre, goal[:2], need - 0.006)):
+                continue
+            for i in range(len(pts) - 2, -1, -1):
+                r = need if i > 0 else need - self.margin  # the start may sit inside the margin
+                if math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) < 1e-6 or ob.segment_clear(pts[i], pre, r):
+                    cost = cum[i] + math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) + d
+                    cost += turn_cost * turn(pts[i], pre, goal[:2])
+                    if i > 0:
+                        cost += turn_cost * turn(pts[i - 1], pts[i], pre)
+                    if best is None or cost < best[0]:
+                        best = (cost, i, pre)
+        if best is None:
+            return path, False
+        _, i, pre = best
+        out = pts[:i + 1]
+        if math.hypot(out[-1][0] - pre[0], out[-1][1] - pre[1]) > 1e-6:
+            out.append(pre)
+        out.append(tuple(goal[:2]))
+        return Path(tuple(out), path.radius), True
+
+    def straight_clear(self, a, b, footprint: Footprint, inflate: float = 0.012) -> bool:
+        """The exact outline (grown by ``inflate``) heading from ``a`` to ``b`` is clear all along the line."""
+        fp = footprint.inflated(inflate)
+        need = footprint.radius + inflate
+        h = math.atan2(b[1] - a[1], b[0] - a[0])
+        n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / 0.01) + 1)
+        for k in range(n):
+            u = k / (n - 1)
+            x, y = a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1])
+            if self.obstacles.clearance_at(x, y) < need and self.obstacles.collides(fp, (x, y, h)):
+                return False
+        return True
 
     # ------------------------------------------------------------------------------------------ slots
     def approach_pose(self, slot, dock_distance: float, footprint: Footprint | float,

@@ -113,12 +113,14 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     fp, fc = robot_footprint(robot), carrying_footprint(robot, field.part)
     moved_early = touched = pushed = off_floor = 0
     hits = []
+    pushes = []  # (t, x, y, mm moved, the agent's activity)
     path, events = [], []
     n_events = 0
     part_ids = list(sim.parts.qadr) if hasattr(sim.parts, "qadr") else []
     last_xy = {}
     odo = DiffDriveOdometry(robot)
     odo.reset(baseline=(0, 0), t=0.0)
+    split: dict[str, float] = {}  # s per agent activity (RoundAgent.activity)
     slip = []  # per second: |odometry's relative motion - the truth's| (m, rad) and the truth's length (m)
     prev = None
     try:
@@ -132,6 +134,8 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                     if st is not None:
                         agent.on_state(st, sim.time)
                 c = agent.step(sim.time, sim.pose, contact)
+                act = agent.activity
+                split[act] = split.get(act, 0.0) + robot.control_period
                 if not sim.factory.started and (c.v or c.w or c.magnet):
                     moved_early += 1
                 frame = sim.step_cycle(Command(c.v, c.w, c.magnet))
@@ -158,6 +162,8 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                             d = math.hypot(px - last_xy[pid][0], py - last_xy[pid][1])
                             if 0.002 < d < 0.05 and last_xy[pid][2] != "held":
                                 pushed += 1
+                                pushes.append((round(sim.time, 2), round(px, 3), round(py, 3), round(1000 * d, 1),
+                                               agent.activity))
                         last_xy[pid] = (px, py, "held" if sim.held == pid else "")
                 while n_events < len(agent.events):
                     t, text = agent.events[n_events]
@@ -175,7 +181,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
             "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
             "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "collision_checks_hit": touched,
             "off_floor_checks": off_floor, "collision_hits": hits,
-            "parts_pushed": pushed, "agent_done": agent.mode == "done", "sim_s": sim.time,
+            "parts_pushed": pushed, "pushes": pushes, "agent_done": agent.mode == "done", "sim_s": sim.time,
             "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
@@ -183,6 +189,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
         out["odometry_error_per_m"] = sum(s[0] for s in slip) / moved if moved > 0 else 0.0
         out["odometry_error_max_per_s_m"] = max((s[0] for s in slip), default=0.0)
         out["odometry_heading_error_max_per_s_rad"] = max((s[1] for s in slip), default=0.0)
+        out["time_split"] = {k: round(v, 2) for k, v in sorted(split.items())}
         if record_path:
             out["path"], out["events"] = path, events
         return out
@@ -301,6 +308,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         if r["collision_checks_hit"]:
             out[f"{p}_collision_where"] = "; ".join(f"{k} at t {t} s ({x}, {y})" for t, x, y, k in r["collision_hits"])
         out[f"{p}_parts_pushed"] = r["parts_pushed"]
+        if r.get("pushes"):
+            out[f"{p}_pushes_where"] = "; ".join(f"{mm} mm at t {t} s ({x}, {y}) while {a}" for t, x, y, mm, a in r["pushes"])
         out[f"{p}_wall_s"] = round(r["wall_s"], 2)
         if "odometry_error_per_m" in r:
             out[f"{p}_odometry_error_per_m"] = round(r["odometry_error_per_m"], 4)
@@ -334,6 +343,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         if mode == "bare_truth":
             out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
         out[f"{p}_errors"] = sum("error" in r for r in rs)
+        splits = [r["time_split"] for r in rs if r.get("time_split")]
+        for act in sorted({a for sp in splits for a in sp}):  # where the time went (RoundAgent.activity)
+            out[f"{p}_time_{act}_median_s"] = round(statistics.median(sp.get(act, 0.0) for sp in splits), 2)
         odo = [r["odometry_error_per_m"] for r in rs if "odometry_error_per_m" in r]
         if odo:  # slip: the pose would suffer from it on the EKF, not here (ground truth)
             out[f"{p}_odometry_error_per_m_median"] = round(statistics.median(odo), 4)
@@ -364,6 +376,14 @@ def table(mode: str, runs: list[dict]) -> str:
                      f"{sum(len(r.get('notes', [])) for r in rs):>5} "
                      f"{sum(int(r.get('collision_checks_hit', 0)) for r in rs) if bare else '-':>7} "
                      f"{1000 * statistics.median([r.get('odometry_error_per_m', math.nan) for r in rs]):>8.2f}")
+    if bare:
+        acts = ("wait_start", "decide", "drive", "turn", "final_turn", "dock_approach", "dock_wait", "dock_back")
+        lines.append("time split, median s per run (RoundAgent.activity): " + " ".join(f"{a:>13}" for a in acts))
+        for rn in sorted({r["round"] for r in runs}):
+            sp = [r["time_split"] for r in runs if r["round"] == rn and r.get("time_split")]
+            if sp:
+                lines.append(f"  round {rn}{'':>44}" + " ".join(
+                    f"{statistics.median(s.get(a, 0.0) for s in sp):>13.1f}" for a in acts))
     return "\n".join(lines)
 
 
