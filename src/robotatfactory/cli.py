@@ -23,7 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog="raf",
-        description="robotatfactory: ROS 1 framework for the RobotAtFactory 4.0 competition on SimTwo "
+        description="robotatfactory: ROS 1 and ROS 2 framework for the RobotAtFactory 4.0 competition on SimTwo "
                     "(with a MuJoCo stand-in simulator).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -31,6 +31,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--field", default=DEFAULT_FIELD, metavar="NAME",
                         help="competition map: a shipped field name (rules2026, simtwo2022) or a field "
                              f".json file (default: {DEFAULT_FIELD})")
+    parser.add_argument("--middleware", choices=("ros1", "ros2"), metavar="{ros1,ros2}",
+                        help="the ROS generation the ROS commands run on: ros1 (Debian's ROS 1, .venv) or ros2 "
+                             "(ROS 2 Jazzy from PyPI, .venv-ros2); default: $RAF_MIDDLEWARE, else the one this "
+                             "Python has")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     for mod in _command_modules():
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP),
@@ -40,9 +44,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+VENVS = {"ros1": ".venv", "ros2": ".venv-ros2"}
+
+
+def _switch_middleware(want: str, argv: list[str]) -> None:
+    """Run this command line again with the Python environment of middleware ``want`` (the two cannot share
+    one interpreter: both define std_msgs etc.), unless this Python already has it."""
+    import importlib.util
+    import os
+    from pathlib import Path
+
+    os.environ["RAF_MIDDLEWARE"] = want
+    if importlib.util.find_spec({"ros1": "rospy", "ros2": "rclpy"}[want]) is not None:
+        return
+    root = Path(__file__).resolve().parents[2]
+    venv = Path(os.environ.get("RAF_ROS2_VENV", root / VENVS["ros2"])) if want == "ros2" else root / VENVS["ros1"]
+    py = venv / "bin" / "python"
+    if not py.exists():
+        print(f"raf: --middleware {want}: {py} does not exist; run scripts/bootstrap.sh (it builds both "
+              "environments)", file=sys.stderr)
+        raise SystemExit(2)
+    os.execv(str(py), [str(py), "-m", "robotatfactory", *argv])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    raw = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
+    if args.middleware:
+        _switch_middleware(args.middleware, raw)
     if not getattr(args, "_run", None):
         parser.print_help()
         return 0

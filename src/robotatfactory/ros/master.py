@@ -1,4 +1,5 @@
-"""A private ROS master (``roscore -p PORT``) on a free port, for benchmarks, experiments and tests.
+"""A private ROS graph for benchmarks, experiments and tests: ROS 1's master (``roscore -p PORT``) on a free
+port, or ROS 2's domain id of its own (:class:`PrivateDomain`); :func:`private_graph` picks by middleware.
 
 Never the default port 11311: several runs (and a user's own roscore) can coexist on one machine.
 """
@@ -55,7 +56,7 @@ class PrivateMaster:
     def env(self, **extra) -> dict:
         e = dict(os.environ)
         e.update(ROS_MASTER_URI=self.uri, ROS_HOME=str(self.home), ROS_LOG_DIR=str(self.home / "log"),
-                 ROS_IP="127.0.0.1", PYTHONUNBUFFERED="1",
+                 ROS_IP="127.0.0.1", PYTHONUNBUFFERED="1", RAF_MIDDLEWARE="ros1",
                  ROS_PACKAGE_PATH=os.pathsep.join(p for p in (str(ROOT), os.environ.get("ROS_PACKAGE_PATH", "")) if p))
         e.pop("ROS_HOSTNAME", None)
         e.update({k: str(v) for k, v in extra.items()})
@@ -129,3 +130,72 @@ def ensure_master(start_private: bool, who: str) -> "PrivateMaster | None":
     if not rosgraph.is_master_online():
         raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore (or pass --roscore)")
     return master
+
+
+class PrivateDomain:
+    """ROS 2's counterpart of :class:`PrivateMaster`: a ROS domain id of its own (ROS 2 has no master;
+    nodes find each other by discovery, which a private ``ROS_DOMAIN_ID`` and the LOCALHOST discovery range
+    keep to this run). The id is reserved with a lock file, so parallel runs on one machine never share one."""
+
+    IDS = range(1, 101)  # valid for Fast DDS with any participant count on loopback
+
+    def __init__(self, domain_id: int | None = None):
+        self.domain_id = domain_id
+        self._lock = None
+        self.home = Path(tempfile.mkdtemp(prefix="raf-ros2-"))
+
+    def start(self) -> "PrivateDomain":
+        import fcntl
+        import random
+
+        ids = [self.domain_id] if self.domain_id is not None else random.sample(list(self.IDS), len(self.IDS))
+        for i in ids:
+            fh = open(Path(tempfile.gettempdir()) / f"raf-ros2-domain-{i}.lock", "w")
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                fh.close()
+                continue
+            self.domain_id, self._lock = i, fh
+            return self
+        raise RuntimeError("no free ROS 2 domain id (every one in 1-100 is held by another run)")
+
+    @property
+    def uri(self) -> str:
+        return f"ROS_DOMAIN_ID={self.domain_id}"
+
+    def env(self, **extra) -> dict:
+        e = dict(os.environ)
+        e.update(ROS_DOMAIN_ID=str(self.domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                 ROS_LOG_DIR=str(self.home / "log"), RAF_MIDDLEWARE="ros2", PYTHONUNBUFFERED="1")
+        e.update({k: str(v) for k, v in extra.items()})
+        return e
+
+    def use_in_this_process(self) -> None:
+        for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR", "RAF_MIDDLEWARE"):
+            os.environ[k] = self.env()[k]
+
+    def stop(self) -> None:
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
+
+    def cleanup(self) -> None:
+        self.stop()
+        shutil.rmtree(self.home, ignore_errors=True)
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.cleanup()
+
+
+def private_graph(middleware: str | None = None) -> "PrivateMaster | PrivateDomain":
+    """A private ROS graph for this process's middleware (or ``middleware``), not yet started: a roscore on a
+    free port (ROS 1) or a free domain id (ROS 2)."""
+    if middleware is None:
+        from .mw import name
+
+        middleware = name()
+    return PrivateDomain() if middleware == "ros2" else PrivateMaster()
