@@ -23,11 +23,23 @@ BUILD=$ROOT/build/ros2
 INTERFACE_PACKAGES=(tf2_msgs robotatfactory_msgs)
 export PIP_NO_INPUT=1 PIP_DISABLE_PIP_VERSION_CHECK=1 DEBIAN_FRONTEND=noninteractive
 
+# one run at a time (several shells may run scripts/bootstrap.sh at once): the others wait, then find
+# everything stamped and do nothing
+mkdir -p "$ROOT/build"
+exec 9> "$ROOT/build/.bootstrap-ros2.lock"
+if ! flock -n 9; then
+  echo "[bootstrap-ros2] another bootstrap_ros2.sh is running: waiting for it"
+  flock 9
+fi
+
 log() { echo "[bootstrap-ros2] $*"; }
 now() { date +%s.%N; }
 since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f s", b - a }'; }
 hash_of() { cat "$@" | sha256sum | cut -d' ' -f1; }
 stamp_ok() { [ -f "$1" ] && [ "$(cat "$1")" = "$2" ]; }
+pip_install() {  # quiet; drops only the warnings about pip.conf index folders that do not exist here
+  "$PY" -m pip install -q "$@" 2> >(grep -v "^WARNING: Location '.*' is ignored: it is neither a file nor a directory" >&2)
+}
 
 # --- Debian packages ------------------------------------------------------------------------------
 DEB_PACKAGES=(cmake g++ ninja-build python3-dev python3-venv)
@@ -66,9 +78,10 @@ if ! stamp_ok "$pip_stamp" "$pip_want"; then
   t=$(now)
   log "installing requirements-ros2.txt (ros-jazzy-* wheels, rosbags, the core deps)"
   # setuptools and wheel first, so that sdists (empy) build as wheels, not by the legacy setup.py path
-  "$PY" -m pip install -q $(grep -E '^(setuptools|wheel)==' requirements-ros2.txt)
-  "$PY" -m pip install -q -r requirements-ros2.txt
-  "$PY" -m pip install -q --no-deps --no-build-isolation -e .
+  # shellcheck disable=SC2046
+  pip_install $(grep -E '^(setuptools|wheel)==' requirements-ros2.txt)
+  pip_install -r requirements-ros2.txt
+  pip_install --no-deps --no-build-isolation -e .
   echo "$pip_want" > "$pip_stamp"
   rm -rf "$BUILD"  # the interface packages are rebuilt against the new wheels
   log "pip done ($(since "$t"))"
