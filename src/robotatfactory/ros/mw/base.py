@@ -79,6 +79,21 @@ def unflatten(flat: dict, sep: str) -> dict:
     return out
 
 
+_last_throttled: dict = {}
+
+
+def throttled(fn: Callable[[str], None], period: float, text: str) -> None:
+    """``fn(text)`` at most once per ``period`` wall seconds per call site (the function and the text's first
+    40 characters): the same rule on both middlewares."""
+    import time
+
+    key = (fn, text[:40])
+    now = time.monotonic()
+    if now - _last_throttled.get(key, -1e18) >= period:
+        _last_throttled[key] = now
+        fn(text)
+
+
 class Publisher(ABC):
     @abstractmethod
     def publish(self, msg) -> None: ...

@@ -12,7 +12,7 @@ from typing import Any, Callable
 
 import rospy
 
-from .base import Node, Publisher, QoS, flatten
+from .base import Node, Publisher, QoS, flatten, throttled
 
 NAME = "ros1"
 MASTER_RESTARTED = 4  # exit code of a node whose ROS master restarted under it
@@ -124,7 +124,7 @@ class Ros1Node(Node):
         fn = {"debug": rospy.logdebug, "info": rospy.loginfo, "warn": rospy.logwarn, "error": rospy.logerr,
               "fatal": rospy.logfatal}[level]
         if throttle > 0:
-            _throttled(fn, throttle, text)
+            throttled(fn, throttle, text)
         else:
             fn(text)
 
@@ -136,18 +136,6 @@ class Ros1Node(Node):
 
     def spin(self) -> None:
         rospy.spin()
-
-
-_last_throttled: dict = {}
-
-
-def _throttled(fn, period: float, text: str) -> None:
-    """One line per call site (its function and the text's first 40 characters) every ``period`` s."""
-    key = (fn, text[:40])
-    now = time.monotonic()
-    if now - _last_throttled.get(key, -1e18) >= period:
-        _last_throttled[key] = now
-        fn(text)
 
 
 # ---- the process's node ---------------------------------------------------------------------------------

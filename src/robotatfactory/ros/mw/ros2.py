@@ -22,7 +22,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from ...errors import ConfigError  # noqa: E402
-from .base import Node, Publisher, QoS, flatten, unflatten  # noqa: E402
+from .base import Node, Publisher, QoS, flatten, throttled, unflatten  # noqa: E402
 
 NAME = "ros2"
 
@@ -202,7 +202,7 @@ class Ros2Node(Node):
         lg = self.node.get_logger()
         fn = {"debug": lg.debug, "info": lg.info, "warn": lg.warning, "error": lg.error, "fatal": lg.fatal}[level]
         if throttle > 0:
-            _throttled(fn, throttle, text)
+            throttled(fn, throttle, text)
         else:
             fn(text)
 
@@ -244,19 +244,6 @@ def _homogeneous(values: list) -> list:
     return values
 
 
-_last_throttled: dict = {}
-
-
-def _throttled(fn, period: float, text: str) -> None:
-    import time
-
-    key = (fn, text[:40])
-    now = time.monotonic()
-    if now - _last_throttled.get(key, -1e18) >= period:
-        _last_throttled[key] = now
-        fn(text)
-
-
 # ---- the process's node ---------------------------------------------------------------------------------
 
 def init_node(name: str, argv: list[str] | None = None, anonymous: bool = False, signals: bool = True,
@@ -267,8 +254,10 @@ def init_node(name: str, argv: list[str] | None = None, anonymous: bool = False,
     from rclpy.parameter import Parameter
 
     if not rclpy.ok():
+        from rclpy.signals import SignalHandlerOptions
+
         rclpy.init(args=argv if argv is not None else sys.argv,
-                   signal_handler_options=None if signals else rclpy.signals.SignalHandlerOptions.NO)
+                   signal_handler_options=None if signals else SignalHandlerOptions.NO)
     if anonymous:
         import uuid
 
