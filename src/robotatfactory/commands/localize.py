@@ -4,13 +4,14 @@ from __future__ import annotations
 import argparse
 
 NAME = "localize"
-HELP = "run the localization node: ArUco poses, EKF with odometry and LIDAR beacons, map->odom (needs a roscore)"
+HELP = "run the localization node: ArUco poses, EKF with odometry and LIDAR beacons, map->odom"
 ORDER = 35
 DESCRIPTION = """\
 Run the localization node next to the bridge. Settings: config/localization.yaml (every key in
 docs/localization.md); --config FILE overrides them from a YAML file of the same shape, --set NAME=VALUE one
 by one (e.g. --set node/filter_method=all_pnp --set pose/lone_marker_max_distance_m=0.6).
-The node needs a ROS master (ROS_MASTER_URI); --roscore starts a private one on a free port.
+ROS 1: the node needs a ROS master (ROS_MASTER_URI); --roscore starts a private one on a free port.
+ROS 2 (raf --middleware ros2 localize): no master; ROS_DOMAIN_ID as for the other nodes.
 
 examples:
   raf localize                               # next to `raf bridge`, default topics
@@ -68,11 +69,15 @@ def run(args) -> int:
         print(yaml.safe_dump({k: _plain(getattr(cfg, k)) for k in cfg.__dataclass_fields__}, sort_keys=False), end="")
         return 0
     from ..ros.cli import run_node
+    from ..ros.localization_node import typed_settings
 
-    def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
-        from ..ros.localization_node import LocalizationNode
+    settings = typed_settings(settings)  # ROS 2: a real parameter stays real (3 -> 3.0)
 
-        return LocalizationNode(cfg).start()
+    def make_node(node):
+        from ..ros.localization_node import LocalizationNode, node_params
+
+        # the settings read back as the node's parameters (ROS 2 declares every one: ros2 param list)
+        return LocalizationNode(from_dict(node_params(node, settings)), node).start()
 
     return run_node(args, "localize", {"": settings}, make_node,
                     lambda n: f"{args.name} running (field {n.field.name})")

@@ -1,4 +1,4 @@
-"""The localization node (thin rospy wiring around :mod:`robotatfactory.localization`).
+"""The localization node (thin wiring around :mod:`robotatfactory.localization`, on either middleware: :mod:`.mw`).
 
 Subscribes (relative names): ``camera/image_raw`` + ``camera/camera_info`` (stamped by the bridge with the
 estimated simulation time of the render), ``odom`` (nav_msgs/Odometry, ``base_link`` in ``odom``), ``scan``.
@@ -9,6 +9,10 @@ closest-marker method), ``aruco/fixes/<method>`` (base_link in map per method), 
 PoseWithCovarianceStamped, base_link in map), TF ``map -> odom`` (REP 105) and ``/diagnostics`` with the
 rejection counts by reason. Every callback survives bad input: it is counted, logged (rate-limited) and
 skipped.
+
+QoS: images, camera_info and scans are sensor data (ROS 2: best effort, which also matches reliable
+publishers); odometry and every output are reliable. Each callback runs one message at a time, as rospy's
+one thread per subscription does (ROS 2's executor would otherwise run two images at once).
 """
 from __future__ import annotations
 
@@ -19,12 +23,10 @@ import time
 from collections import Counter
 
 import numpy as np
-import rospy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
-from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..errors import ConfigError
@@ -37,11 +39,17 @@ from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from . import messages as rm
 from .cli import publish_every, spin_node
+from .mw import QoS, api
+from .mw.base import OK, WARN, Node
 
 
 class LocalizationNode:
-    def __init__(self, cfg: LocalizationConfig):
+    """The localization on a middleware node (:mod:`.mw`): ``start()`` subscribes and publishes,
+    ``stop()`` ends the diagnostics and ignores further messages."""
+
+    def __init__(self, cfg: LocalizationConfig, node: Node):
         self.cfg = cfg
+        self.node = node
         self.field = load_field(cfg.field)
         self.robot = robot_for(cfg)  # the calibration file's camera, if any
         nc = cfg.node
@@ -67,31 +75,31 @@ class LocalizationNode:
 
     # ------------------------------------------------------------------ wiring
     def start(self) -> "LocalizationNode":
-        t, nc = self.cfg.topics, self.cfg.node
-        self.pub_markers = rospy.Publisher(t["markers"], MarkerArray, queue_size=2)
-        self.pub_poses = rospy.Publisher(t["marker_poses"], PoseArray, queue_size=2)
-        self.pub_debug = rospy.Publisher(t["debug_image"], Image, queue_size=1)
-        self.pub_camera_pose = rospy.Publisher(t["camera_pose"], PoseWithCovarianceStamped, queue_size=5)
-        self.pub_fix = {m: rospy.Publisher(f"{t['fixes']}/{m}", PoseWithCovarianceStamped, queue_size=5)
+        t, nc, node = self.cfg.topics, self.cfg.node, self.node
+        R = QoS.RELIABLE
+        self.pub_markers = node.publisher(t["markers"], MarkerArray, R, 2)
+        self.pub_poses = node.publisher(t["marker_poses"], PoseArray, R, 2)
+        self.pub_debug = node.publisher(t["debug_image"], Image, QoS.SENSOR, 1)
+        self.pub_camera_pose = node.publisher(t["camera_pose"], PoseWithCovarianceStamped, R, 5)
+        self.pub_fix = {m: node.publisher(f"{t['fixes']}/{m}", PoseWithCovarianceStamped, R, 5)
                         for m in nc.methods()}
         # the filter's final verdict on each camera fix (once it leaves the filter's history): accepted / gated
-        self.pub_verdict = {ok: rospy.Publisher(f"{t['fixes']}/filter_{'accepted' if ok else 'rejected'}",
-                                                PoseWithCovarianceStamped, queue_size=50) for ok in (True, False)}
-        self.pub_pose = rospy.Publisher(t["pose"], PoseWithCovarianceStamped, queue_size=10)
-        self.pub_tf = rospy.Publisher("/tf", TFMessage, queue_size=50)
-        self.pub_diag = rospy.Publisher(t["diagnostics"], DiagnosticArray, queue_size=5)
+        self.pub_verdict = {ok: node.publisher(f"{t['fixes']}/filter_{'accepted' if ok else 'rejected'}",
+                                               PoseWithCovarianceStamped, R, 50) for ok in (True, False)}
+        self.pub_pose = node.publisher(t["pose"], PoseWithCovarianceStamped, R, 10)
+        self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, R, 5)
         self._running = True
+        # odom: the bridge writes it reliably (QoS.SYNCHRONOUS); every message counts for the filter
         self.subs = [
-            rospy.Subscriber(t["odom"], Odometry, self._guard(self.on_odom), queue_size=50, tcp_nodelay=True),
-            rospy.Subscriber(t["image"], Image, self._guard(self.on_image), queue_size=1, buff_size=1 << 24,
-                             tcp_nodelay=True),
-            rospy.Subscriber(t["camera_info"], CameraInfo, self._guard(self.on_camera_info), queue_size=1),
+            node.subscribe(t["odom"], Odometry, self._guard(self.on_odom), R, 50),
+            node.subscribe(t["image"], Image, self._guard(self.on_image), QoS.SENSOR, 1, large=True),
+            node.subscribe(t["camera_info"], CameraInfo, self._guard(self.on_camera_info), QoS.SENSOR, 1),
         ]
         if nc.use_lidar and len(self.beacon_xy):
-            self.subs.append(rospy.Subscriber(t["scan"], LaserScan, self._guard(self.on_scan), queue_size=5))
+            self.subs.append(node.subscribe(t["scan"], LaserScan, self._guard(self.on_scan), QoS.SENSOR, 5))
         self._diag_thread = threading.Thread(target=self._diag_loop, name="raf-localize-diag", daemon=True)
         self._diag_thread.start()
-        rospy.loginfo(f"localization: field {self.field.name}, camera fixes by '{nc.filter_method}', camera_pose "
+        node.info(f"localization: field {self.field.name}, camera fixes by '{nc.filter_method}', camera_pose "
                       f"by '{nc.camera_pose_method}', {len(self.beacon_xy)} LIDAR beacons "
                       f"{'used' if nc.use_lidar else 'ignored'}; waiting for "
                       f"{'odometry' if nc.initial_pose == 'start' else 'a confident camera fix'}")
@@ -100,31 +108,39 @@ class LocalizationNode:
     def stop(self) -> None:
         self._running = False
         for s in getattr(self, "subs", []):
-            s.unregister()
+            if hasattr(s, "unregister"):  # ROS 1 (ROS 2's subscriptions go with the node)
+                s.unregister()
 
     def _guard(self, fn):
+        """``fn`` as a callback: one message at a time, any exception counted and logged (rate-limited)."""
+        one = threading.Lock()
+
         def run(msg):
-            try:
-                fn(msg)
-            except Exception as e:  # noqa: BLE001 - a callback must never take the node down
-                self.counts[f"callback_error:{fn.__name__}"] += 1
-                self._warn(fn.__name__, f"localization: {fn.__name__} failed on a message: {e!r}")
+            if not self._running:
+                return
+            with one:
+                try:
+                    fn(msg)
+                except Exception as e:  # noqa: BLE001 - a callback must never take the node down
+                    self.counts[f"callback_error:{fn.__name__}"] += 1
+                    self._warn(fn.__name__, f"localization: {fn.__name__} failed on a message: {e!r}")
         return run
 
     def _warn(self, key: str, text: str) -> None:
         now = time.monotonic()
         if now - self._last_warn.get(key, -1e9) >= self.cfg.node.log_period:
             self._last_warn[key] = now
-            rospy.logwarn(text)
+            self.node.warn(text)
 
     # ------------------------------------------------------------------ callbacks
     def on_camera_info(self, msg: CameraInfo) -> None:
         if not self.cfg.node.use_camera_info or self.cfg.calibration:  # a calibration file takes precedence
             return
-        K = np.array(msg.K, dtype=float).reshape(3, 3)
+        D_msg, K_msg, _, _ = rm.camera_matrices(msg)
+        K = np.array(K_msg, dtype=float).reshape(3, 3)
         D = np.zeros(5)
-        if msg.D:
-            D[:min(5, len(msg.D))] = np.asarray(msg.D, dtype=float)[:5]
+        if D_msg:
+            D[:min(5, len(D_msg))] = np.asarray(D_msg, dtype=float)[:5]
         D_now = self.loc.D if self.loc.D is not None else np.zeros(5)
         if np.allclose(K, self.loc.K) and np.allclose(D, D_now):
             self._K_from_info = True
@@ -133,14 +149,14 @@ class LocalizationNode:
             with self.lock:
                 self.loc.set_intrinsics(K, D)
             self._K_from_info = True
-            rospy.loginfo(f"localization: camera matrix from camera_info: fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} "
+            self.node.info(f"localization: camera matrix from camera_info: fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} "
                           f"cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}, distortion {np.round(D, 5).tolist()}")
         except ConfigError as e:
             self.counts["bad_camera_info"] += 1
             self._warn("camera_info", f"localization: ignoring camera_info: {e}")
 
     def on_odom(self, msg: Odometry) -> None:
-        t = msg.header.stamp.to_sec()
+        t = rm.stamp_to_s(msg.header.stamp)
         p = msg.pose.pose
         pose = (p.position.x, p.position.y, rm.quaternion_yaw(p.orientation))
         if not all(math.isfinite(v) for v in (t,) + pose):
@@ -148,7 +164,7 @@ class LocalizationNode:
             return
         with self.lock:
             if self._odom is not None and t < self._odom[0] - 1.0:  # the simulation restarted
-                rospy.logwarn("localization: odometry went back in time: restarting the filter")
+                self.node.warn("localization: odometry went back in time: restarting the filter")
                 self.ekf = Ekf(self.ekf.cfg)
                 self.counts["restarts"] += 1
                 self._odom = None  # (else every later message looks older still and restarts it again)
@@ -190,11 +206,11 @@ class LocalizationNode:
         self.pub_pose.publish(m)
         if self.cfg.node.publish_tf:
             map_odom = matrix_se2(se2_matrix(*x) @ inv(se2_matrix(*odom_pose)))  # map <- odom (REP 105)
-            self.pub_tf.publish(TFMessage([rm.planar_transform(self.frames["map"], self.frames["odom"], *map_odom,
-                                                               rm.stamp_s(t + self.cfg.node.tf_future_s))]))
+            self.node.send_tf([rm.planar_transform(self.frames["map"], self.frames["odom"], *map_odom,
+                                                   rm.stamp_s(t + self.cfg.node.tf_future_s))])
 
     def on_image(self, msg: Image) -> None:
-        t = msg.header.stamp.to_sec()
+        t = rm.stamp_to_s(msg.header.stamp)
         try:
             img = rm.image_to_bgr(msg)
         except ValueError as e:
@@ -232,7 +248,7 @@ class LocalizationNode:
             elif r.reason == reasons.TOO_OLD:
                 self._warn("too_old", f"localization: a camera frame stamped {t:.3f} s is older than the filter's "
                                       f"history ({self.ekf.cfg.history_s} s): dropped")
-        if nc.debug_image and self.pub_debug.get_num_connections() > 0:
+        if nc.debug_image and self.pub_debug.subscriber_count() > 0:
             from ..localization.draw import draw_debug
 
             with self.lock:
@@ -257,6 +273,7 @@ class LocalizationNode:
         pa = PoseArray()
         pa.header.stamp, pa.header.frame_id = stamp, frame
         used = set()
+        lifetime = api().duration_msg(0.5)
         fix = res.estimates.get(self.cfg.node.filter_method)
         if fix is not None and fix.ok:
             used = set(fix.marker_ids)
@@ -268,12 +285,12 @@ class LocalizationNode:
                 m = Marker()
                 m.header.stamp, m.header.frame_id = stamp, frame
                 m.ns = f"aruco_{kind}"
-                m.id = o.id
+                m.id = int(o.id)
                 m.pose = p
-                m.lifetime = rospy.Duration(0.5)
+                m.lifetime = lifetime
                 if kind == "cube":
                     m.type = Marker.CUBE
-                    m.scale.x = m.scale.y = o.marker.size
+                    m.scale.x = m.scale.y = float(o.marker.size)
                     m.scale.z = 0.002
                     ok = o.id in used
                     m.color.r, m.color.g, m.color.b, m.color.a = (0.1, 0.9, 0.1, 0.8) if ok else (0.9, 0.6, 0.1, 0.8)
@@ -299,7 +316,7 @@ class LocalizationNode:
         obs = extract_beacons(ranges, angles, self.cfg.beacons, range_min=msg.range_min,
                               range_max=msg.range_max if msg.range_max > 0 else np.inf)
         self.counts["scans"] += 1
-        t0 = msg.header.stamp.to_sec()
+        t0 = rm.stamp_to_s(msg.header.stamp)
         dt = msg.time_increment if math.isfinite(msg.time_increment) and msg.time_increment > 0 else 0.0
         for o in obs:
             with self.lock:
@@ -310,14 +327,14 @@ class LocalizationNode:
 
     # ------------------------------------------------------------------ diagnostics
     def _diag_loop(self) -> None:
-        publish_every(self.cfg.node.diagnostics_period, lambda: self._running and not rospy.is_shutdown(),
+        publish_every(self.cfg.node.diagnostics_period, lambda: self._running and self.node.ok(),
                       self.pub_diag, self.diagnostics, errors=(Exception,),
                       on_error=lambda e: self._warn("diag", f"localization: diagnostics failed: {e!r}"))
 
     def diagnostics(self) -> DiagnosticArray:
-        name = rospy.get_name()
+        name = self.node.name
         arr = DiagnosticArray()
-        arr.header.stamp = rospy.Time.now()
+        arr.header.stamp = self.node.now()
 
         with self.lock:
             c = dict(self.counts)
@@ -327,11 +344,11 @@ class LocalizationNode:
         age = None if self._last_fix_wall is None else time.monotonic() - self._last_fix_wall
         frames = c.get("frames", 0)
         if frames == 0:
-            level, text = DiagnosticStatus.WARN, "no camera image yet"
+            level, text = WARN, "no camera image yet"
         elif age is None or age > 5.0:
-            level, text = DiagnosticStatus.WARN, "no usable camera fix for a while (no markers in view?)"
+            level, text = WARN, "no usable camera fix for a while (no markers in view?)"
         else:
-            level, text = DiagnosticStatus.OK, "camera fixes coming in"
+            level, text = OK, "camera fixes coming in"
         vals = {"frames": frames, "fixes": c.get("fixes", 0), "frame_ms_median":
                 float(np.median(self._frame_ms)) if self._frame_ms else -1.0,
                 "camera_matrix_from_camera_info": self._K_from_info,
@@ -339,11 +356,11 @@ class LocalizationNode:
         vals.update({f"rejected_{k}": v for k, v in lc.items()})
         st1 = rm.diagnostic_status(f"{name}: camera", level, text, "aruco", dict(sorted(vals.items())), ".4g")
         if x is None:
-            level, text = DiagnosticStatus.WARN, "not initialised: waiting for a confident camera fix"
+            level, text = WARN, "not initialised: waiting for a confident camera fix"
             vals = {}
         else:
             sx = math.sqrt(max(P[0, 0], P[1, 1]))
-            level = DiagnosticStatus.OK if sx < 0.05 else DiagnosticStatus.WARN
+            level = OK if sx < 0.05 else WARN
             text = f"x {x[0]:+.3f} y {x[1]:+.3f} heading {math.degrees(x[2]):+.1f} deg, sigma {sx * 1000:.1f} mm"
             vals = {"x": x[0], "y": x[1], "theta_deg": math.degrees(x[2]), "sigma_xy_m": sx,
                     "sigma_theta_deg": math.degrees(math.sqrt(P[2, 2]))}
@@ -357,8 +374,69 @@ class LocalizationNode:
         return arr
 
 
+def default_params() -> dict:
+    """The node's whole parameter tree with its defaults (what ROS 2 declares): every setting of
+    :mod:`robotatfactory.localization.config` (``detector/extra`` only when given)."""
+    from dataclasses import asdict
+
+    cfg = LocalizationConfig()
+    tree = {}
+    for f in cfg.__dataclass_fields__:
+        v = getattr(cfg, f)
+        tree[f] = asdict(v) if hasattr(v, "__dataclass_fields__") else (dict(v) if isinstance(v, dict) else v)
+    tree["detector"].pop("extra", None)
+    return tree
+
+
+RANGES: dict[str, tuple[float, float]] = {  # what NodeConfig.check() and the estimators accept
+    "node.diagnostics_period": (1e-3, 1e9), "node.log_period": (1e-3, 1e9), "node.initial_sigma_xy": (1e-9, 1e9),
+    "node.initial_sigma_theta_deg": (1e-9, 1e9),
+}
+_COMMENTS: dict | None = None
+
+
+def describe_param(flat: str) -> tuple[str, tuple[float, float] | None]:
+    """(description, (min, max) or None) of a parameter (``node.filter_method``): its end-of-line comment in
+    config/localization.yaml and the range the validation allows, where it checks one."""
+    global _COMMENTS
+    if _COMMENTS is None:
+        from ..localization.config import DEFAULT_FILE
+        from ..settings import yaml_comments
+
+        _COMMENTS = yaml_comments(DEFAULT_FILE)
+    return _COMMENTS.get(flat, ""), RANGES.get(flat)
+
+
+def typed_settings(settings: dict, defaults: dict | None = None) -> dict:
+    """``settings`` with whole numbers written where a real is expected made reals (``history_s: 3`` ->
+    3.0): ROS 2 parameters keep the type of their default. Other values are left for the validation."""
+    defaults = default_params() if defaults is None else defaults
+    out = {}
+    for k, v in settings.items():
+        d = defaults.get(k) if isinstance(defaults, dict) else None
+        if isinstance(v, dict):
+            out[k] = typed_settings(v, d if isinstance(d, dict) else {})
+        elif isinstance(d, float) and isinstance(v, int) and not isinstance(v, bool):
+            out[k] = float(v)
+        else:
+            out[k] = v
+    return out
+
+
+def node_params(node: Node, settings: dict | None = None) -> dict:
+    """The node's parameters as a settings tree: ``default_params()`` (updated with ``settings``: options
+    given on the command line that the defaults lack, e.g. ``detector/extra`` keys, are declared too)."""
+    from ..settings import deep_update
+
+    defaults = default_params()
+    if settings:
+        deep_update(defaults, typed_settings(settings, defaults))
+    return node.params(defaults, describe_param)
+
+
 def main(argv: list[str] | None = None) -> int:
-    return spin_node("raf_localization", lambda node: LocalizationNode(from_dict(node.params())).start(), argv)
+    return spin_node("raf_localization", lambda node: LocalizationNode(from_dict(node_params(node)), node).start(),
+                     argv)
 
 
 if __name__ == "__main__":
