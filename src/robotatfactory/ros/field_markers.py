@@ -25,8 +25,10 @@ def _marker(ns, mid, mtype, frame, pose: Pose, scale, rgba, text="") -> Marker:
     m.type = mtype
     m.action = Marker.ADD
     m.pose = pose
-    m.scale = Vector3(*scale)
-    m.color = ColorRGBA(*rgba)
+    sx, sy, sz = (float(v) for v in scale)
+    m.scale = Vector3(x=sx, y=sy, z=sz)  # keyword arguments, floats: ROS 2 messages take nothing else
+    r, g, b, a = (float(v) for v in rgba)
+    m.color = ColorRGBA(r=r, g=g, b=b, a=a)
     m.text = text
     m.frame_locked = False
     return m
@@ -34,8 +36,9 @@ def _marker(ns, mid, mtype, frame, pose: Pose, scale, rgba, text="") -> Marker:
 
 def _pose(xyz, q: Quaternion | None = None) -> Pose:
     p = Pose()
-    p.position = Point(*map(float, xyz))
-    p.orientation = q or Quaternion(0, 0, 0, 1)
+    x, y, z = map(float, xyz)
+    p.position = Point(x=x, y=y, z=z)
+    p.orientation = q or Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
     return p
 
 
