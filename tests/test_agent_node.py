@@ -1,23 +1,26 @@
 """The agent's ROS node: inputs only pose/odom/contact (never ground truth), cmd_vel and electromagnet out,
 the factory-state server over UDP, and a stop when the pose goes stale. A real roscore on a free port and
-the real FactoryServer on loopback; the node runs in the test process."""
+the real FactoryServer on loopback; the node runs in the test process, on the test node of rosutil
+(:mod:`robotatfactory.ros.mw`)."""
 from __future__ import annotations
 
 import time
 
 import pytest
 
-from rosutil import Collector, ros_master, test_node, wait_until  # noqa: F401
+from robotatfactory.ros.mw import QoS
+
+from rosutil import Collector, middleware, publisher, ros_master, test_node, unpublish, wait_until  # noqa: F401
 
 pytestmark = [pytest.mark.ros]
 
 
 def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_master, field):  # noqa: F811
-    rospy = test_node()
-    import rosgraph
+    tnode = test_node()
     from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
     from nav_msgs.msg import Odometry, Path
     from std_msgs.msg import Bool
+    from visualization_msgs.msg import Marker, MarkerArray
 
     from robotatfactory.competition import Factory, FactoryServer, RoundSetup
     from robotatfactory.ros import messages as rm
@@ -25,12 +28,13 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_mast
 
     factory = Factory(field, RoundSetup.make(1, parts="XBXX"))
     server = FactoryServer(factory, port=0, clock=time.monotonic).start()
-    node = AgentNode(AgentNodeConfig(server_port=server.address[1])).start()
+    node = AgentNode(AgentNodeConfig(server_port=server.address[1]), tnode).start()
     cmds = Collector("/cmd_vel", Twist)
     magnet = Collector("/electromagnet", Bool)
     paths = Collector("/agent/path", Path)
-    pub_pose = rospy.Publisher("/pose", PoseWithCovarianceStamped, queue_size=5)
-    pub_odom = rospy.Publisher("/odom", Odometry, queue_size=5)
+    markers = Collector("/agent/markers", MarkerArray)
+    pub_pose = publisher("/pose", PoseWithCovarianceStamped, QoS.RELIABLE, 5, wait_for=0)
+    pub_odom = publisher("/odom", Odometry, QoS.RELIABLE, 5, wait_for=0)
     sp = field.start_pose
     try:
         # before the start: no part list, the robot stays put (and the pose is not there yet)
@@ -39,7 +43,7 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_mast
         factory.start(time.monotonic())
 
         def feed():
-            now = rospy.Time.now()
+            now = tnode.now()
             p = PoseWithCovarianceStamped()
             p.header.stamp, p.header.frame_id = now, "map"
             p.pose.pose.position.x, p.pose.pose.position.y = sp.x, sp.y
@@ -59,10 +63,30 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_mast
         path = paths.wait(1, timeout=5)[-1]
         assert path.header.frame_id == "map" and len(path.poses) >= 2
         assert not any(m.data for m in magnet.msgs)
+        # RViz: the planned round as arrows source -> destination, the current task highlighted, the goal pose
+        def showing_task(arr):
+            return any(m.ns == "agent_task" for m in arr.markers) and any(m.ns == "agent_goal" for m in arr.markers)
+
+        arr = markers.wait(1, timeout=5, pred=showing_task)[-1]
+        assert arr.markers[0].action == Marker.DELETEALL
+        assert all(m.header.frame_id == "map" for m in arr.markers[1:])
+        plan = [m for m in arr.markers if m.ns == "agent_plan"]
+        texts = {m.id: m.text for m in arr.markers if m.ns == "agent_plan_text"}
+        assert plan and all(m.type == Marker.ARROW and len(m.points) == 2 for m in plan)
+        assert len(texts) == len(plan) and texts[0].startswith("1: ") and "incoming 2 ->" in texts[0]
+        src = field.slot("incoming", 2).xy
+        assert abs(plan[0].points[0].x - src[0]) < 1e-9 and abs(plan[0].points[0].y - src[1]) < 1e-9
+        # the current task's arrow (the first) is the one highlighted: thicker and of its own colour
+        assert all(plan[0].scale.x > m.scale.x and plan[0].color != m.color for m in plan[1:])
+        head = next(m for m in arr.markers if m.ns == "agent_task" and m.type == Marker.TEXT_VIEW_FACING)
+        assert "incoming 2" in head.text
+        goal = next(m for m in arr.markers if m.ns == "agent_goal")
+        end = path.poses[-1].pose.position
+        assert (goal.pose.position.x, goal.pose.position.y) == pytest.approx((end.x, end.y), abs=1e-9)
         # the node's inputs are exactly its own sensors' topics; nobody subscribes to ground truth
-        assert sorted(s.resolved_name for s in node.subscribers) == sorted(f"/{t}" for t in SUBSCRIBED)
-        state = rosgraph.Master("/raf_agent_test").getSystemState()
-        subscribed = {topic for topic, _ in state[1]}
+        assert sorted(_topic(s) for s in node.subscribers) == sorted(f"/{t}" for t in SUBSCRIBED)
+        subscribed = _subscribed_topics(tnode)
+        assert {f"/{t}" for t in SUBSCRIBED} <= subscribed
         assert not any("ground_truth" in t or t.startswith("/sim") for t in subscribed), subscribed
         # the pose stops coming: within the staleness limit and the braking the commands reach zero
         stale0 = node.counts["stale_cycles"]
@@ -73,10 +97,26 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_mast
     finally:
         node.stop()
         server.stop()
-        for c in (cmds, magnet, paths):
+        for c in (cmds, magnet, paths, markers):
             c.close()
-        pub_pose.unregister()
-        pub_odom.unregister()
+        unpublish(pub_pose)
+        unpublish(pub_odom)
+
+
+def _topic(sub) -> str:
+    """The resolved topic of a subscription of either middleware."""
+    return sub.resolved_name if hasattr(sub, "resolved_name") else sub.topic_name
+
+
+def _subscribed_topics(tnode) -> set[str]:
+    """Every topic someone in the graph subscribes to."""
+    if middleware() == "ros2":
+        n = tnode.node
+        return {t for name, ns in n.get_node_names_and_namespaces()
+                for t, _ in n.get_subscriber_names_and_types_by_node(name, ns)}
+    import rosgraph
+
+    return {topic for topic, _ in rosgraph.Master("/raf_agent_test").getSystemState()[1]}
 
 
 def test_launch_parameters_are_checked():

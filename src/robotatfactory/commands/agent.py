@@ -1,4 +1,4 @@
-"""``raf agent``: run the autonomous competition robot's node (issue 11; needs a roscore)."""
+"""``raf agent``: run the autonomous competition robot's node (issue 11; ROS 1 or, with ``raf --middleware ros2``, ROS 2)."""
 from __future__ import annotations
 
 import argparse
@@ -45,12 +45,17 @@ def run(args) -> int:
     if getattr(args, "print_params", False):
         print(cfg)
         return 0
+    from dataclasses import asdict
+
     from ..ros.cli import run_node
 
+    params = asdict(cfg)
+
     def make_node(node):
-        from ..ros.agent_node import AgentNode
+        from ..ros.agent_node import AgentNode, config_from_params, node_params
 
-        return AgentNode(cfg).start()
+        # the settings read back as the node's parameters (ROS 2 declares every one: ros2 param list)
+        return AgentNode(config_from_params(node_params(node, params)), node).start()
 
-    return run_node(args, "agent", {}, make_node, lambda n: f"{args.name} running (field {n.field.name}, "
+    return run_node(args, "agent", params, make_node, lambda n: f"{args.name} running (field {n.field.name}, "
                                                            f"server udp {cfg.server_host}:{cfg.server_port})")

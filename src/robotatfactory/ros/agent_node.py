@@ -1,10 +1,13 @@
-"""The agent node: thin rospy wiring around :class:`robotatfactory.agent.behaviour.RoundAgent`.
+"""The agent node: thin wiring around :class:`robotatfactory.agent.behaviour.RoundAgent`, on either
+middleware (:mod:`.mw`).
 
 Uses only what a real robot has. Subscribes (relative names): ``pose``
 (geometry_msgs/PoseWithCovarianceStamped, base_link in map, from ``raf localize``), ``odom``
 (nav_msgs/Odometry, only to tell that the robot's own sensors are alive) and ``contact`` (std_msgs/Bool).
 Never ``ground_truth`` nor simulator state. Publishes ``cmd_vel`` (geometry_msgs/Twist), ``electromagnet``
-(std_msgs/Bool), ``agent/path`` (nav_msgs/Path, the path being followed, map frame) and ``/diagnostics``.
+(std_msgs/Bool), ``agent/path`` (nav_msgs/Path, the path being followed, map frame), ``agent/markers``
+(visualization_msgs/MarkerArray, map frame: the planned round as arrows from source to destination slot with
+their order and part, the current task highlighted, the current goal pose) and ``/diagnostics``.
 Talks to the factory-state server over UDP (a thread polls it whenever the agent asks; the control loop
 never waits on the network).
 
@@ -14,24 +17,30 @@ seconds (the agent then brakes to a stop). Bad messages are counted and skipped.
 """
 from __future__ import annotations
 
+import inspect
 import math
 import threading
 import time
 from dataclasses import dataclass
 
-import rospy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry, Path
 from std_msgs.msg import Bool
+from visualization_msgs.msg import Marker, MarkerArray
 
 from ..agent.behaviour import RoundAgent
 from ..agent.client import FactoryClient, ServerReplyError, ServerTimeout
+from ..agent.footprint import pose_in_front
 from ..agent.predict import extrapolate
+from ..agent.tasks import Move, Wait, plan_round
 from ..field import load_field
 from ..robot import load_robot
 from ..simtwo.ports import SERVER_UDP_PORT
 from . import messages as rm
+from .mw import QoS
+from .mw.base import OK, WARN, Node
 
 SUBSCRIBED = ("pose", "odom", "contact")  # the only inputs; a test checks no other is subscribed
 
@@ -49,13 +58,20 @@ class AgentNodeConfig:
 
 
 class AgentNode:
-    def __init__(self, cfg: AgentNodeConfig):
+    """The agent on a middleware node (:mod:`.mw`): ``start()`` subscribes, publishes and starts the control
+    timer (node clock), ``stop()`` stops the robot."""
+
+    def __init__(self, cfg: AgentNodeConfig, node: Node):
         self.cfg = cfg
+        self.node = node
         self.field = load_field(cfg.field)
         self.robot = load_robot(cfg.robot)
         self.agent = RoundAgent(self.field, self.robot)
         self.lock = threading.RLock()
         self.pose: tuple[float, float, float] | None = None
+        self.pose_cov: np.ndarray | None = None  # 3x3 (x, y, theta) of the latest pose
+        # the agent core takes the pose's uncertainty where its step() has the argument
+        self._step_uncertainty = "uncertainty" in inspect.signature(self.agent.step).parameters
         self.pose_stamp = -math.inf
         self.odom_stamp = -math.inf
         self.contact = False
@@ -64,34 +80,43 @@ class AgentNode:
         self._stale_at_diag = 0  # stale_cycles at the last diagnostics report
         self._events_logged = 0
         self._path_sent = None
+        self._markers_key = None  # what the last agent/markers showed (plan, task, goal)
+        self._plan: list = []  # the planned round's Moves (from the server state it was planned on)
+        self._plan_state = None
         self._running = False
         self.subscribers: list = []
+        self.timer = None
 
     def start(self) -> AgentNode:
-        self.pub_cmd = rospy.Publisher("cmd_vel", Twist, queue_size=1, tcp_nodelay=True)
-        self.pub_magnet = rospy.Publisher("electromagnet", Bool, queue_size=1, tcp_nodelay=True)
-        self.pub_path = rospy.Publisher("agent/path", Path, queue_size=1, latch=True)
-        self.pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=5)
+        node = self.node
+        self.pub_cmd = node.publisher("cmd_vel", Twist, QoS.CONTROL, 1)
+        self.pub_magnet = node.publisher("electromagnet", Bool, QoS.CONTROL, 1)
+        self.pub_path = node.publisher("agent/path", Path, QoS.LATCHED, 1)
+        self.pub_markers = node.publisher("agent/markers", MarkerArray, QoS.LATCHED, 1)
+        self.pub_diag = node.publisher("/diagnostics", DiagnosticArray, QoS.RELIABLE, 5)
         self.subscribers = [
-            rospy.Subscriber("pose", PoseWithCovarianceStamped, self.on_pose, queue_size=5, tcp_nodelay=True),
-            rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=5, tcp_nodelay=True),
-            rospy.Subscriber("contact", Bool, self.on_contact, queue_size=5, tcp_nodelay=True),
+            node.subscribe("pose", PoseWithCovarianceStamped, self.on_pose, QoS.RELIABLE, 5),
+            node.subscribe("odom", Odometry, self.on_odom, QoS.RELIABLE, 5),
+            node.subscribe("contact", Bool, self.on_contact, QoS.RELIABLE, 5),
         ]
         self.client = FactoryClient(self.cfg.server_host, self.cfg.server_port, timeout=0.2, retries=2)
         self._running = True
         self._poller = threading.Thread(target=self._poll_loop, name="raf-agent-server", daemon=True)
         self._poller.start()
-        self.timer = rospy.Timer(rospy.Duration(self.robot.control_period), self._tick)
+        self.timer = node.timer(self.robot.control_period, self._tick)
         return self
 
     def stop(self) -> None:
-        self._running = False
+        running, self._running = self._running, False
         try:
-            self.timer.shutdown()
-            self.pub_cmd.publish(Twist())
+            if self.timer is not None:
+                self.timer.shutdown() if hasattr(self.timer, "shutdown") else self.timer.cancel()
+            if running:
+                self.pub_cmd.publish(Twist())
         except Exception:  # noqa: BLE001 - shutting down
             pass
-        self.client.close()
+        if hasattr(self, "client"):
+            self.client.close()
 
     # ------------------------------------------------------------------ inputs
     def on_pose(self, msg: PoseWithCovarianceStamped) -> None:
@@ -100,12 +125,14 @@ class AgentNode:
         if not all(math.isfinite(v) for v in (x, y, th)):
             self.counts["bad_pose"] += 1
             return
+        c = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)[np.ix_((0, 1, 5), (0, 1, 5))]
         with self.lock:
-            self.pose, self.pose_stamp = (x, y, th), msg.header.stamp.to_sec()
+            self.pose, self.pose_stamp = (x, y, th), rm.stamp_to_s(msg.header.stamp)
+            self.pose_cov = c if np.all(np.isfinite(c)) else None
 
     def on_odom(self, msg: Odometry) -> None:
         with self.lock:
-            self.odom_stamp = msg.header.stamp.to_sec()
+            self.odom_stamp = rm.stamp_to_s(msg.header.stamp)
             self.twist = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
 
     def on_contact(self, msg: Bool) -> None:
@@ -114,22 +141,24 @@ class AgentNode:
 
     # ------------------------------------------------------------------ server
     def _poll_loop(self) -> None:
-        while self._running and not rospy.is_shutdown():
+        while self._running and self.node.ok():
             if self.agent.wants_state:
                 try:
                     st = self.client.poll_state()
                 except (ServerTimeout, ServerReplyError, OSError) as e:
                     self.counts["server_errors"] += 1
-                    rospy.logwarn_throttle(5.0, f"raf agent: factory-state server: {e}")
+                    self.node.warn(f"raf agent: factory-state server: {e}", throttle=5.0)
                     st = None
                 if st is not None:
                     with self.lock:
-                        self.agent.on_state(st, rospy.get_time())
+                        self.agent.on_state(st, self.node.now_s())
             time.sleep(0.02)
 
     # ------------------------------------------------------------------ control
     def _tick(self, _event=None) -> None:
-        now = rospy.get_time()
+        if not self._running:
+            return
+        now = self.node.now_s()
         with self.lock:
             fresh = (now - self.pose_stamp <= self.cfg.max_input_age and now - self.odom_stamp <= self.cfg.max_input_age)
             # the estimate brought forward to now with the measured speeds (the EKF's stamp is older)
@@ -137,50 +166,149 @@ class AgentNode:
                 if fresh and self.pose is not None else None
             if pose is None:
                 self.counts["stale_cycles"] += 1
-            cmd = self.agent.step(now, pose, self.contact)
+            if self._step_uncertainty:
+                cmd = self.agent.step(now, pose, self.contact, uncertainty=self.pose_cov if pose is not None else None)
+            else:
+                cmd = self.agent.step(now, pose, self.contact)
             self.counts["cycles"] += 1
             events = self.agent.events[self._events_logged:]
             self._events_logged = len(self.agent.events)
             path = self.agent.path
         tw = Twist()
-        tw.linear.x, tw.angular.z = cmd.v, cmd.w
+        tw.linear.x, tw.angular.z = float(cmd.v), float(cmd.w)
         self.pub_cmd.publish(tw)
-        self.pub_magnet.publish(Bool(data=cmd.magnet))
+        self.pub_magnet.publish(Bool(data=bool(cmd.magnet)))
         for t, text in events:
-            rospy.loginfo(f"raf agent: t = {t:.2f} s: {text}")
+            self.node.info(f"raf agent: t = {t:.2f} s: {text}")
         if path is not None and path is not self._path_sent:
             self._path_sent = path
             self.pub_path.publish(self._path_msg(path))
+        if self.counts["cycles"] % 5 == 0:  # 5 Hz at most, and only when something shown changed
+            self._publish_markers()
         if self.counts["cycles"] % 25 == 0:
             self.pub_diag.publish(self._diagnostics())
 
     def _path_msg(self, path) -> Path:
         msg = Path()
         msg.header.frame_id = self.cfg.map_frame
-        msg.header.stamp = rospy.Time.now()
+        msg.header.stamp = self.node.now()
         for x, y in path.points:
             ps = PoseStamped()
             ps.header = msg.header
-            ps.pose.position.x, ps.pose.position.y = x, y
+            ps.pose.position.x, ps.pose.position.y = float(x), float(y)
             ps.pose.orientation.w = 1.0
             msg.poses.append(ps)
         return msg
+
+    # ------------------------------------------------------------------ RViz
+    def _planned_moves(self) -> list:
+        """The round as planned from the latest server state (:func:`..agent.tasks.plan_round`): its Moves,
+        the current one first. Re-planned only when the server state changes."""
+        a = self.agent
+        st = a.state
+        if st is None:
+            return []
+        if st is not self._plan_state:
+            self._plan_state = st
+            try:
+                steps, _ = plan_round(a.policy, st, a.delays.estimate or 10.0)
+                self._plan = [s.task for s in steps if isinstance(s.task, Move)]
+            except Exception as e:  # noqa: BLE001 - display only: a plan that cannot be made shows nothing
+                self._plan = []
+                self.node.warn(f"raf agent: no plan to show: {e}", throttle=10.0)
+        return self._plan
+
+    def _goal(self):
+        """The current goal pose (x, y, heading; m, rad) in map: the path's end facing the slot's plate while
+        driving, the dock pose while docking; None when there is none."""
+        a = self.agent
+        if a.target is None or a.mode not in ("to_pick", "to_place", "pick", "place"):
+            return None
+        slot = self.field.slot(a.target.zone, a.target.number)
+        if a.mode in ("to_pick", "to_place") and a.path is not None and len(a.path.points):
+            x, y = (float(v) for v in a.path.points[-1])  # the approach pose, facing the plate
+            return x, y, float(slot.facing) + math.pi
+        return tuple(float(v) for v in pose_in_front(slot, a.d_dock))  # docking: the dock pose
+
+    def _publish_markers(self) -> None:
+        with self.lock:
+            a = self.agent
+            moves = self._planned_moves()
+            task = a.task if isinstance(a.task, (Move, Wait)) else None
+            goal = self._goal()
+            mode = a.mode
+        key = (tuple(moves), task, goal, mode)
+        if key == self._markers_key:
+            return
+        self._markers_key = key
+        self.pub_markers.publish(self.marker_array(moves, task, goal, mode))
+
+    def marker_array(self, moves: list, task, goal, mode: str) -> MarkerArray:
+        """The plan, the current task and the goal as RViz markers (map frame; namespaces ``agent_plan``,
+        ``agent_plan_text``, ``agent_task``, ``agent_goal``). The first marker deletes the previous set."""
+        frame, stamp = self.cfg.map_frame, self.node.now()
+        out = MarkerArray()
+        out.markers.append(Marker(action=Marker.DELETEALL))
+
+        def marker(ns, mid, mtype, rgba, scale):
+            m = Marker(ns=ns, id=mid, type=mtype, action=Marker.ADD)
+            m.header.frame_id, m.header.stamp = frame, stamp
+            m.pose.orientation.w = 1.0
+            m.scale.x, m.scale.y, m.scale.z = (float(v) for v in scale)
+            m.color.r, m.color.g, m.color.b, m.color.a = (float(v) for v in rgba)
+            return m
+
+        def xy(ref):
+            s = self.field.slot(ref.zone, ref.number)
+            return float(s.xy[0]), float(s.xy[1])
+
+        current = task if isinstance(task, Move) else None
+        shown = list(moves)
+        if current is not None and current not in shown:
+            shown.insert(0, current)
+        for i, mv in enumerate(shown):
+            (x0, y0), (x1, y1) = xy(mv.source), xy(mv.target)
+            is_current = mv == current
+            z = 0.06 if is_current else 0.04
+            arrow = marker("agent_plan", i, Marker.ARROW, (1.0, 0.2, 0.9, 1.0) if is_current else (0.3, 0.3, 0.9, 0.6),
+                           (0.012 if is_current else 0.006, 0.03 if is_current else 0.018, 0.03))
+            arrow.points = [Point(x=x0, y=y0, z=z), Point(x=x1, y=y1, z=z)]
+            out.markers.append(arrow)
+            text = marker("agent_plan_text", i, Marker.TEXT_VIEW_FACING, (1.0, 1.0, 1.0, 1.0),
+                          (0.0, 0.0, 0.04 if is_current else 0.03))
+            text.pose.position.x, text.pose.position.y, text.pose.position.z = (x0 + x1) / 2, (y0 + y1) / 2, z + 0.05
+            text.text = f"{i + 1}: {mv.part.label} {mv.source} -> {mv.target}"
+            out.markers.append(text)
+        if task is not None:
+            head = marker("agent_task", 0, Marker.TEXT_VIEW_FACING, (1.0, 0.9, 0.2, 1.0), (0.0, 0.0, 0.06))
+            fx, fy = self.field.floor.x, self.field.floor.y
+            head.pose.position.x, head.pose.position.y = (fx[0] + fx[1]) / 2, float(fy[1]) + 0.1
+            head.pose.position.z = 0.1
+            head.text = f"{mode}: {task}"
+            out.markers.append(head)
+            if current is not None:
+                ring = marker("agent_task", 1, Marker.CYLINDER, (1.0, 0.2, 0.9, 0.35), (0.12, 0.12, 0.01))
+                ring.pose.position.x, ring.pose.position.y = xy(current.source)
+                out.markers.append(ring)
+        if goal is not None:
+            g = marker("agent_goal", 0, Marker.ARROW, (0.1, 0.9, 0.2, 1.0), (0.08, 0.015, 0.015))
+            g.pose.position.x, g.pose.position.y, g.pose.position.z = goal[0], goal[1], 0.02
+            g.pose.orientation = rm.yaw_quaternion(goal[2])
+            out.markers.append(g)
+        return out
 
     def _diagnostics(self) -> DiagnosticArray:
         a = self.agent
         # WARN while inputs went stale since the last report (not for good once they were stale at start-up)
         stale_now = self.counts["stale_cycles"] - self._stale_at_diag
         self._stale_at_diag = self.counts["stale_cycles"]
-        level = DiagnosticStatus.WARN if stale_now and a.mode not in ("done", "wait_start") else DiagnosticStatus.OK
+        level = WARN if stale_now and a.mode not in ("done", "wait_start") else OK
         values = {"mode": a.mode, "task": str(a.task), **{k: v for k, v in self.counts.items()},
                   **vars(a.counters)}
         arr = DiagnosticArray()
-        arr.header.stamp = rospy.Time.now()
-        st = DiagnosticStatus(level=level, name="raf agent", message=f"{a.mode}: {a.task}", hardware_id="robot")
-        from diagnostic_msgs.msg import KeyValue
-
-        st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
-        arr.status.append(st)
+        arr.header.stamp = self.node.now()
+        arr.status.append(rm.diagnostic_status("raf agent", level, f"{a.mode}: {a.task}", "robot",
+                                               {k: str(v) for k, v in values.items()}))
         return arr
 
 
@@ -205,7 +333,38 @@ def config_from_params(p: dict) -> AgentNodeConfig:
 def main(argv: list[str] | None = None) -> int:
     from .cli import spin_node
 
-    return spin_node("raf_agent", lambda node: AgentNode(config_from_params(node.params())).start(), argv)
+    return spin_node("raf_agent", lambda node: AgentNode(config_from_params(node_params(node)), node).start(), argv)
+
+
+def default_params() -> dict:
+    """The node's parameters with their defaults (what ROS 2 declares)."""
+    from dataclasses import asdict
+
+    return asdict(AgentNodeConfig())
+
+
+_DESCRIPTIONS = {
+    "field": "competition map (shipped name or a field .json)",
+    "robot": "robot file name or path",
+    "server_host": "factory-state server host",
+    "server_port": "factory-state server UDP port",
+    "max_input_age": "s after which pose/odom count as stale (the robot stops)",
+    "map_frame": "frame of agent/path and agent/markers",
+}
+_RANGES = {"server_port": (1, 65535), "max_input_age": (1e-3, 1e9)}
+
+
+def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
+    return _DESCRIPTIONS.get(name, ""), _RANGES.get(name)
+
+
+def node_params(node: Node, given: dict | None = None) -> dict:
+    """The node's parameters (ROS 2: declared with their defaults, descriptions and ranges)."""
+    d = default_params()
+    d.update(given or {})
+    if isinstance(d.get("max_input_age"), int) and not isinstance(d["max_input_age"], bool):
+        d["max_input_age"] = float(d["max_input_age"])
+    return node.params(d, describe_param)
 
 
 if __name__ == "__main__":
