@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from ..errors import ConfigError
+from .mw.base import stamp_s
 
 
 def image_to_bgr(msg) -> np.ndarray:
@@ -28,10 +29,11 @@ def image_to_bgr(msg) -> np.ndarray:
 
 
 def odom_pose(msg) -> tuple[float, float, float, float]:
+    """(stamp s, x, y, theta) of a nav_msgs/Odometry of either ROS generation (or a bag's copy of one)."""
     from .messages import quaternion_yaw
 
     p = msg.pose.pose
-    return (msg.header.stamp.to_sec(), p.position.x, p.position.y, quaternion_yaw(p.orientation))
+    return (stamp_s(msg.header.stamp), p.position.x, p.position.y, quaternion_yaw(p.orientation))
 
 
 def _match(topic: str, wanted: str) -> bool:
@@ -79,25 +81,34 @@ def read_bag(path: str, image_topic: str, odom_topic: str | None, sink, every: i
 
 def record_live(image_topic: str, odom_topic: str | None, duration: float, sink, every: int = 1,
                 max_images: int = 0):
-    """Subscribe for ``duration`` wall seconds (needs a ROS master); images to ``sink`` (from the
-    subscriber's thread, one at a time), odometry returned."""
+    """Subscribe for ``duration`` wall seconds on this process's middleware (:mod:`.mw`; ROS 1 needs a
+    master, ROS 2 finds the publishers in its domain); images to ``sink`` (one at a time), odometry
+    returned. Images are sensor data (ROS 2: best effort, matching the bridge's camera), odometry reliable."""
+    import sys
     import threading
 
-    import rosgraph
-    import rospy
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Image
 
-    if not rosgraph.is_master_online():
-        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore and the bridge first")
+    from .mw import QoS, api
+
     if not duration > 0 or not math.isfinite(duration):
         raise ConfigError(f"--duration must be a positive number of seconds, got {duration!r}")
-    rospy.init_node("raf_calibrate", anonymous=True, disable_signals=True)
+    m = api()
+    if m.NAME == "ros1":
+        import rosgraph
+
+        if not rosgraph.is_master_online():
+            raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore and the bridge first")
+    node = m.init_node("raf_calibrate", argv=[sys.argv[0]], anonymous=True, signals=False)
     lock = threading.Lock()
+    done = threading.Event()
     odom, count, kept, bad = [], [0], [0], [0]
 
     def on_image(msg):
         with lock:
+            if done.is_set():
+                return
             k = count[0]
             count[0] += 1
             if k % max(1, every) or (max_images > 0 and kept[0] >= max_images):
@@ -107,25 +118,39 @@ def record_live(image_topic: str, odom_topic: str | None, duration: float, sink,
             except ConfigError:
                 bad[0] += 1
                 return
-            sink(msg.header.stamp.to_sec(), img)
+            sink(stamp_s(msg.header.stamp), img)
             kept[0] += 1
 
     def on_odom(msg):
         with lock:
-            odom.append(odom_pose(msg))
+            if not done.is_set():
+                odom.append(odom_pose(msg))
 
-    subs = [rospy.Subscriber(image_topic, Image, on_image, queue_size=10, buff_size=1 << 24)]
+    topic = node.resolve(image_topic)
+    subs = [node.subscribe(image_topic, Image, on_image, QoS.SENSOR, 10, large=True)]
     if odom_topic:
-        subs.append(rospy.Subscriber(odom_topic, Odometry, on_odom, queue_size=200))
-    t_end = time.monotonic() + duration
-    while time.monotonic() < t_end and not rospy.is_shutdown():
-        time.sleep(0.1)
-    for s in subs:
-        s.unregister()
-    rospy.signal_shutdown("raf calibrate: recording done")
+        subs.append(node.subscribe(odom_topic, Odometry, on_odom, QoS.RELIABLE, 200))
+    spinner = threading.Thread(target=node.spin, name="raf-calibrate-spin", daemon=True)
+    spinner.start()
+    try:
+        t_end = time.monotonic() + duration
+        while time.monotonic() < t_end and node.ok():
+            time.sleep(0.1)
+    finally:
+        done.set()
+        for s in subs:
+            if hasattr(s, "unregister"):  # ROS 1 (ROS 2's go with the node)
+                s.unregister()
+        node.shutdown("raf calibrate: recording done")
+        spinner.join(timeout=5.0)
+        if m.NAME == "ros2":  # a ROS 2 process destroys its node and shuts rclpy down before it exits
+            import rclpy
+
+            node.destroy()
+            rclpy.try_shutdown()
     with lock:
         if not kept[0]:
             extra = f" ({bad[0]} in an unsupported encoding)" if bad[0] else ""
-            raise ConfigError(f"no images arrived on {rospy.resolve_name(image_topic)} in {duration:g} s{extra} "
+            raise ConfigError(f"no images arrived on {topic} in {duration:g} s{extra} "
                               f"(is the bridge running and the robot's camera on?)")
         return kept[0], sorted(odom, key=lambda a: a[0])
