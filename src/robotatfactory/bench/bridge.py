@@ -1,9 +1,19 @@
-"""``raf bench bridge``: latency and throughput of the ROS bridge, with real processes.
+"""``raf bench bridge``: latency and throughput of the ROS bridge, with real processes, on ROS 1 and ROS 2.
 
-A dedicated sender (this process, no physics) plays the simulator: SensorFrames over UDP and camera frames
-over ZMQ; a private roscore (free port), the real bridge node (``raf bridge``, its own process) and two
-subscriber processes (``bench/_bridge_sub.py``, ``tcp_nodelay``): one for odom (a controller), one for
-images (a vision node). All processes read the same system-wide monotonic clock, so a datagram's send time and the subscriber's receive time compare directly.
+Per middleware (``--middlewares ros1,ros2``; default: each one whose environment exists), the measuring part
+(:func:`measure`) runs in that middleware's interpreter (``.venv`` / ``.venv-ros2``, see
+:func:`robotatfactory.ros.processes.interpreter`) as a subprocess, one after the other in one invocation
+(``--repeats N``: N rounds, the middlewares alternating, so that both see the same machine load). Keys are
+prefixed with the middleware (``ros1_odom_latency_p99_ms``, ``ros2_camera_max_frames_per_s``, ...); with
+repeats each key is the median over the runs and the headline figures also list every run (``..._runs``).
+
+What one measurement does. A dedicated sender (the measuring process, no physics) plays the simulator:
+SensorFrames over UDP and camera frames over ZMQ; a private graph (ROS 1: a roscore on a free port; ROS 2: a
+domain id of its own), the real bridge node (``raf bridge``, its own process) and two subscriber processes
+(``bench/_bridge_sub.py``): one for odom (a controller), one for images (a vision node). All processes read the
+same system-wide monotonic clock, so a datagram's send time and the subscriber's receive time compare
+directly. QoS as the nodes state it (:mod:`robotatfactory.ros.mw`): odom reliable (ROS 1: ``tcp_nodelay``),
+the camera best effort on ROS 2 (``QoS.SENSOR``).
 
 Phase 1a (control path alone) and 1b (the same with camera frames at ``--camera-fps``, each published just
 before its cycle's SensorFrame, as SimTwo does): SensorFrames at ``--rate`` Hz; measured (a) the reply
@@ -17,6 +27,7 @@ keeps only the newest frame, so excess frames are dropped, not queued). The p99 
 from __future__ import annotations
 
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -28,11 +39,18 @@ from pathlib import Path
 import numpy as np
 
 NAME = "bridge"
-HELP = "bridge latency (datagram -> Command reply, datagram -> odom subscriber, camera -> image subscriber) and camera throughput"
-TARGETS = {
-    "odom_latency_p99_ms": "<= 2 ms (issue 4: control path p99)",
-    "camera_max_frames_per_s": ">= 100 frames/s sustained (issue 4)",
-}
+HELP = ("bridge latency (datagram -> Command reply, datagram -> odom subscriber, camera -> image subscriber) and "
+        "camera throughput, on ROS 1 and ROS 2 side by side")
+MIDDLEWARES = ("ros1", "ros2")
+#: per middleware: key -> target
+TARGETS = {f"{m}_{k}": v for m in MIDDLEWARES for k, v in {
+    "odom_latency_p99_ms": "<= 2 ms (issues 4, 13: control path p99)",
+    "camera_max_frames_per_s": ">= 100 frames/s sustained (issues 4, 13)",
+}.items()}
+#: the figures printed side by side and listed per run with --repeats
+HEADLINE = ("odom_latency_median_ms", "odom_latency_p99_ms", "odom_latency_max_ms", "odom_latency_p99_with_camera_ms",
+            "reply_rtt_median_ms", "reply_rtt_p99_ms", "camera_latency_median_ms", "camera_latency_p99_ms",
+            "camera_max_frames_per_s")
 
 
 def add_arguments(parser) -> None:
@@ -40,35 +58,144 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seconds", type=float, default=10.0, help="length of phases 1a and 1b (default 10 s each)")
     parser.add_argument("--camera-seconds", type=float, default=5.0, help="length of phase 2 (default 5 s)")
     parser.add_argument("--camera-fps", type=float, default=15.0, help="camera rate in phase 1b (default 15)")
+    parser.add_argument("--middlewares", default=None, metavar="ros1,ros2",
+                        help="the middlewares to measure, one after the other (default: every one whose "
+                             "environment exists: .venv for ros1, .venv-ros2 for ros2)")
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="rounds of measurements (default 1); figures are medians, the headline ones also "
+                             "listed per run")
+
+
+def _measure_options(args) -> list[str]:
+    return ["--rate", str(args.rate), "--seconds", str(args.seconds), "--camera-seconds", str(args.camera_seconds),
+            "--camera-fps", str(args.camera_fps)]
+
+
+def middlewares_to_measure(spec: str | None) -> list[str]:
+    """The middlewares named by ``spec`` (comma separated), or every one whose interpreter exists."""
+    from ..errors import ConfigError
+    from ..ros.processes import interpreter
+
+    if spec:
+        want = [m.strip().lower() for m in spec.split(",") if m.strip()]
+        bad = [m for m in want if m not in MIDDLEWARES]
+        if bad or not want:
+            raise ConfigError(f"--middlewares {spec!r}: a comma-separated list of {', '.join(MIDDLEWARES)}")
+        missing = [m for m in want if interpreter(m) is None]
+        if missing:
+            raise ConfigError(f"--middlewares: no environment for {', '.join(missing)} (scripts/bootstrap.sh builds "
+                              ".venv for ros1 and .venv-ros2 for ros2)")
+        return list(dict.fromkeys(want))
+    have = [m for m in MIDDLEWARES if interpreter(m) is not None]
+    if not have:
+        raise ConfigError("neither ROS environment exists (.venv with rospy, .venv-ros2 with rclpy): run "
+                          "scripts/bootstrap.sh")
+    return have
 
 
 def run(args) -> dict:
+    from ..errors import ConfigError
+
+    if args.repeats < 1:
+        raise ConfigError("--repeats must be >= 1")
+    mws = middlewares_to_measure(args.middlewares)
+    runs: dict[str, list[dict]] = {m: [] for m in mws}
+    for i in range(args.repeats):
+        for m in mws:
+            print(f"raf bench bridge: {m}, run {i + 1} of {args.repeats} ...", file=sys.stderr, flush=True)
+            runs[m].append(measure_in(m, args))
+    out = combine(runs)
+    print(side_by_side(out, mws, args.repeats))
+    return out
+
+
+def measure_in(middleware: str, args) -> dict:
+    """One :func:`measure` in ``middleware``'s interpreter (a subprocess); its result dict."""
+    from ..ros.processes import interpreter
+
+    py = interpreter(middleware)
+    with tempfile.TemporaryDirectory(prefix="raf-bench-bridge-") as d:
+        out = Path(d) / "result.json"
+        env = dict(os.environ, RAF_MIDDLEWARE=middleware, PYTHONUNBUFFERED="1")
+        cmd = [str(py), "-m", "robotatfactory.bench.bridge", "--out", str(out), *_measure_options(args)]
+        budget = 180 + 2 * args.seconds + args.camera_seconds
+        r = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=budget)
+        if r.returncode != 0 or not out.is_file():
+            tail = r.stdout.decode(errors="replace").splitlines()[-20:]
+            raise RuntimeError(f"the {middleware} measurement failed (exit {r.returncode}):\n" + "\n".join(tail))
+        return json.loads(out.read_text())
+
+
+def combine(runs: dict[str, list[dict]]) -> dict:
+    """Per-middleware keys: the median over the runs (numbers), the value of the last run (others); targets
+    judged on the medians; the headline figures listed per run when there are several."""
+    out: dict = {}
+    for m, rs in runs.items():
+        n = len(rs)
+        keys = list(dict.fromkeys(k for r in rs for k in r))
+        for k in keys:
+            vals = [r.get(k) for r in rs]
+            nums = [float(v) for v in vals if isinstance(v, (int, float)) and not isinstance(v, bool) and v is not None]
+            if k.endswith("_target_met"):
+                continue
+            if nums and len(nums) == len(vals):
+                med = float(np.median(nums))
+                out[f"{m}_{k}"] = int(med) if all(isinstance(v, int) for v in vals) and med == int(med) else med
+            else:
+                out[f"{m}_{k}"] = vals[-1]
+            if n > 1 and k in HEADLINE and nums:
+                out[f"{m}_{k}_runs"] = " / ".join(f"{v:.2f}" for v in nums)
+        p99, fps = out.get(f"{m}_odom_latency_p99_ms"), out.get(f"{m}_camera_max_frames_per_s")
+        out[f"{m}_runs"] = n
+        out[f"{m}_odom_p99_target_met"] = p99 is not None and p99 == p99 and p99 <= 2.0
+        out[f"{m}_camera_rate_target_met"] = fps is not None and fps >= 100.0
+    return out
+
+
+def side_by_side(out: dict, mws: list[str], repeats: int) -> str:
+    """A Markdown table: one row per headline figure, one column per middleware."""
+    from ..results import _fmt
+
+    head = "| figure | " + " | ".join(mws) + " |"
+    rows = [f"raf bench bridge, {repeats} run(s) per middleware (medians; per run in brackets)", head,
+            "|---|" + "---|" * len(mws)]
+    for k in HEADLINE:
+        cells = []
+        for m in mws:
+            v = out.get(f"{m}_{k}")
+            runs_ = out.get(f"{m}_{k}_runs")
+            cells.append("-" if v is None else _fmt(v) + (f" ({runs_})" if runs_ else ""))
+        rows.append(f"| `{k}` | " + " | ".join(cells) + " |")
+    for k in ("odom_p99_target_met", "camera_rate_target_met"):
+        rows.append(f"| `{k}` | " + " | ".join(str(out.get(f"{m}_{k}")) for m in mws) + " |")
+    return "\n".join(rows) + "\n"
+
+
+# ------------------------------------------------------------------------------ one measurement (one middleware)
+
+
+def measure(args) -> dict:
+    """The measurement on this process's middleware (see the module's docstring); a flat dict, unprefixed."""
     import zmq
 
-    from ..ros.master import PrivateMaster, free_port, stop_process
+    from ..ros.master import free_port, private_graph
+    from ..ros.mw import name as middleware
+    from ..ros.processes import Procs, raf_cmd
     from ..simtwo import Command, ProtocolError, SensorFrame, encode_frame
     from .protocol import sample_frame
 
     tmp = Path(tempfile.mkdtemp(prefix="raf-bench-bridge-"))
-    master = PrivateMaster().start()
-    env = master.env()
+    graph = private_graph(middleware()).start()
+    env = graph.env()
     port = free_port(socket.SOCK_DGRAM)
     cam_port = free_port()
-    procs = []
+    procs = Procs(tmp)
     try:
-        bridge = subprocess.Popen([sys.executable, "-m", "robotatfactory", "bridge", "--port", str(port), "--camera",
-                                   f"tcp://127.0.0.1:{cam_port}", "--set", "watchdog/timeout=1000"],
-                                  env=env, stdout=open(tmp / "bridge.log", "wb"), stderr=subprocess.STDOUT,
-                                  start_new_session=True)
-        procs.append(bridge)
-        subs = {}
+        procs.start("bridge", raf_cmd("bridge", "--port", str(port), "--camera", f"tcp://127.0.0.1:{cam_port}",
+                                      "--set", "watchdog/timeout=1000"), env)
         for what in ("odom", "image"):
-            subs[what] = subprocess.Popen([sys.executable, "-m", "robotatfactory.bench._bridge_sub",
-                                           str(tmp / f"sub_{what}.json"), what], env=env,
-                                          stdout=open(tmp / f"sub_{what}.log", "wb"), stderr=subprocess.STDOUT,
-                                          start_new_session=True)
-            procs.append(subs[what])
-        _wait_for_subscriber(env, timeout=30)
+            procs.start(f"sub_{what}", [sys.executable, "-m", "robotatfactory.bench._bridge_sub",
+                                        str(tmp / f"sub_{what}.json"), what], env)
 
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind(("127.0.0.1", 0))
@@ -95,6 +222,8 @@ def run(args) -> dict:
                     data, _ = sock.recvfrom(65536)
                 except socket.timeout:
                     continue
+                except OSError:  # e.g. an ICMP error while the bridge was not up yet
+                    continue
                 t = time.monotonic()
                 try:
                     c = Command.decode(data)
@@ -112,8 +241,9 @@ def run(args) -> dict:
             b[row_off + 0], b[row_off + 1], b[row_off + 2], b[row_off + 4] = v[0], v[1], v[2], v[3]
             return bytes(b)
 
-        # warm-up (connections, the camera stamper's phase), then phase 1a (control path alone) and 1b (with
-        # the camera at --camera-fps, published just before the cycle's SensorFrame as SimTwo does)
+        # warm-up (until both subscribers have their first message: discovery, connections; then the camera
+        # stamper's phase), then phase 1a (control path alone) and 1b (with the camera at --camera-fps,
+        # published just before the cycle's SensorFrame as SimTwo does)
         seq, cam_counter = 0, 1
         period = 1.0 / args.rate
         cam_every = max(1, int(round(args.rate / args.camera_fps))) if args.camera_fps > 0 else 0
@@ -138,16 +268,27 @@ def run(args) -> dict:
             sock.sendto(data, ("127.0.0.1", port))
             seq += 1
 
-        def paced(seconds, phase, camera):
+        def paced(seconds, phase, camera, until=None):
             t0 = time.monotonic()
             n = 0
             while time.monotonic() - t0 < seconds:
                 send_cycle(phase, camera)
                 n += 1
+                if until is not None and n % 10 == 0:
+                    procs.check()
+                    if until():
+                        return True
                 wait = t0 + n * period - time.monotonic()
                 if wait > 0:
                     time.sleep(wait)
+            return False
 
+        ready = [tmp / f"sub_{w}.json.ready" for w in ("odom", "image")]
+        t_up = time.monotonic()
+        if not paced(90.0, None, True, until=lambda: all(p.exists() for p in ready)):
+            raise RuntimeError("the bridge or the bench subscribers did not come up in 90 s: "
+                               f"{procs.tail('bridge')}\n{procs.tail('sub_odom')}\n{procs.tail('sub_image')}")
+        startup_s = time.monotonic() - t_up
         paced(2.0, None, True)
         rtt.clear()
         paced(args.seconds, "alone", False)
@@ -176,16 +317,15 @@ def run(args) -> dict:
         stop_rx.set()
         th.join(1)
         res = {}
-        for what, sub in subs.items():
-            stop_process(sub)
+        for what in ("odom", "image"):
+            procs.stop(f"sub_{what}")
             res.update({k: v for k, v in json.loads((tmp / f"sub_{what}.json").read_text()).items() if v})
         sock.close()
         pub.close(0)
         ctx.term()
     finally:
-        for p in procs:
-            stop_process(p)
-        master.cleanup()
+        procs.stop_all()
+        graph.cleanup()
 
     # --- analysis ---
     odom_lat = {"alone": [], "camera": []}
@@ -196,14 +336,18 @@ def run(args) -> dict:
     rtt_by = {"alone": [rt for sq, rt in rtt if phase_of.get(sq) == "alone"],
               "camera": [rt for sq, rt in rtt if phase_of.get(sq) == "camera"]}
     lat_cam = [t - sent_cam[c] for c, t, _ in res.get("images", []) if c in sent_cam and c < flood_counter_start]
+    n_cam_sent = sum(1 for c in sent_cam if c < flood_counter_start)
     flood_in = [t for c, t, _ in res.get("images", []) if c >= flood_counter_start and t0 + 0.5 <= t <= flood_t1]
     cam_fps = (len(flood_in) - 1) / (flood_in[-1] - flood_in[0]) if len(flood_in) > 2 else 0.0
+    n_sent_alone = sum(1 for p in phase_of.values() if p == "alone")
 
     def ms(xs, q):
         return float(np.percentile(np.array(xs) * 1000, q)) if xs else float("nan")
 
     p99 = ms(odom_lat["alone"], 99)
     return {
+        "middleware": middleware(),
+        "graph_startup_s": startup_s,
         "sensor_frames_per_s": args.rate,
         "reply_rtt_median_ms": ms(rtt_by["alone"], 50),
         "reply_rtt_p99_ms": ms(rtt_by["alone"], 99),
@@ -211,6 +355,7 @@ def run(args) -> dict:
         "odom_latency_p99_ms": p99,
         "odom_latency_max_ms": ms(odom_lat["alone"], 100),
         "odom_samples": len(odom_lat["alone"]),
+        "odom_lost": n_sent_alone - len(odom_lat["alone"]),
         "reply_rtt_p99_with_camera_ms": ms(rtt_by["camera"], 99),
         "odom_latency_median_with_camera_ms": ms(odom_lat["camera"], 50),
         "odom_latency_p99_with_camera_ms": ms(odom_lat["camera"], 99),
@@ -218,6 +363,7 @@ def run(args) -> dict:
         "camera_latency_median_ms": ms(lat_cam, 50),
         "camera_latency_p99_ms": ms(lat_cam, 99),
         "camera_frames_measured": len(lat_cam),
+        "camera_frames_lost_with_control": n_cam_sent - len(lat_cam),
         "camera_sent_in_flood_frames_per_s": n_flood / (flood_t1 - t0),
         "camera_max_frames_per_s": cam_fps,
         "odom_p99_target_met": bool(odom_lat["alone"]) and p99 <= 2.0,
@@ -225,20 +371,20 @@ def run(args) -> dict:
     }
 
 
-def _wait_for_subscriber(env: dict, timeout: float) -> None:
-    import xmlrpc.client
+def main(argv: list[str] | None = None) -> int:
+    """``python -m robotatfactory.bench.bridge --out FILE [options]``: one :func:`measure` on this
+    interpreter's middleware (what :func:`measure_in` runs), its figures written to FILE as JSON."""
+    import argparse
 
-    master = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"])
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            code, _, state = master.getSystemState("/raf_bench")
-            subs = {t: n for t, n in state[1]}
-            pubs = {t: n for t, n in state[0]}
-            if "/odom" in subs and "/odom" in pubs and "/camera/image_raw" in subs and "/camera/image_raw" in pubs:
-                time.sleep(0.5)
-                return
-        except OSError:
-            pass
-        time.sleep(0.1)
-    raise RuntimeError("the bridge or the bench subscriber did not come up")
+    from ..results import flat, write_json
+
+    p = argparse.ArgumentParser(prog="python -m robotatfactory.bench.bridge")
+    p.add_argument("--out", required=True)
+    add_arguments(p)
+    args = p.parse_args(argv)
+    write_json(args.out, flat(measure(args)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

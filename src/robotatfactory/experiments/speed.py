@@ -1,7 +1,8 @@
-"""``raf experiment speed``: the paper's first validation (its figure 5), through ROS.
+"""``raf experiment speed``: the paper's first validation (its figure 5), through ROS (1 or 2).
 
-A private roscore (free port), the stand-in simulator (``raf sim --lockstep``, real time, no camera), the
-bridge (``raf bridge``) and a small rospy node in this process that sends, on ``cmd_vel``, a linear speed
+A private graph (ROS 1: a roscore on a free port; ROS 2: a domain id of its own; ``raf --middleware ros2
+experiment speed`` runs it on ROS 2), the stand-in simulator (``raf sim --lockstep``, real time, no camera),
+the bridge (``raf bridge``) and a small node in this process that sends, on ``cmd_vel``, a linear speed
 reference: a cubic Hermite spline from 0 to 0.3 m/s in 1 s (zero slope at both ends), then held. The speed
 measured from the encoders (``odom`` twist, the mean over each 40 ms cycle) is recorded against the
 reference.
@@ -25,8 +26,6 @@ from __future__ import annotations
 
 import math
 import socket
-import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -84,66 +83,64 @@ def analyse(t: np.ndarray, v: np.ndarray, v_max: float, rise: float) -> dict:
 
 
 def run(args, out_dir: Path | None) -> dict:
-    from ..ros.master import PrivateMaster, free_port, stop_process
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+
+    from ..ros.master import free_port, private_graph
+    from ..ros.mw import QoS
+    from ..ros.mw.base import stamp_ns
+    from ..ros.processes import ExperimentNode, Procs, wait_until
 
     v_max, rise, hold = args.v_max, args.rise, args.hold
     duration = args.settle + rise + hold
     tmp = Path(tempfile.mkdtemp(prefix="raf-exp-speed-"))
-    master = PrivateMaster().start()
-    master.use_in_this_process()
-    env = master.env()
+    graph = private_graph().start()
+    graph.use_in_this_process()
+    env = graph.env()
     port, sim_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
-    procs = []
+    procs = Procs(tmp)
+    exp = None
     try:
-        bridge = subprocess.Popen([sys.executable, "-m", "robotatfactory", "--field", args.field, "bridge", "--port",
-                                   str(port), "--no-camera", "--set", "lidar/enabled=false"], env=env,
-                                  stdout=open(tmp / "bridge.log", "wb"), stderr=subprocess.STDOUT, start_new_session=True)
-        procs.append(bridge)
-        import rospy
-        from geometry_msgs.msg import Twist
-        from nav_msgs.msg import Odometry
-
-        rospy.init_node("raf_speed_experiment", anonymous=True, disable_signals=True)
-        pub = rospy.Publisher("cmd_vel", Twist, queue_size=1, tcp_nodelay=True)
+        procs.raf("bridge", "--field", args.field, "bridge", "--port", str(port), "--no-camera", "--set",
+                  "lidar/enabled=false", env=env)
+        exp = ExperimentNode("raf_speed_experiment")
+        node = exp.node
+        pub = node.publisher("cmd_vel", Twist, QoS.CONTROL)
         lock = threading.Lock()
         rec: list[tuple[float, float, float]] = []  # (stamp, odom v, ground-truth v)
         gt_v: dict[int, float] = {}
         t_start = args.settle
 
         def on_odom(m):
-            T = m.header.stamp.to_sec()
+            ns = stamp_ns(m.header.stamp)
+            T = ns * 1e-9
             tw = Twist()
             tw.linear.x = float(hermite_reference(T + P - t_start, v_max, rise)) if T + P >= t_start else 0.0
             pub.publish(tw)
             with lock:
-                rec.append((T, m.twist.twist.linear.x, gt_v.get(m.header.stamp.to_nsec(), math.nan)))
+                rec.append((T, m.twist.twist.linear.x, gt_v.get(ns, math.nan)))
 
         def on_gt(m):
             with lock:
-                gt_v[m.header.stamp.to_nsec()] = m.twist.twist.linear.x
+                gt_v[stamp_ns(m.header.stamp)] = m.twist.twist.linear.x
 
-        rospy.Subscriber("ground_truth", Odometry, on_gt, queue_size=10, tcp_nodelay=True)
-        rospy.Subscriber("odom", Odometry, on_odom, queue_size=10, tcp_nodelay=True)
-        _wait(lambda: pub.get_num_connections() > 0, 30, "the bridge subscribing to cmd_vel")
-        sim = subprocess.Popen([sys.executable, "-m", "robotatfactory", "--field", args.field, "sim", "--port",
-                                str(sim_port), "--bridge", f"127.0.0.1:{port}", "--no-camera", "--no-server",
-                                *(["--lockstep", "--lockstep-timeout", "2.0"] if args.lockstep else []),
-                                "--realtime", "--start-pose=-0.7,0.35,0",
-                                "--speed-control", args.speed_control, "--pid-timing", args.pid_timing,
-                                "--seed", str(args.seed), "--duration", f"{duration + 0.2:.2f}",
-                                "--status-every", "1"], env=env, stdout=open(tmp / "sim.log", "wb"),
-                               stderr=subprocess.STDOUT, start_new_session=True)
-        procs.append(sim)
-        code = sim.wait(timeout=120 + 4 * duration)
-        if code != 0:
-            raise RuntimeError(f"raf sim exited with {code}: {(tmp / 'sim.log').read_text()[-1500:]}")
+        node.subscribe("ground_truth", Odometry, on_gt, QoS.RELIABLE, 10)
+        node.subscribe("odom", Odometry, on_odom, QoS.SYNCHRONOUS, 10)
+        wait_until(lambda: pub.subscriber_count() > 0, 60, "the bridge subscribing to cmd_vel", procs.check)
+        procs.raf("sim", "--field", args.field, "sim", "--port", str(sim_port), "--bridge", f"127.0.0.1:{port}",
+                  "--no-camera", "--no-server", *(["--lockstep", "--lockstep-timeout", "2.0"] if args.lockstep else []),
+                  "--realtime", "--start-pose=-0.7,0.35,0", "--speed-control", args.speed_control, "--pid-timing",
+                  args.pid_timing, "--seed", str(args.seed), "--duration", f"{duration + 0.2:.2f}",
+                  "--status-every", "1", env=env, may_exit=True)
+        procs.wait("sim", timeout=120 + 4 * duration)
         time.sleep(0.3)
         with lock:
             data = [(T, v, gt_v.get(int(round(T * 1e9)), g)) for T, v, g in rec]
     finally:
-        for p in procs:
-            stop_process(p)
-        master.cleanup()
+        procs.stop_all()
+        if exp is not None:
+            exp.close()
+        graph.cleanup()
     if len(data) < 10:
         raise RuntimeError(f"only {len(data)} odom messages recorded; see {tmp}/sim.log and {tmp}/bridge.log")
     arr = np.array(sorted(data))
@@ -151,7 +148,10 @@ def run(args, out_dir: Path | None) -> dict:
     keep = (t >= 0) & (t <= rise + hold)
     t, v, g = t[keep], arr[keep, 1], arr[keep, 2]
     res = analyse(t, v, v_max, rise)
-    res.update({"speed_mode": f"{args.speed_control}/{args.pid_timing}/{'lockstep' if args.lockstep else 'free'}",
+    from ..ros.mw import name as middleware
+
+    res.update({"middleware": middleware(),
+                "speed_mode": f"{args.speed_control}/{args.pid_timing}/{'lockstep' if args.lockstep else 'free'}",
                 "speed_samples": int(len(t)), "speed_reference_max_mps": v_max, "speed_rise_s": rise,
                 "speed_rmse_target_met": res["speed_rmse_mps"] <= 0.01})
     ok = np.isfinite(g)
@@ -163,15 +163,6 @@ def run(args, out_dir: Path | None) -> dict:
         np.savetxt(out_dir / "speed.csv", np.column_stack([t, v, g, hermite_reference(t - P / 2, v_max, rise)]),
                    delimiter=",", header="t_s,odom_v_mps,ground_truth_v_mps,reference_mid_interval_mps", comments="")
     return res
-
-
-def _wait(pred, timeout, what):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return
-        time.sleep(0.05)
-    raise RuntimeError(f"timed out waiting for {what}")
 
 
 def _figure(path: Path, t, v, g, v_max, rise, res) -> None:
