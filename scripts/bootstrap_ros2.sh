@@ -71,9 +71,9 @@ if [ ! -x "$PY" ]; then
   log "venv created ($(since "$t"))"
 fi
 
-# --- pip: when requirements-ros2.txt or pyproject.toml changed ---------------------------------------
+# --- pip: the wheels when requirements-ros2.txt changed, the package when pyproject.toml changed ----------
 pip_stamp=$VENV/.raf-ros2-pip
-pip_want=$(hash_of requirements-ros2.txt pyproject.toml)
+pip_want=$(hash_of requirements-ros2.txt)
 if ! stamp_ok "$pip_stamp" "$pip_want"; then
   t=$(now)
   log "installing requirements-ros2.txt (ros-jazzy-* wheels, rosbags, the core deps)"
@@ -81,10 +81,19 @@ if ! stamp_ok "$pip_stamp" "$pip_want"; then
   # shellcheck disable=SC2046
   pip_install $(grep -E '^(setuptools|wheel)==' requirements-ros2.txt)
   pip_install -r requirements-ros2.txt
-  pip_install --no-deps --no-build-isolation -e .
+  rm -f "$VENV/.raf-ros2-package"
+  rm -rf "$BUILD"  # the interface packages are built again, from scratch, against the new wheels
   echo "$pip_want" > "$pip_stamp"
-  rm -rf "$BUILD"  # the interface packages are rebuilt against the new wheels
-  log "pip done ($(since "$t"))"
+  log "requirements installed ($(since "$t"))"
+fi
+pkg_stamp=$VENV/.raf-ros2-package
+pkg_want=$(hash_of pyproject.toml)
+if ! stamp_ok "$pkg_stamp" "$pkg_want"; then
+  t=$(now)
+  log "installing robotatfactory (editable)"
+  pip_install --no-deps --no-build-isolation -e .
+  echo "$pkg_want" > "$pkg_stamp"
+  log "robotatfactory installed ($(since "$t"))"
 fi
 
 # --- the wheels' CMake exports name the wheel builder's Python (/opt/python/cp311-cp311/...) -----------
@@ -143,7 +152,7 @@ done
 
 # --- the smoke check, once after anything changed ----------------------------------------------------
 check_stamp=$VENV/.raf-ros2-checked
-check_want=$(cat "$pip_stamp" "${INTERFACE_PACKAGES[@]/#/$VENV/.raf-ros2-}" scripts/check_ros2.py | sha256sum | cut -d' ' -f1)
+check_want=$(cat "$pip_stamp" "$pkg_stamp" "${INTERFACE_PACKAGES[@]/#/$VENV/.raf-ros2-}" scripts/check_ros2.py | sha256sum | cut -d' ' -f1)
 if [ "$built_any" = 1 ] || ! stamp_ok "$check_stamp" "$check_want"; then
   t=$(now)
   log "checking the environment (scripts/check_ros2.py)"
