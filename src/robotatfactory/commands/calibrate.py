@@ -17,13 +17,15 @@ examples:
   raf calibrate --bag drive.bag --out calib.yaml
   raf --field simtwo2022 calibrate --bag drive.bag --image-topic /camera/image_raw --odom-topic /odom --out calib.yaml --json fit.json
   raf calibrate --live --duration 60 --out calib.yaml          # while the robot drives round the field
+  raf --middleware ros2 calibrate --live --duration 60 --out calib.yaml   # the same on ROS 2
 """
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument("--bag", metavar="FILE", help="a rosbag with camera images (and odometry)")
-    src.add_argument("--live", action="store_true", help="record the live topics (needs a ROS master)")
+    src.add_argument("--live", action="store_true", help="record the live topics (ROS 1: needs a ROS master; ROS 2: "
+                     "raf --middleware ros2 calibrate --live, in the bridge's ROS_DOMAIN_ID)")
     parser.add_argument("--duration", type=float, default=60.0, metavar="S",
                         help="with --live: seconds to record (default 60)")
     parser.add_argument("--image-topic", default="camera/image_raw", help="sensor_msgs/Image topic (default camera/image_raw)")
