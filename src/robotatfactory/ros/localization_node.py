@@ -395,15 +395,38 @@ RANGES: dict[str, tuple[float, float]] = {  # what NodeConfig.check() and the es
 _COMMENTS: dict | None = None
 
 
+def _field_comments() -> dict:
+    """``section.field`` -> the end-of-line comment of the field in its settings dataclass's source (the
+    descriptions of settings config/localization.yaml does not list or comment)."""
+    import inspect
+    import re
+
+    from ..localization import config as lc
+
+    out = {}
+    sections = {"": lc.LocalizationConfig, "node": lc.NodeConfig}
+    sections.update({f.name: f.default_factory for f in lc.LocalizationConfig.__dataclass_fields__.values()
+                     if isinstance(f.default_factory, type) and hasattr(f.default_factory, "__dataclass_fields__")})
+    for sec, cls in sections.items():
+        try:
+            src = inspect.getsource(cls)
+        except (OSError, TypeError):
+            continue
+        for m in re.finditer(r"^\s+(\w+)\s*:[^=\n]*=[^#\n]*#\s*(.+)$", src, re.M):
+            out[f"{sec}.{m.group(1)}" if sec else m.group(1)] = m.group(2).strip()
+    return out
+
+
 def describe_param(flat: str) -> tuple[str, tuple[float, float] | None]:
     """(description, (min, max) or None) of a parameter (``node.filter_method``): its end-of-line comment in
-    config/localization.yaml and the range the validation allows, where it checks one."""
+    config/localization.yaml (else in its settings dataclass) and the range the validation allows, where it
+    checks one."""
     global _COMMENTS
     if _COMMENTS is None:
         from ..localization.config import DEFAULT_FILE
         from ..settings import yaml_comments
 
-        _COMMENTS = yaml_comments(DEFAULT_FILE)
+        _COMMENTS = {**_field_comments(), **yaml_comments(DEFAULT_FILE)}
     return _COMMENTS.get(flat, ""), RANGES.get(flat)
 
 
