@@ -115,6 +115,13 @@ def add_arguments(parser) -> None:
     parser.add_argument("--camera-error", action="store_true",
                         help="render with a camera that differs from the nominal one (fx and fy +3 %%, cx +4 px, "
                              "cy -3 px, pitch +1 degree), as a user's SimTwo may")
+    parser.add_argument("--bag", metavar="FILE", default=None,
+                        help="replay a recorded calibration drive (a ROS 1 bag or a rosbag2, e.g. from --save-bag or "
+                             "raf record) instead of driving it: raf calibrate runs on it (implies --calibration "
+                             "auto; the results say so)")
+    parser.add_argument("--save-bag", metavar="FILE", default=None,
+                        help="keep the calibration drive's recording there (ROS 1: a .bag file; ROS 2: a rosbag2 "
+                             "directory), to replay with --bag")
     parser.add_argument("--calibration-speed", type=float, default=0.15,
                         help="cruise speed of the calibration drive, m/s (default 0.15)")
     parser.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
@@ -136,6 +143,7 @@ class Plan:
     track_error: float
     radius_error: float
     speed: float
+    bag: str | None = None  # a recorded calibration drive to replay (--bag) instead of driving one
 
     @property
     def prefix(self) -> str:
@@ -164,72 +172,82 @@ def plan_from_args(args) -> Plan:
     if not (abs(track_err) < 0.2 and abs(radius_err) < 0.2):
         raise ConfigError("--wheel-error: each relative error must be within +-0.2")
     cal = args.calibration
+    bag = getattr(args, "bag", None)
+    if bag:
+        if not Path(bag).exists():
+            raise ConfigError(f"--bag {bag!r}: no such bag file or rosbag2 directory")
+        if cal not in (None, "auto"):
+            raise ConfigError("--bag replays the calibration drive for --calibration auto: leave --calibration out")
+        if getattr(args, "save_bag", None):
+            raise ConfigError("--bag replays a recording; --save-bag keeps a new one: use one of them")
+        cal, bag = "auto", str(Path(bag).resolve())
     if cal is None:
         cal = "auto" if mode == "simtwo" else ("true" if args.camera_error else "none")
     if cal not in ("auto", "true", "none"):
         if not Path(cal).is_file():
             raise ConfigError(f"--calibration {cal!r}: not a file (or auto, true, none)")
         cal = str(Path(cal).resolve())
-    return Plan(mode, routes, cal, bool(args.camera_error), track_err, radius_err, float(args.speed))
+    return Plan(mode, routes, cal, bool(args.camera_error), track_err, radius_err, float(args.speed), bag or None)
 
 
 # ------------------------------------------------------------------------------------------- recording
 
 
 class Recorder:
-    """The experiment's ROS node: drives the route on ground truth and records every pose stream."""
+    """The experiment's recording on this process's node (:class:`~robotatfactory.ros.processes.ExperimentNode`,
+    either middleware): drives the route on ground truth and records every pose stream; on the calibration
+    drive also camera/image_raw (every ``image_every``-th frame), camera_info and odom into a bag
+    (:func:`open_bag_writer`)."""
 
-    def __init__(self, route, speed: float, robot, bag_path: Path | None = None, image_every: int = 3):
-        import rospy
+    def __init__(self, exp, route, speed: float, robot, bag_path: Path | None = None, image_every: int = 3):
         from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
         from nav_msgs.msg import Odometry
 
         from ..localization.geometry import inv
         from ..localization.route import PurePursuit
+        from ..ros.mw import QoS
 
-        self.rospy = rospy
+        self.exp = exp
+        node = exp.node
         self.Twist = Twist
         self.pp = PurePursuit.for_route(route, speed=speed)
         self.T_cam_base = inv(robot.camera.base_to_optical())
         self.lock = threading.Lock()
         self.data = {k: [] for k in ("gt", "odom", "ekf", "camera_pose", "accepted", "rejected", *METHODS)}
         self.last_gt_t = -math.inf
-        self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=5)
+        self.cmd = node.publisher("cmd_vel", Twist, QoS.RELIABLE, 5)
         self.done_t: float | None = None
-        self.subs = [rospy.Subscriber("ground_truth", Odometry, self._on_gt, queue_size=50, tcp_nodelay=True),
-                     rospy.Subscriber("odom", Odometry, self._rec("odom"), queue_size=100),
-                     rospy.Subscriber("pose", PoseWithCovarianceStamped, self._rec("ekf"), queue_size=100),
-                     rospy.Subscriber("camera_pose", PoseWithCovarianceStamped, self._on_camera, queue_size=50)]
-        self.subs += [rospy.Subscriber(f"aruco/fixes/{m}", PoseWithCovarianceStamped, self._rec(m), queue_size=50)
-                      for m in METHODS]
-        self.subs += [rospy.Subscriber(f"aruco/fixes/filter_{k}", PoseWithCovarianceStamped, self._rec(k),
-                                       queue_size=100) for k in ("accepted", "rejected")]
-        # the calibration drive: camera/image_raw (every image_every-th frame), camera_info and odom to a rosbag
+        Pose = PoseWithCovarianceStamped
+        self.subs = [node.subscribe("ground_truth", Odometry, self._on_gt, QoS.SYNCHRONOUS, 50),
+                     node.subscribe("odom", Odometry, self._rec("odom"), QoS.RELIABLE, 100),
+                     node.subscribe("pose", Pose, self._rec("ekf"), QoS.RELIABLE, 100),
+                     node.subscribe("camera_pose", Pose, self._on_camera, QoS.RELIABLE, 50)]
+        self.subs += [node.subscribe(f"aruco/fixes/{m}", Pose, self._rec(m), QoS.RELIABLE, 50) for m in METHODS]
+        self.subs += [node.subscribe(f"aruco/fixes/filter_{k}", Pose, self._rec(k), QoS.RELIABLE, 100)
+                      for k in ("accepted", "rejected")]
+        # the calibration drive: camera/image_raw (every image_every-th frame), camera_info and odom to a bag
         self.bag = None
         self.bag_counts = {"images": 0, "odom": 0, "camera_info": 0}
         if bag_path is not None:
-            import rosbag
             from sensor_msgs.msg import CameraInfo, Image
 
-            self.bag = rosbag.Bag(str(bag_path), "w")
+            self.bag = open_bag_writer(bag_path)
             self._bag_lock = threading.Lock()
             self._image_every, self._image_n = max(1, int(image_every)), 0
-            self.subs += [rospy.Subscriber("camera/image_raw", Image, self._bag_image, queue_size=20,
-                                           buff_size=1 << 24),
-                          rospy.Subscriber("camera/camera_info", CameraInfo, self._bag_write("camera/camera_info",
-                                                                                             "camera_info"),
-                                           queue_size=20),
-                          rospy.Subscriber("odom", Odometry, self._bag_write("odom", "odom"), queue_size=100)]
+            self.subs += [node.subscribe("camera/image_raw", Image, self._bag_image, QoS.SENSOR, 20, large=True),
+                          node.subscribe("camera/camera_info", CameraInfo,
+                                         self._bag_write("camera/camera_info", "camera_info"), QoS.SENSOR, 20),
+                          node.subscribe("odom", Odometry, self._bag_write("odom", "odom"), QoS.RELIABLE, 100)]
         from diagnostic_msgs.msg import DiagnosticArray
 
         self.diag: dict[str, str] = {}
-        self.subs.append(rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diag, queue_size=20))
+        self.subs.append(node.subscribe("/diagnostics", DiagnosticArray, self._on_diag, QoS.RELIABLE, 20))
 
     def _bag_write(self, topic: str, counter: str):
         def cb(msg):
             with self._bag_lock:
                 if self.bag is not None:
-                    self.bag.write(topic, msg, msg.header.stamp)
+                    self.bag.write(topic, msg, stamp_ns(msg.header.stamp))
                     self.bag_counts[counter] += 1
         return cb
 
@@ -255,7 +273,7 @@ class Recorder:
         p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
         from ..ros.messages import quaternion_yaw
 
-        return (msg.header.stamp.to_sec(), p.position.x, p.position.y, quaternion_yaw(p.orientation))
+        return (stamp_ns(msg.header.stamp) * 1e-9, p.position.x, p.position.y, quaternion_yaw(p.orientation))
 
     def _rec(self, key):
         def cb(msg):
@@ -277,7 +295,7 @@ class Recorder:
         T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
         T[:3, 3] = (p.x, p.y, p.z)
         with self.lock:
-            self.data["camera_pose"].append((msg.header.stamp.to_sec(),) + base_from_camera(T, self.T_cam_base)
+            self.data["camera_pose"].append((stamp_ns(msg.header.stamp) * 1e-9,) + base_from_camera(T, self.T_cam_base)
                                             + (p.z,))
 
     def _on_gt(self, msg):
@@ -297,7 +315,9 @@ class Recorder:
 
     def stop(self):
         for s in self.subs:
-            s.unregister()
+            self.exp.drop(s)
+        self.subs = []
+        self.exp.drop(self.cmd)
         self.close_bag()
 
     def arrays(self) -> dict:
@@ -305,40 +325,56 @@ class Recorder:
             return {k: np.array(v, dtype=float) if v else np.zeros((0, 4)) for k, v in self.data.items()}
 
 
-# ------------------------------------------------------------------------------------------- processes
+# ------------------------------------------------------------------------------------------- bags
 
 
-class Procs:
-    def __init__(self, log_dir: Path):
-        self.log_dir = log_dir
-        self.procs: list[tuple[str, subprocess.Popen]] = []
+def stamp_ns(stamp) -> int:
+    from ..ros.mw.base import stamp_ns as ns
 
-    def start(self, name: str, cmd: list[str], env: dict) -> subprocess.Popen:
-        log = open(self.log_dir / f"{name}.log", "wb")
-        p = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        self.procs.append((name, p))
-        return p
+    return ns(stamp)
 
-    def check(self) -> None:
-        for name, p in self.procs:
-            if p.poll() is not None and name in ("sim", "bridge", "localize"):
-                raise RuntimeError(f"{name} exited early with code {p.returncode}:\n{self.tail(name)}")
 
-    def tail(self, name: str, n: int = 25) -> str:
-        try:
-            return "\n".join((self.log_dir / f"{name}.log").read_text(errors="replace").splitlines()[-n:])
-        except OSError:
-            return ""
+class _Ros1BagWriter:
+    """A ROS 1 bag (rosbag.Bag) written from rospy messages."""
 
-    def stop_all(self) -> None:
-        from ..ros.master import stop_process
+    def __init__(self, path: Path):
+        import rosbag
 
-        for name, p in reversed(self.procs):
-            stop_process(p)
+        self._bag = rosbag.Bag(str(path), "w")
+
+    def write(self, topic: str, msg, stamp_ns_: int) -> None:
+        from ..ros.mw.ros1 import time_msg
+
+        self._bag.write(topic, msg, time_msg(stamp_ns_))
+
+    def close(self) -> None:
+        self._bag.close()
+
+
+def open_bag_writer(path: Path):
+    """The calibration drive's recording: an object with ``write(topic, msg, stamp_ns)`` and ``close()``.
+    Through :mod:`robotatfactory.ros.bags` where it offers a writer for this middleware's messages (a
+    rosbag2 on ROS 2), else rosbag.Bag (ROS 1). ROS 2 without it: ConfigError."""
+    from ..ros.mw import name
+
+    try:
+        from ..ros import bags
+    except ImportError:
+        bags = None
+    if bags is not None and hasattr(bags, "open_writer"):
+        return bags.open_writer(path)
+    if name() == "ros1":
+        return _Ros1BagWriter(path)
+    from ..errors import ConfigError
+
+    raise ConfigError("recording the calibration drive on ROS 2 needs robotatfactory.ros.bags (a rosbag2 writer); "
+                      "pass --calibration FILE or --bag FILE instead")
 
 
 def _raf(*args: str) -> list[str]:
-    return [sys.executable, "-m", "robotatfactory", *args]
+    from ..ros.processes import raf_cmd
+
+    return raf_cmd(*args)
 
 
 # ------------------------------------------------------------------------------------------- analysis
@@ -599,13 +635,16 @@ Window Geometry:
 """
 
 
-def save_debug_image(path: Path, notes: list) -> None:
+def save_debug_image(exp, path: Path, notes: list) -> None:
     """One aruco/debug_image frame (the paper's figure 6) as PNG."""
-    import rospy
     from sensor_msgs.msg import Image
 
+    from ..ros.mw import QoS
+
     try:
-        msg = rospy.wait_for_message("aruco/debug_image", Image, timeout=10.0)
+        msg = exp.wait_for_message("aruco/debug_image", Image, timeout=10.0, qos=QoS.SENSOR)
+        if msg is None:
+            raise TimeoutError("no aruco/debug_image in 10 s")
         import cv2
 
         img = np.frombuffer(msg.data, dtype=np.uint8).reshape(msg.height, msg.width, 3)
@@ -728,17 +767,34 @@ def sim_robot(plan: Plan, work: Path):
     return robot, write_robot_json(robot, work / "robot_sim.json")
 
 
+@dataclass
+class Graph:
+    """The run's private ROS graph (a roscore on a free port / a ROS 2 domain id) and this process's node on it."""
+
+    private: object  # robotatfactory.ros.master.PrivateMaster | PrivateDomain
+    exp: object  # robotatfactory.ros.processes.ExperimentNode
+
+    def env(self) -> dict:
+        return self.private.env()
+
+    @property
+    def middleware(self) -> str:
+        return self.exp.middleware
+
+
 class Session:
-    """One drive: bridge, localization (optional) and simulator processes under the experiment's master, and
+    """One drive: bridge, localization (optional) and simulator processes on the experiment's graph, and
     this process's recorder. Use as a context manager; ``drive()`` returns when the route is done."""
 
-    def __init__(self, args, plan: Plan, master, log_dir: Path, name: str, route, robot_file: Path | None,
+    def __init__(self, args, plan: Plan, graph: Graph, log_dir: Path, name: str, route, robot_file: Path | None,
                  calibration_file: Path | None, localize: bool = True, bag: Path | None = None,
                  speed: float | None = None):
-        self.args, self.plan, self.master, self.name, self.route = args, plan, master, name, route
+        from ..ros.processes import Procs
+
+        self.args, self.plan, self.graph, self.name, self.route = args, plan, graph, name, route
         self.log_dir = log_dir / name
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        self.procs = Procs(self.log_dir)
+        self.procs = Procs(self.log_dir, watch=("sim", "bridge", "localize"))
         self.robot_file, self.calibration_file, self.localize, self.bag = robot_file, calibration_file, localize, bag
         self.speed = speed if speed is not None else plan.speed
         self.rec = None
@@ -775,7 +831,7 @@ class Session:
     def start(self) -> None:
         from ..ros.master import free_port
 
-        args, env = self.args, self.master.env()
+        args, env = self.args, self.graph.env()
         import socket
 
         bport, sport, cport = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM), free_port()
@@ -804,7 +860,7 @@ class Session:
     def drive(self, robot, settle_s: float = 0.0) -> None:
         """Drive the route on ground truth; then keep the robot stopped for ``settle_s`` simulation seconds
         (the filter's verdicts on the last fixes become final when they leave its history)."""
-        self.rec = rec = Recorder(self.route, self.speed, robot, bag_path=self.bag)
+        self.rec = rec = Recorder(self.graph.exp, self.route, self.speed, robot, bag_path=self.bag)
         wall0 = time.monotonic()
         last_report = wall0
         while rec.done_t is None:
@@ -834,32 +890,40 @@ class Session:
         rec.close_bag()
 
 
-def calibration_drive(args, plan: Plan, master, log_dir: Path, work: Path, robot_file: Path | None, robot,
+def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, robot_file: Path | None, robot,
                       out_dir: Path | None, notes: list) -> tuple[Path | None, dict]:
-    """``--calibration auto``: drive the calibration route recording a rosbag of camera/image_raw (every 3rd
-    frame), camera_info and odom, then ``raf calibrate --bag`` on it. Returns the calibration file and result keys."""
+    """``--calibration auto``: drive the calibration route recording a bag of camera/image_raw (every 3rd
+    frame), camera_info and odom (``--save-bag FILE`` keeps it), then ``raf calibrate --bag`` on it; with
+    ``--bag FILE``, no drive: ``raf calibrate`` on that recording. Returns the calibration file and result keys."""
     from ..localization.route import make_route
 
     out: dict = {}
-    bag = work / "calibration.bag"  # ~130 MB: deleted with the work directory (the YAML is kept)
-    route = make_route("calibration", 1)
-    with Session(args, plan, master, log_dir, "calibration", route, robot_file, None, localize=False, bag=bag,
-                 speed=args.calibration_speed) as ses:
-        ses.start()
-        ses.drive(robot)
-        counts = dict(ses.rec.bag_counts)
-        notes.extend(ses.notes)
-    out.update({"calibration_bag_images": counts["images"], "calibration_bag_odom": counts["odom"]})
+    if plan.bag:
+        bag = Path(plan.bag)
+        out["calibration_bag"] = str(bag)
+    else:
+        # ~130 MB: deleted with the work directory unless --save-bag names where to keep it (the YAML is kept)
+        bag = Path(args.save_bag) if args.save_bag else work / ("calibration.bag" if graph.middleware == "ros1"
+                                                                else "calibration_bag")
+        route = make_route("calibration", 1)
+        with Session(args, plan, graph, log_dir, "calibration", route, robot_file, None, localize=False, bag=bag,
+                     speed=args.calibration_speed) as ses:
+            ses.start()
+            ses.drive(robot)
+            counts = dict(ses.rec.bag_counts)
+            notes.extend(ses.notes)
+        out.update({"calibration_bag_images": counts["images"], "calibration_bag_odom": counts["odom"]})
     calib = (out_dir or work) / "calibration.yaml"
     cmd = _raf("--field", args.field, "calibrate", "--bag", str(bag), "--out", str(calib))
     t0 = time.monotonic()
     with open(log_dir / "calibrate.log", "wb") as log:
-        r = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=master.env(), timeout=1800)
+        r = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=graph.env(), timeout=1800)
     out["calibration_wall_s"] = time.monotonic() - t0
     if r.returncode != 0 or not calib.is_file():
         tail = (log_dir / "calibrate.log").read_text(errors="replace").splitlines()[-15:]
         raise RuntimeError(f"raf calibrate failed (exit {r.returncode}):\n" + "\n".join(tail))
-    out["calibration_source"] = "raf calibrate on the calibration drive"
+    out["calibration_source"] = (f"raf calibrate on the recorded drive {bag} (--bag: replayed, not driven)"
+                                 if plan.bag else "raf calibrate on the calibration drive")
     return calib, out
 
 
@@ -875,14 +939,14 @@ def calibration_keys(calib: Path | None, true_camera) -> dict:
     return out
 
 
-def run_route(args, plan: Plan, master, log_dir: Path, work: Path, name: str, laps: int, robot_file, robot,
+def run_route(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, name: str, laps: int, robot_file, robot,
               nominal_robot, calib: Path | None, field, out_dir: Path | None, notes: list) -> dict:
     """One route: start the processes, drive, analyse; returns the route's keys, unprefixed."""
     from ..localization.config import load_config
     from ..localization.route import make_route
 
     route = make_route(name, laps)
-    with Session(args, plan, master, log_dir, name, route, robot_file, calib) as ses:
+    with Session(args, plan, graph, log_dir, name, route, robot_file, calib) as ses:
         ses.start()
         ses.drive(nominal_robot, settle_s=load_config().ekf.history_s + 1.0)
         data = ses.rec.arrays()
@@ -891,7 +955,7 @@ def run_route(args, plan: Plan, master, log_dir: Path, work: Path, name: str, la
             diag = dict(ses.rec.diag)
         notes.extend(ses.notes)
         if out_dir is not None and name == plan.routes[0][0]:
-            _pictures(args, master, data, out_dir, log_dir, notes)
+            _pictures(args, graph, data, out_dir, log_dir, notes)
         applied = list(ses.applied)
     if len(data["gt"]) < 10:
         raise RuntimeError(f"{name}: no ground truth recorded: did the simulator and the bridge run? "
@@ -918,10 +982,10 @@ def run_route(args, plan: Plan, master, log_dir: Path, work: Path, name: str, la
     return out
 
 
-def _pictures(args, master, data: dict, out_dir: Path, log_dir: Path, notes: list) -> None:
-    """The debug image, the TF tree and the RViz screenshot, while the processes still run."""
-    env = master.env()
-    save_debug_image(out_dir / "localization_debug_image.png", notes)
+def _pictures(args, graph: Graph, data: dict, out_dir: Path, log_dir: Path, notes: list) -> None:
+    """The debug image, the TF tree and the RViz screenshot (ROS 1's tools), while the processes still run."""
+    env = graph.env()
+    save_debug_image(graph.exp, out_dir / "localization_debug_image.png", notes)
     cfg = out_dir / "localization.rviz"
     # look over the robot's shoulder at what its camera sees (the paper's figure 7)
     x, y, th = data["gt"][-1, 1:4] if len(data["gt"]) else (0.0, 0.0, 0.0)
@@ -929,6 +993,10 @@ def _pictures(args, master, data: dict, out_dir: Path, log_dir: Path, notes: lis
     view = RVIZ.replace("X: 0.0\n        Y: -0.15", f"X: {fx:.3f}\n        Y: {fy:.3f}")
     view = view.replace("Yaw: 4.71", f"Yaw: {(th + math.pi) % (2 * math.pi):.3f}")
     cfg.write_text(view)
+    if graph.middleware != "ros1":
+        notes.append("TF tree and RViz screenshot: ROS 1's view_frames and rviz; not made on ROS 2 (no tf2_tools "
+                     "or rviz2 wheels)")
+        return
     if not args.no_tf_tree:
         why = tf_tree(env, out_dir, log_dir)
         if why:
@@ -943,7 +1011,8 @@ def run(args, out_dir: Path | None) -> dict:
     from ..field import load_field
     from ..localization.calibration import write_calibration
     from ..robot import load_robot
-    from ..ros.master import PrivateMaster
+    from ..ros.master import private_graph
+    from ..ros.processes import ExperimentNode
 
     plan = plan_from_args(args)
     field = load_field(args.field)
@@ -960,16 +1029,17 @@ def run(args, out_dir: Path | None) -> dict:
                  "sim_track_error_fraction": plan.track_error, "sim_wheel_radius_error_fraction": plan.radius_error,
                  "camera_error": plan.camera_error}
     notes: list[str] = []
-    master = PrivateMaster().start()
+    private = private_graph().start()
+    exp = None
     ok = False
     try:
-        master.use_in_this_process()
-        import rospy
-
-        rospy.init_node("raf_experiment_localization", anonymous=True, disable_signals=True)
+        private.use_in_this_process()
+        exp = ExperimentNode("raf_experiment_localization")
+        graph = Graph(private, exp)
+        out["middleware"] = graph.middleware
         calib: Path | None = None
         if plan.calibration == "auto":
-            calib, keys = calibration_drive(args, plan, master, log_dir, work, robot_file, nominal, out_dir, notes)
+            calib, keys = calibration_drive(args, plan, graph, log_dir, work, robot_file, nominal, out_dir, notes)
             out.update({f"{m}_{k}": v for k, v in keys.items()})
         elif plan.calibration == "true":
             calib = write_calibration((out_dir or work) / "calibration_true.yaml", robot.camera,
@@ -982,12 +1052,14 @@ def run(args, out_dir: Path | None) -> dict:
             out[f"{m}_calibration_source"] = f"file {calib}"
         out.update({f"{m}_{k}": v for k, v in calibration_keys(calib, robot.camera).items()})
         for name, laps in plan.routes:
-            keys = run_route(args, plan, master, log_dir, work, name, laps, robot_file, robot, nominal, calib,
+            keys = run_route(args, plan, graph, log_dir, work, name, laps, robot_file, robot, nominal, calib,
                              field, out_dir, notes)
             out.update({f"{m}_{name}_{k}": v for k, v in keys.items()})
         ok = True
     finally:
-        master.cleanup()
+        if exp is not None:
+            exp.close()
+        private.cleanup()
         if ok:
             shutil.rmtree(work, ignore_errors=True)  # logs live in out_dir/logs when --out is given
         elif not ok:

@@ -1,0 +1,71 @@
+"""ros/processes.py: the one helper that starts, watches and stops the raf processes of a benchmark or an
+experiment (no ROS needed for these)."""
+import os
+import sys
+import time
+
+import pytest
+
+from robotatfactory.ros.processes import Procs, interpreter, raf_cmd, wait_until
+
+
+def test_a_process_that_dies_is_reported_with_its_log(tmp_path):
+    with Procs(tmp_path) as procs:
+        procs.start("short", [sys.executable, "-c", "print('bye from short'); raise SystemExit(3)"], dict(os.environ))
+        procs.start("long", [sys.executable, "-c", "import time; time.sleep(60)"], dict(os.environ))
+        with pytest.raises(RuntimeError, match=r"short exited early with code 3:\nbye from short"):
+            wait_until(lambda: False, 20, "nothing", check=procs.check)
+        long_ = procs.get("long")
+        assert long_.poll() is None
+    assert long_.poll() is not None  # stopped with the context (its whole session)
+    assert (tmp_path / "short.log").read_text().strip() == "bye from short"
+
+
+def test_an_expected_exit_is_waited_for_not_reported(tmp_path):
+    with Procs(tmp_path) as procs:
+        procs.start("tool", [sys.executable, "-c", "import sys; sys.exit(0)"], dict(os.environ), may_exit=True)
+        assert procs.wait("tool", 20) == 0
+        procs.check()  # no error
+        procs.start("bad", [sys.executable, "-c", "import sys; print('boom'); sys.exit(5)"], dict(os.environ),
+                    may_exit=True)
+        with pytest.raises(RuntimeError, match="bad exited with code 5:\nboom"):
+            procs.wait("bad", 20)
+
+
+def test_stop_all_ends_the_children_too(tmp_path):
+    code = ("import subprocess, sys, time; p = subprocess.Popen([sys.executable, '-c', 'import time; "
+            "time.sleep(60)']); print(p.pid, flush=True); time.sleep(60)")
+    procs = Procs(tmp_path)
+    procs.start("parent", [sys.executable, "-c", code], dict(os.environ))
+    wait_until(lambda: (tmp_path / "parent.log").read_text().strip() != "", 20, "the child's pid")
+    child = int((tmp_path / "parent.log").read_text().split()[0])
+    procs.stop_all()
+    end = time.monotonic() + 10
+    while time.monotonic() < end and _alive(child):
+        time.sleep(0.05)
+    assert not _alive(child)
+    assert procs.procs == []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split()[2] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_wait_until_times_out_naming_what():
+    t0 = time.monotonic()
+    with pytest.raises(RuntimeError, match="waiting for the moon"):
+        wait_until(lambda: False, 0.3, "the moon")
+    assert time.monotonic() - t0 >= 0.3
+
+
+def test_commands_and_interpreters():
+    assert raf_cmd("sim", "--seed", "1") == [sys.executable, "-m", "robotatfactory", "sim", "--seed", "1"]
+    assert raf_cmd("bridge", python="/x/python")[:3] == ["/x/python", "-m", "robotatfactory"]
+    from robotatfactory.ros import mw
+
+    for m in mw.available():  # this interpreter runs its own middleware
+        assert str(interpreter(m)) == sys.executable
