@@ -203,8 +203,14 @@ class Ros2Node(Node):
         return unflatten(out, ".")
 
     def log(self, level, text, throttle=0.0) -> None:
-        lg = self.node.get_logger()
-        fn = {"debug": lg.debug, "info": lg.info, "warn": lg.warning, "error": lg.error, "fatal": lg.fatal}[level]
+        fns = self.__dict__.get("_log_fns")
+        if fns is None:  # one function per level, made once (the throttling keys on it)
+            import functools
+
+            lg = self.node.get_logger()
+            fns = self._log_fns = {lv: functools.partial(_emit, lg, lv)
+                                   for lv in ("debug", "info", "warn", "error", "fatal")}
+        fn = fns[level]
         if throttle > 0:
             throttled(fn, throttle, text)
         else:
@@ -238,6 +244,21 @@ class Ros2Node(Node):
             self.node.destroy_node()
         except Exception:  # noqa: BLE001 - already torn down
             pass
+
+
+def _emit(lg, level: str, text: str) -> None:
+    """One calling line per severity: rclpy keys a logger's context by the line that calls it and raises
+    "Logger severity cannot be changed between calls" when one line logs at two severities."""
+    if level == "debug":
+        lg.debug(text)
+    elif level == "info":
+        lg.info(text)
+    elif level == "warn":
+        lg.warning(text)
+    elif level == "error":
+        lg.error(text)
+    else:
+        lg.fatal(text)
 
 
 def _homogeneous(values: list) -> list:
