@@ -76,8 +76,23 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_mast
         assert len(texts) == len(plan) and texts[0].startswith("1: ") and "incoming 2 ->" in texts[0]
         src = field.slot("incoming", 2).xy
         assert abs(plan[0].points[0].x - src[0]) < 1e-9 and abs(plan[0].points[0].y - src[1]) < 1e-9
-        # the current task's arrow (the first) is the one highlighted: thicker and of its own colour
-        assert all(plan[0].scale.x > m.scale.x and plan[0].color != m.color for m in plan[1:])
+        # a longer plan: one arrow per Move from its source slot to its destination, numbered in order, the
+        # current one (the first) highlighted: thicker and of its own colour
+        from robotatfactory.agent.state import FactoryState
+        from robotatfactory.agent.tasks import plan_round
+
+        steps, _ = plan_round(node.agent.policy, FactoryState.from_letters("RGBB"), 10.0)
+        moves = [s.task for s in steps if hasattr(s.task, "source")]
+        big = node.marker_array(moves, moves[0], None, "to_pick")
+        arrows = [m for m in big.markers if m.ns == "agent_plan"]
+        labels = [m.text for m in big.markers if m.ns == "agent_plan_text"]
+        assert len(arrows) == len(moves) >= 4
+        for k, (mv, a, label) in enumerate(zip(moves, arrows, labels)):
+            s0, s1 = field.slot(mv.source.zone, mv.source.number).xy, field.slot(mv.target.zone, mv.target.number).xy
+            assert (a.points[0].x, a.points[0].y, a.points[1].x, a.points[1].y) == pytest.approx((*s0, *s1))
+            assert label == f"{k + 1}: {mv.part.label} {mv.source} -> {mv.target}"
+        assert all(arrows[0].scale.x > a.scale.x and arrows[0].color != a.color for a in arrows[1:])
+        assert not any(m.ns == "agent_goal" for m in big.markers)  # no goal given, none shown
         head = next(m for m in arr.markers if m.ns == "agent_task" and m.type == Marker.TEXT_VIEW_FACING)
         assert "incoming 2" in head.text
         goal = next(m for m in arr.markers if m.ns == "agent_goal")

@@ -81,8 +81,8 @@ class AgentNode:
         self._events_logged = 0
         self._path_sent = None
         self._markers_key = None  # what the last agent/markers showed (plan, task, goal)
-        self._plan: list = []  # the planned round's Moves (from the server state it was planned on)
-        self._plan_state = None
+        self._plan: list = []  # the Moves planned after the current one
+        self._plan_state = None  # (server state, current Move) they were planned from
         self._running = False
         self.subscribers: list = []
         self.timer = None
@@ -201,22 +201,36 @@ class AgentNode:
         return msg
 
     # ------------------------------------------------------------------ RViz
-    def _planned_moves(self) -> list:
-        """The round as planned from the latest server state (:func:`..agent.tasks.plan_round`): its Moves,
-        the current one first. Re-planned only when the server state changes."""
+    def _current_move(self) -> Move | None:
+        """The Move being done now, with the destination the agent is heading for (it may have changed it
+        since it picked the part), or None."""
+        a = self.agent
+        if not isinstance(a.task, Move):
+            return None
+        if a.carrying is not None and a.target is not None:
+            return Move(a.task.part, a.task.source, a.target)
+        return a.task
+
+    def _planned_moves(self, current: Move | None) -> list:
+        """The round as planned (:func:`..agent.tasks.plan_round`): the current Move first, then the Moves
+        planned from the server state as it will be once the current one is done. Re-planned only when the
+        server state or the current Move changes."""
         a = self.agent
         st = a.state
         if st is None:
-            return []
-        if st is not self._plan_state:
-            self._plan_state = st
+            return [current] if current is not None else []
+        key = (id(st), current)
+        if key != self._plan_state:
+            self._plan_state = key
+            if current is not None:  # the part leaves its slot (it may be gone already) and lands at the target
+                st = st.with_slot(current.source, None).with_slot(current.target, current.part)
             try:
                 steps, _ = plan_round(a.policy, st, a.delays.estimate or 10.0)
                 self._plan = [s.task for s in steps if isinstance(s.task, Move)]
             except Exception as e:  # noqa: BLE001 - display only: a plan that cannot be made shows nothing
                 self._plan = []
                 self.node.warn(f"raf agent: no plan to show: {e}", throttle=10.0)
-        return self._plan
+        return ([current] if current is not None else []) + self._plan
 
     def _goal(self):
         """The current goal pose (x, y, heading; m, rad) in map: the path's end facing the slot's plate while
@@ -233,8 +247,9 @@ class AgentNode:
     def _publish_markers(self) -> None:
         with self.lock:
             a = self.agent
-            moves = self._planned_moves()
-            task = a.task if isinstance(a.task, (Move, Wait)) else None
+            current = self._current_move()
+            moves = self._planned_moves(current)
+            task = current if current is not None else (a.task if isinstance(a.task, Wait) else None)
             goal = self._goal()
             mode = a.mode
         key = (tuple(moves), task, goal, mode)
@@ -263,12 +278,9 @@ class AgentNode:
             return float(s.xy[0]), float(s.xy[1])
 
         current = task if isinstance(task, Move) else None
-        shown = list(moves)
-        if current is not None and current not in shown:
-            shown.insert(0, current)
-        for i, mv in enumerate(shown):
+        for i, mv in enumerate(moves):
             (x0, y0), (x1, y1) = xy(mv.source), xy(mv.target)
-            is_current = mv == current
+            is_current = i == 0 and mv == current
             z = 0.06 if is_current else 0.04
             arrow = marker("agent_plan", i, Marker.ARROW, (1.0, 0.2, 0.9, 1.0) if is_current else (0.3, 0.3, 0.9, 0.6),
                            (0.012 if is_current else 0.006, 0.03 if is_current else 0.018, 0.03))
