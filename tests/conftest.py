@@ -26,3 +26,22 @@ def robot():
 def raf_cmd():
     """The raf command line as a list, run with this interpreter."""
     return [sys.executable, "-m", "robotatfactory"]
+
+
+def _middlewares() -> list[str]:
+    """The middlewares a ``middleware``-taking test runs on in this interpreter: the one it has (``.venv``:
+    ros1, ``.venv-ros2``: ros2); RAF_MIDDLEWARE, when set, names it. One a process: rospy and rclpy never
+    share an interpreter, and the test node is made once."""
+    from robotatfactory.ros import mw
+
+    want = os.environ.get("RAF_MIDDLEWARE", "").strip().lower()
+    have = mw.available()
+    return [want] if want in have else have[:1]
+
+
+def pytest_generate_tests(metafunc):
+    """Parametrise the ``middleware`` fixture with this interpreter's middleware: ids read ``[ros1]`` /
+    ``[ros2]``. A middleware the interpreter lacks is not a parameter (nothing is skipped); the README's test
+    command runs the ``middlewares``-marked tests in both environments (scripts/bootstrap.sh test)."""
+    if "middleware" in metafunc.fixturenames:
+        metafunc.parametrize("middleware", _middlewares(), scope="session")

@@ -1,5 +1,8 @@
-"""The bridge end to end against the fake simulator: a real roscore (free port), ``raf bridge`` as a process,
-the fake SimTwo (tests/fakesim.py) in a thread of this process, and an in-process rospy test node."""
+"""The bridge end to end against the fake simulator, on each middleware (``[ros1]``: a real roscore on a free
+port; ``[ros2]``: a private ROS domain id): ``raf bridge`` as a process, the fake SimTwo (tests/fakesim.py) in a
+thread of this process, and the in-process test node (rosutil). The same topics, types, frames and behaviour
+on both; each middleware's own conventions (ROS 1: rosparam, rosbag; ROS 2: QoS, declared parameters, a late
+subscriber's latched topics) where they differ."""
 from __future__ import annotations
 
 import math
@@ -11,7 +14,8 @@ import numpy as np
 import pytest
 
 from fakesim import FakeSim, tick_of_image
-from rosutil import Collector, free_port, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+from rosutil import (Collector, TFTree, free_port, level_int, publisher, raf_process, ros_graph, stamp_ns,  # noqa: F401
+                     stamp_s, stop_process, test_node, unpublish, wait_for_node, wait_until)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -19,7 +23,7 @@ WATCHDOG = 0.5
 
 
 @pytest.fixture(scope="module")
-def rig(ros_master, tmp_path_factory):
+def rig(middleware, ros_graph, tmp_path_factory):
     """One bridge process and one fake simulator (lockstep, real time) shared by the tests of this file."""
     port = free_port(socket.SOCK_DGRAM)
     cam = f"tcp://127.0.0.1:{free_port()}"
@@ -27,12 +31,11 @@ def rig(ros_master, tmp_path_factory):
     # the fake simulator renders on the grid k/15 s: the grid idealisation's stamping makes its stamps exact
     proc = raf_process(["bridge", "--port", str(port), "--camera", cam, "--set", "camera/bracket=nearest",
                         "--set", "camera/use_grid=true", "--set", f"watchdog/timeout={WATCHDOG}",
-                        "--set", "diagnostics/period=0.25", "--set", "log_period=1.0"], ros_master.env(), log)
-    rospy = test_node()
-    wait_until(lambda: any(n.endswith("raf_bridge") for n in __import__("rosnode").get_node_names()), 30,
-               what="the bridge node registering")
+                        "--set", "diagnostics/period=0.25", "--set", "log_period=1.0"], ros_graph.env(), log)
+    node = test_node()
+    wait_for_node("/raf_bridge", 30)
     sim = FakeSim(("127.0.0.1", port), cam, lockstep=True, lockstep_timeout=0.3).start()
-    yield {"rospy": rospy, "sim": sim, "port": port, "cam": cam, "proc": proc, "log": log}
+    yield {"node": node, "middleware": middleware, "sim": sim, "port": port, "cam": cam, "proc": proc, "log": log}
     sim.stop()
     code = stop_process(proc)
     print(log.read_text()[-4000:])
@@ -58,6 +61,7 @@ def latest_diag(diag: Collector, suffix: str, after: float = 0.0):
     return diag_values(pairs[-1][1], suffix)
 
 
+@pytest.mark.middlewares
 def test_every_topic_arrives_with_types_frames_and_stamps(rig):
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
@@ -78,19 +82,19 @@ def test_every_topic_arrives_with_types_frames_and_stamps(rig):
             c.close()
     m = {t: c.msgs for t, c in cols.items()}
     # /clock follows Tms: whole control periods, increasing
-    clocks = [c.clock.to_nsec() for c in m["/clock"]]
+    clocks = [stamp_ns(c.clock) for c in m["/clock"]]
     assert all(b > a for a, b in zip(clocks, clocks[1:]))
     assert all(c % 40_000_000 == 0 for c in clocks)
     od = m["/odom"][-1]
     assert (od.header.frame_id, od.child_frame_id) == ("odom", "base_link")
-    assert od.header.stamp.to_nsec() % 40_000_000 == 0
+    assert stamp_ns(od.header.stamp) % 40_000_000 == 0
     cov = np.array(od.pose.covariance).reshape(6, 6)
     assert np.all(np.diag(cov) > 0)
     gt = m["/ground_truth"][-1]
     assert gt.header.frame_id == "map" and gt.child_frame_id == "base_link"
     js = m["/joint_states"][-1]
     assert list(js.name) == ["left_wheel_joint", "right_wheel_joint"] and len(js.position) == 2
-    assert js.header.stamp.to_nsec() % 40_000_000 == 0
+    assert stamp_ns(js.header.stamp) % 40_000_000 == 0
     sc = m["/scan"][-1]
     assert sc.header.frame_id == "laser"
     assert sc.angle_min == pytest.approx(-math.pi) and sc.angle_max == pytest.approx(math.pi)
@@ -102,17 +106,17 @@ def test_every_topic_arrives_with_types_frames_and_stamps(rig):
     # a sweep is stamped with the time of its first ray: the fake simulator delivers whole sweeps 1 ms after
     # a cycle's end like SimTwo (measured over the period before), which lidar/delivery_lag assumes
     for s in m["/scan"]:
-        assert (s.header.stamp.to_nsec() - 1_000_000) % 200_000_000 == 0, s.header.stamp.to_sec()
+        assert (stamp_ns(s.header.stamp) - 1_000_000) % 200_000_000 == 0, stamp_s(s.header.stamp)
     assert m["/contact"][-1].data is False
     img = m["/camera/image_raw"]
     for im in img:
         assert (im.encoding, im.width, im.height, im.step, im.header.frame_id) == ("bgr8", 640, 480, 1920,
                                                                                    "camera_optical")
     # stamps: the render time of each frame (the fake simulator writes its render tick into the image)
-    from robotatfactory.ros.messages import image_to_bgr
+    from robotatfactory.ros.messages import camera_matrices, image_to_bgr
 
     truth = [tick_of_image(image_to_bgr(im)) / 60 for im in img]
-    stamps = [im.header.stamp.to_sec() for im in img]
+    stamps = [stamp_s(im.header.stamp) for im in img]
     assert all(b > a for a, b in zip(stamps, stamps[1:]))
     late = list(zip(truth, stamps))[-12:]  # after the render phase has been learned
     wrong = [(t, s) for t, s in late if s != pytest.approx(t, abs=1e-6)]
@@ -123,9 +127,10 @@ def test_every_topic_arrives_with_types_frames_and_stamps(rig):
     bgr = image_to_bgr(img[-1])
     assert tuple(bgr[240, 320]) == (200, 50, 20) and tuple(bgr[479, 639]) == (0, 80, 0)
     info = m["/camera/camera_info"][-1]
-    assert list(info.K) == [226.8, 0, 319.5, 0, 226.8, 239.5, 0, 0, 1] and info.header.frame_id == "camera_optical"
-    infos = {i.header.stamp.to_nsec() for i in m["/camera/camera_info"]}
-    assert img[-1].header.stamp.to_nsec() in infos  # camera_info carries the image's stamp
+    assert camera_matrices(info)[1] == [226.8, 0, 319.5, 0, 226.8, 239.5, 0, 0, 1]
+    assert info.header.frame_id == "camera_optical"
+    infos = {stamp_ns(i.header.stamp) for i in m["/camera/camera_info"]}
+    assert stamp_ns(img[-1].header.stamp) in infos  # camera_info carries the image's stamp
     arr = m["/field/markers"][0]
     ns = {mk.ns for mk in arr.markers}
     assert {"floor", "walls", "slots", "aruco", "aruco_ids"} <= ns
@@ -135,40 +140,111 @@ def test_every_topic_arrives_with_types_frames_and_stamps(rig):
     assert int(vals["accepted"]) > 0 and float(vals["datagram_rate_hz"]) > 10
 
 
+@pytest.mark.middlewares
 def test_tf_resolves_markers_and_camera(rig):
-    import rospy
-    import tf2_ros
-
-    buf = tf2_ros.Buffer()
-    listener = tf2_ros.TransformListener(buf)
-    t = buf.lookup_transform("map", "aruco_13", rospy.Time(0), rospy.Duration(10))
-    tr = t.transform.translation
-    assert (tr.x, tr.y, tr.z) == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
-    t = buf.lookup_transform("odom", "camera_optical", rospy.Time(0), rospy.Duration(10))
     from robotatfactory.robot import load_robot
 
-    # with the robot at odom's origin-ish, the optical frame is the camera mount: z is forward-down
-    cam = load_robot().camera
-    b = buf.lookup_transform("base_link", "camera_optical", rospy.Time(0), rospy.Duration(5))
-    q = b.transform.rotation
-    from scipy.spatial.transform import Rotation
+    tf = TFTree()
+    try:
+        T = tf.lookup("map", "aruco_13", 10)
+        assert T[:3, 3] == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+        assert tf.can_transform("odom", "camera_optical", 10)
+        # the optical frame is the camera mount: z forward-down
+        cam = load_robot().camera
+        B = tf.lookup("base_link", "camera_optical", 5)
+        assert np.allclose(B[:3, :3], cam.base_to_optical()[:3, :3], atol=1e-9)
+        assert (B[0, 3], B[2, 3]) == pytest.approx((cam.xyz[0], cam.xyz[2]))
+        assert tf.can_transform("base_link", "left_wheel", 5)
+        assert tf.can_transform("base_link", "laser", 5)
+        # odom -> base_link is dynamic and stamped with simulation time (whole control periods)
+        _, stamp = tf.try_lookup("odom", "base_link")
+        assert stamp is not None and round(stamp * 1e9) % 40_000_000 == 0
+    finally:
+        tf.close()
+    if rig["middleware"] == "ros1":  # and ROS 1's own TF library resolves the same tree
+        import rospy
+        import tf2_ros
 
-    R = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-    assert np.allclose(R, cam.base_to_optical()[:3, :3], atol=1e-9)
-    assert (b.transform.translation.x, b.transform.translation.z) == pytest.approx((cam.xyz[0], cam.xyz[2]))
-    assert buf.can_transform("base_link", "left_wheel", rospy.Time(0), rospy.Duration(5))
-    assert buf.can_transform("base_link", "laser", rospy.Time(0), rospy.Duration(5))
-    listener.unregister()
+        buf = tf2_ros.Buffer()
+        listener = tf2_ros.TransformListener(buf)
+        t = buf.lookup_transform("map", "aruco_13", rospy.Time(0), rospy.Duration(10))
+        assert t.transform.translation.x == pytest.approx(0.0, abs=1e-9)
+        assert buf.can_transform("odom", "camera_optical", rospy.Time(0), rospy.Duration(10))
+        listener.unregister()
 
 
+@pytest.mark.middlewares
+def test_latched_topics_reach_a_late_subscriber_and_qos(rig):
+    """/tf_static and /field/markers, published once at start-up, reach a subscriber that comes much later
+    (ROS 1: latched; ROS 2: reliable + transient local). ROS 2: what each publisher offers is asserted: the
+    sensor topics best effort, the control path and odometry reliable."""
+    from tf2_msgs.msg import TFMessage
+    from visualization_msgs.msg import MarkerArray
+
+    wait_until(lambda: len(rig["sim"].received) > 20, 10, what="the stream running")
+    static, markers = Collector("/tf_static", TFMessage), Collector("/field/markers", MarkerArray)
+    try:
+        frames = {t.child_frame_id for m in static.wait(1, timeout=10) for t in m.transforms}
+        assert {"aruco_13", "laser", "camera_optical"} <= frames, frames
+        assert sum(mk.ns == "aruco" for mk in markers.wait(1, timeout=10)[0].markers) == 49
+    finally:
+        static.close()
+        markers.close()
+    if rig["middleware"] == "ros2":
+        from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+        from rosutil import publisher_qos, subscription_qos
+
+        def offered(topic):
+            q = wait_until(lambda: publisher_qos(topic), 5, what=f"a publisher of {topic}")
+            return {(p.reliability, p.durability) for p in q}
+
+        for topic in ("/scan", "/camera/image_raw", "/camera/camera_info"):
+            assert {r for r, _ in offered(topic)} == {ReliabilityPolicy.BEST_EFFORT}, topic
+        for topic in ("/tf_static", "/field/markers"):
+            assert offered(topic) == {(ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)}, topic
+        for topic in ("/odom", "/tf", "/clock", "/diagnostics"):
+            assert {r for r, _ in offered(topic)} == {ReliabilityPolicy.RELIABLE}, topic
+        cmd = subscription_qos("/cmd_vel")
+        assert cmd and all(q.reliability == ReliabilityPolicy.RELIABLE for q in cmd), cmd
+
+
+@pytest.mark.middlewares
+def test_parameters_and_sim_time(rig):
+    """The bridge's settings as each middleware shows parameters. ROS 1: on the master (``rosparam get``),
+    ``/use_sim_time`` set; ROS 2: declared on the node with the YAML's comment as description and the checked
+    range (``ros2 param describe``), ``use_sim_time`` a parameter of the node."""
+    if rig["middleware"] == "ros1":
+        import rospy
+
+        assert rospy.get_param("/raf_bridge/watchdog/timeout") == WATCHDOG
+        assert rospy.get_param("/raf_bridge/diagnostics/period") == 0.25
+        assert rospy.get_param("/use_sim_time") is True
+        return
+    from rcl_interfaces.msg import ParameterType
+
+    from rosutil import node_parameters
+
+    p = node_parameters("/raf_bridge")
+    assert p["use_sim_time"][0] is True
+    value, d = p["watchdog.timeout"]
+    assert value == WATCHDOG and d.type == ParameterType.PARAMETER_DOUBLE
+    assert "SIMULATION time" in d.description
+    assert d.floating_point_range and d.floating_point_range[0].from_value >= 0
+    assert p["diagnostics.period"][0] == 0.25 and p["camera.use_grid"][0] is True
+    assert p["udp.port"][1].type == ParameterType.PARAMETER_INTEGER and p["udp.port"][1].integer_range
+    described = [n for n, (_, d) in p.items() if d.description]
+    assert len(p) >= 40 and len(described) >= 0.5 * len(p), sorted(set(p) - set(described))
+    assert {"udp.port", "watchdog.timeout", "diagnostics.period", "frame_prefix"} <= set(described)
+
+
+@pytest.mark.middlewares
 def test_cmd_vel_moves_the_robot_and_the_watchdog_stops_it(rig):
-    import rospy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
 
     sim = rig["sim"]
-    pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
-    wait_until(lambda: pub.get_num_connections() > 0, 10, what="bridge subscribed to cmd_vel")
+    pub = publisher("/cmd_vel", Twist)
     odom = Collector("/odom", Odometry)
     x0 = sim.pose()[0]
     tw = Twist()
@@ -194,24 +270,26 @@ def test_cmd_vel_moves_the_robot_and_the_watchdog_stops_it(rig):
     time.sleep(0.5)
     assert sim.pose()[0] == pytest.approx(x2, abs=1e-9)
     odom.close()
+    unpublish(pub)
 
 
+@pytest.mark.middlewares
 def test_electromagnet_command_reaches_the_simulator(rig):
-    import rospy
     from std_msgs.msg import Bool
 
     sim = rig["sim"]
-    pub = rospy.Publisher("/electromagnet", Bool, queue_size=1, latch=True)
+    pub = publisher("/electromagnet", Bool)
     state = Collector("/electromagnet/state", Bool)
-    pub.publish(Bool(True))
+    pub.publish(Bool(data=True))
     wait_until(lambda: sim.received and sim.received[-1].magnet, 5, what="S = 1 in the replies")
     state.wait(1, timeout=5, pred=lambda m: m.data)
-    pub.publish(Bool(False))
+    pub.publish(Bool(data=False))
     wait_until(lambda: not sim.received[-1].magnet, 5, what="S = 0 in the replies")
     state.close()
-    pub.unregister()
+    unpublish(pub)
 
 
+@pytest.mark.middlewares
 def test_exactly_one_reply_per_datagram_with_seq_echoed(rig):
     sim = rig["sim"]
     n0 = len(sim.received)
@@ -222,6 +300,7 @@ def test_exactly_one_reply_per_datagram_with_seq_echoed(rig):
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # one each, in order, none missing
 
 
+@pytest.mark.middlewares
 def test_bad_input_is_counted_and_good_frames_keep_flowing(rig):
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
@@ -273,14 +352,13 @@ def test_bad_input_is_counted_and_good_frames_keep_flowing(rig):
     odom.close()
 
 
+@pytest.mark.middlewares
 def test_lost_datagrams_lose_no_ticks(rig):
-    import rospy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
 
     sim = rig["sim"]
-    pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
-    wait_until(lambda: pub.get_num_connections() > 0, 10, what="bridge subscribed to cmd_vel")
+    pub = publisher("/cmd_vel", Twist)
     odom = Collector("/odom", Odometry)
     od0 = odom.wait(1)[-1]
     wait_until(lambda: len(odom.msgs) > 1, 5)
@@ -308,11 +386,14 @@ def test_lost_datagrams_lose_no_ticks(rig):
     tick = 2 * math.pi * 0.0325 / 360
     assert abs(dist_odom - dist_true) < 2 * tick  # every tick counted despite the lost datagrams
     odom.close()
-    pub.unregister()
+    unpublish(pub)
 
 
+@pytest.mark.middlewares
 def test_stale_simulator_is_reported_and_recovers_including_a_restart(rig):
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from robotatfactory.ros.mw.base import ERROR, OK
     from nav_msgs.msg import Odometry
 
     sim = rig["sim"]
@@ -320,7 +401,7 @@ def test_stale_simulator_is_reported_and_recovers_including_a_restart(rig):
     wait_until(lambda: sim.seq > 60, 10, what="a simulator that has run a while")  # then a restart is no replay
     sim.pause()
     t0 = time.monotonic()
-    wait_until(lambda: latest_diag(diag, "sensor stream", t0 + 2.2)[0].level == DiagnosticStatus.ERROR, 6,
+    wait_until(lambda: level_int(latest_diag(diag, "sensor stream", t0 + 2.2)[0].level) == ERROR, 6,
                what="stale ERROR")
     _, vals = latest_diag(diag, "sensor stream")
     assert float(vals["staleness_s"]) > 2.0
@@ -330,19 +411,20 @@ def test_stale_simulator_is_reported_and_recovers_including_a_restart(rig):
     sim.reset(0)
     sim.resume()
     t1 = time.monotonic()
-    wait_until(lambda: latest_diag(diag, "sensor stream", t1 + 0.3)[0].level == DiagnosticStatus.OK, 6,
+    wait_until(lambda: level_int(latest_diag(diag, "sensor stream", t1 + 0.3)[0].level) == OK, 6,
                what="OK after recovery")
     _, after = latest_diag(diag, "sensor stream", t1 + 0.3)
     assert int(after["restarts"]) == int(before["restarts"]) + 1
     msgs = odom.wait(5)
     # odometry restarted from the origin and the clock went back with the simulator
-    assert msgs[-1].header.stamp.to_sec() < 3.0
+    assert stamp_s(msgs[-1].header.stamp) < 3.0
     assert abs(msgs[-1].pose.pose.position.x) < 0.05
     diag.close()
     odom.close()
 
 
 def test_rosbag_record_plays_back(rig, tmp_path):
+    """ROS 1 only (rosbag; the ROS 2 recording is ``raf record``'s, tested with it)."""
     from nav_msgs.msg import Odometry
 
     bag_path = tmp_path / "bridge.bag"

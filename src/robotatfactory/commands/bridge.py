@@ -84,10 +84,19 @@ def run(args) -> int:
         return 0
     from ..ros.cli import run_node
 
+    from ..ros.config import default_params, describe_param
+    from ..ros.mw.base import flatten
+
+    # ROS 2 types parameters strictly: a whole number given for a real-valued setting is sent as a real
+    kinds = flatten(default_params(), "/")
+    params = {k: float(v) if isinstance(kinds.get(k), float) and isinstance(v, int) and not isinstance(v, bool)
+              else v for k, v in cfg.flat_params().items()}
+
     def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.bridge_node import Bridge
 
+        node.params(default_params(), describe_param)  # ROS 2: declared (ros2 param list/describe), values = cfg's
         return Bridge(cfg, node).start()
 
-    return run_node(args, "bridge", cfg.flat_params(), make_node,
+    return run_node(args, "bridge", params, make_node,
                     lambda b: f"{args.name} listening on udp {cfg.bind_host}:{b.bound_port}")
