@@ -14,6 +14,13 @@ import threading
 from typing import Callable
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+# Fast DDS: a shared-memory segment that holds a camera image (the default 512 KB does not, so best-effort
+# images went over UDP fragments and most were lost: data/fastdds.xml says more); a user's own profile wins
+if not (os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")):
+    _profile = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "data",
+                            "fastdds.xml")
+    if os.path.isfile(_profile):
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = _profile
 # Fast DDS: a shared-memory segment that holds camera images (fastdds.xml says why), unless the user chose
 # a profile; read when the first participant is made, so set before rclpy.init
 if not (os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")):
