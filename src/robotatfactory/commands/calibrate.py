@@ -23,7 +23,8 @@ examples:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_mutually_exclusive_group(required=True)
-    src.add_argument("--bag", metavar="FILE", help="a rosbag with camera images (and odometry)")
+    src.add_argument("--bag", metavar="PATH", help="a recording with camera images (and odometry): a ROS 1 .bag, a "
+                     "rosbag2 directory or a .mcap/.db3 file (raf record)")
     src.add_argument("--live", action="store_true", help="record the live topics (ROS 1: needs a ROS master; ROS 2: "
                      "raf --middleware ros2 calibrate --live, in the bridge's ROS_DOMAIN_ID)")
     parser.add_argument("--duration", type=float, default=60.0, metavar="S",
@@ -83,8 +84,8 @@ def run(args) -> int:
             kept.append((float(stamp), dets))
 
     if args.bag:
-        if not Path(args.bag).is_file():
-            raise ConfigError(f"--bag {args.bag}: no such file")
+        if not Path(args.bag).exists():
+            raise ConfigError(f"--bag {args.bag}: no such bag file or rosbag2 directory")
         from ..ros.calibration_source import read_bag
 
         n_images, odom = read_bag(args.bag, args.image_topic, odom_topic, sink, args.every, args.max_frames)

@@ -36,39 +36,30 @@ def odom_pose(msg) -> tuple[float, float, float, float]:
     return (stamp_s(msg.header.stamp), p.position.x, p.position.y, quaternion_yaw(p.orientation))
 
 
-def _match(topic: str, wanted: str) -> bool:
-    t, w = topic.strip("/"), wanted.strip("/")
-    return t == w or t.endswith("/" + w)
-
-
 def read_bag(path: str, image_topic: str, odom_topic: str | None, sink, every: int = 1, max_images: int = 0):
-    """Images (every ``every``-th, at most ``max_images`` if > 0) to ``sink`` and odometry from a bag file."""
-    import rosbag
+    """Images (every ``every``-th, at most ``max_images`` if > 0) to ``sink`` and odometry from a bag: a ROS 1
+    ``.bag``, a rosbag2 directory or a ``.mcap``/``.db3`` file (:mod:`.bags`, either middleware or none)."""
+    from .bags import find_topic, open_bag
 
-    try:
-        bag = rosbag.Bag(path)
-    except (OSError, rosbag.ROSBagException) as e:
-        raise ConfigError(f"cannot read bag {path}: {e}") from None
-    with bag:
-        info = bag.get_type_and_topic_info()
-        topics = info.topics
-        img_topics = [t for t in topics if _match(t, image_topic)]
+    with open_bag(path) as bag:
+        topics = bag.topics
+        img_topics = find_topic(topics, image_topic)
         if not img_topics:
-            listing = ", ".join(f"{t} ({v.msg_type}, {v.message_count})" for t, v in sorted(topics.items())) or "none"
+            listing = ", ".join(f"{t} ({v.msgtype}, {v.count})" for t, v in sorted(topics.items())) or "none"
             raise ConfigError(f"bag {path} has no image topic {image_topic!r} (--image-topic); its topics: {listing}")
         if len(img_topics) > 1:
             raise ConfigError(f"bag {path}: several topics match {image_topic!r}: {img_topics}; name one exactly")
-        if topics[img_topics[0]].msg_type != "sensor_msgs/Image":
-            raise ConfigError(f"bag {path}: {img_topics[0]} holds {topics[img_topics[0]].msg_type}, not sensor_msgs/Image")
-        od_topics = [t for t in topics if odom_topic and _match(t, odom_topic)
-                     and topics[t].msg_type == "nav_msgs/Odometry"]
+        if topics[img_topics[0]].msgtype != "sensor_msgs/msg/Image":
+            raise ConfigError(f"bag {path}: {img_topics[0]} holds {topics[img_topics[0]].msgtype}, not sensor_msgs/Image")
+        od_topics = [t for t in (find_topic(topics, odom_topic) if odom_topic else [])
+                     if topics[t].msgtype == "nav_msgs/msg/Odometry"]
         wanted = img_topics + od_topics[:1]
         odom = []
         k = kept = 0
-        for topic, msg, t in bag.read_messages(topics=wanted):
+        for topic, t_ns, msg in bag.messages(wanted):
             if topic == img_topics[0]:
                 if k % max(1, every) == 0 and (max_images <= 0 or kept < max_images):
-                    sink(msg.header.stamp.to_sec() or t.to_sec(), image_to_bgr(msg))
+                    sink(stamp_s(msg.header.stamp) or t_ns * 1e-9, image_to_bgr(msg))
                     kept += 1
                 k += 1
             else:
