@@ -291,17 +291,17 @@ class AgentNode:
             text.pose.position.x, text.pose.position.y, text.pose.position.z = (x0 + x1) / 2, (y0 + y1) / 2, z + 0.05
             text.text = f"{i + 1}: {mv.part.label} {mv.source} -> {mv.target}"
             out.markers.append(text)
-        if task is not None:
-            head = marker("agent_task", 0, Marker.TEXT_VIEW_FACING, (1.0, 0.9, 0.2, 1.0), (0.0, 0.0, 0.06))
-            fx, fy = self.field.floor.x, self.field.floor.y
-            head.pose.position.x, head.pose.position.y = (fx[0] + fx[1]) / 2, float(fy[1]) + 0.1
-            head.pose.position.z = 0.1
-            head.text = f"{mode}: {task}"
-            out.markers.append(head)
-            if current is not None:
-                ring = marker("agent_task", 1, Marker.CYLINDER, (1.0, 0.2, 0.9, 0.35), (0.12, 0.12, 0.01))
-                ring.pose.position.x, ring.pose.position.y = xy(current.source)
-                out.markers.append(ring)
+        head = marker("agent_task", 0, Marker.TEXT_VIEW_FACING, (1.0, 0.9, 0.2, 1.0), (0.0, 0.0, 0.06))
+        fx, fy = self.field.floor.x, self.field.floor.y
+        head.pose.position.x, head.pose.position.y = (fx[0] + fx[1]) / 2, float(fy[1]) + 0.1
+        head.pose.position.z = 0.1
+        head.text = f"{mode}: {task}" if task is not None else {"wait_start": "waiting for the start",
+                                                               "done": "round done"}.get(mode, mode)
+        out.markers.append(head)
+        if current is not None:  # the part being moved: a ring round its source slot
+            ring = marker("agent_task", 1, Marker.CYLINDER, (1.0, 0.2, 0.9, 0.35), (0.12, 0.12, 0.01))
+            ring.pose.position.x, ring.pose.position.y = xy(current.source)
+            out.markers.append(ring)
         if goal is not None:
             g = marker("agent_goal", 0, Marker.ARROW, (0.1, 0.9, 0.2, 1.0), (0.08, 0.015, 0.015))
             g.pose.position.x, g.pose.position.y, g.pose.position.z = goal[0], goal[1], 0.02
