@@ -308,7 +308,8 @@ def _matrix(t) -> np.ndarray:
 class TFTree:
     """The latest transform of every child frame from ``/tf`` and ``/tf_static`` (ROS 2 has no tf2_ros wheel,
     so lookups compose the chain here; the same code on ROS 1). ``lookup(target, source)`` is the 4x4
-    target <- source, the chain's oldest dynamic stamp in ``stamp``."""
+    target <- source; ``try_lookup`` also gives the chain's latest common time (the oldest of its dynamic
+    links' latest stamps, what tf2 resolves ``Time(0)`` to)."""
 
     def __init__(self):
         from tf2_msgs.msg import TFMessage
@@ -350,13 +351,13 @@ class TFTree:
                     T = _matrix(t) @ T
                     if f not in self.static_children:
                         s = stamp_s(t.header.stamp)
-                        stamp = s if stamp is None else max(stamp, s)
+                        stamp = s if stamp is None else min(stamp, s)
                 return T, stamp
 
             Ta, sa = up(a)  # common <- target
             Tb, sb = up(b)  # common <- source
             stamps = [s for s in (sa, sb) if s is not None]
-            return np.linalg.inv(Ta) @ Tb, (max(stamps) if stamps else None)
+            return np.linalg.inv(Ta) @ Tb, (min(stamps) if stamps else None)
 
     def lookup(self, target: str, source: str, timeout: float = 10.0) -> np.ndarray:
         return wait_until(lambda: self.try_lookup(target, source), timeout,

@@ -1,4 +1,5 @@
-"""The bridge's simulation services (ros/sim_services.py, srv/*.srv) through ROS: with the stand-in (``raf sim``'s
+"""The bridge's simulation services (ros/sim_services.py, srv/*.srv) through ROS, on each middleware (ROS 1:
+the package's generated classes; ROS 2: robotatfactory_msgs and std_srvs): with the stand-in (``raf sim``'s
 control channel: every service, bad requests, a reset that leaves TF consistent for a listener that keeps
 running) and with a SimTwo-like simulator (the fake: teleports through the Command datagram's labels)."""
 from __future__ import annotations
@@ -13,7 +14,16 @@ import time
 
 import pytest
 
-from rosutil import ROOT, Collector, free_port, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+from rosutil import (ROOT, Collector, TFTree, call_service, free_port, publisher, raf_process, ros_graph,  # noqa: F401
+                     srv_types, stamp_s, stop_process, test_node, wait_for_service, wait_until)
+
+SERVICES = {"reset": "ResetSimulation", "pause": "Trigger", "resume": "Trigger", "step": "StepSimulation",
+            "set_robot_pose": "SetRobotPose", "place_part": "PlacePart", "get_state": "GetSimulationState"}
+
+
+def sim(name: str, **fields):
+    """Call ``/sim/<name>`` with the request's fields as keywords (either middleware)."""
+    return call_service(f"/sim/{name}", getattr(srv_types(), SERVICES[name]), **fields)
 
 
 def test_generated_service_classes_are_up_to_date(tmp_path):
@@ -30,8 +40,9 @@ def test_generated_service_classes_are_up_to_date(tmp_path):
     assert Trigger._md5sum == "937c9679a518e3a18d831e57125ea522"  # std_srvs/Trigger's: its clients work too
 
 
-# a TF listener that lives through the reset, as RViz and the localization node do (sim time: raf bridge set
-# /use_sim_time before this starts); one JSON line per lookup of map -> base_link
+# ROS 1: a TF listener (tf2_ros) in a process of its own that lives through the reset, as RViz and the
+# localization node do (sim time: raf bridge set /use_sim_time before this starts); one JSON line per lookup
+# of map -> base_link. ROS 2 (no tf2_ros wheel): rosutil's TFTree in this process, polled by a thread.
 PROBE = r"""
 import json, math, sys, time
 import rospy, tf2_ros
@@ -66,23 +77,60 @@ def _diag_services() -> tuple[str, str]:
     return kv["simulator"], kv["sim_services"]
 
 
-def _probe_lines(proc_out) -> list[dict]:
-    return [json.loads(line) for line in proc_out.read_text().splitlines() if line.startswith("{")]
+class Probe:
+    """Looks up map -> base_link every 0.1 s for ``duration`` s; ``lines()``: one dict per lookup (ok, x, y,
+    yaw, stamp: the transform's time, wall)."""
+
+    def __init__(self, middleware: str, env: dict, out, duration: float = 60.0):
+        self.out, self.proc, self.tf, self._lines = out, None, None, []
+        if middleware == "ros1":
+            self.proc = subprocess.Popen([sys.executable, "-c", PROBE, str(duration)], env=env,
+                                         stdout=open(out, "w"), stderr=subprocess.STDOUT, start_new_session=True)
+            return
+        import threading
+
+        self.tf = TFTree()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._poll, args=(duration,), daemon=True)
+        self._thread.start()
+
+    def _poll(self, duration: float) -> None:
+        end = time.monotonic() + duration
+        while time.monotonic() < end and not self._stop.is_set():
+            r = self.tf.try_lookup("map", "base_link")
+            if r is None or r[1] is None:
+                out = {"ok": False}
+            else:
+                T, stamp = r
+                out = {"ok": True, "x": T[0, 3], "y": T[1, 3], "yaw": math.atan2(T[1, 0], T[0, 0]), "stamp": stamp}
+            out["wall"] = time.time()
+            self._lines.append(out)
+            time.sleep(0.1)
+
+    def lines(self) -> list[dict]:
+        if self.proc is not None:
+            return [json.loads(line) for line in self.out.read_text().splitlines() if line.startswith("{")]
+        return list(self._lines)
+
+    def stop(self) -> None:
+        if self.proc is not None:
+            stop_process(self.proc)
+        else:
+            self._stop.set()
+            self._thread.join(2)
+            self.tf.close()
 
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_services_with_the_stand_in(ros_master, field, tmp_path):
-    import rospy
+@pytest.mark.middlewares
+def test_services_with_the_stand_in(middleware, ros_graph, field, tmp_path):
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from rosgraph_msgs.msg import Clock
 
-    from robotatfactory.srv import (GetSimulationState, PlacePart, ResetSimulation, SetRobotPose, StepSimulation,
-                                    Trigger)
-
     test_node()
-    env = ros_master.env()
+    env = ros_graph.env()
     port, sim_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
     ctl_port = free_port(socket.SOCK_DGRAM)
     procs = [raf_process(["bridge", "--port", str(port), "--no-camera", "--set",
@@ -91,26 +139,21 @@ def test_services_with_the_stand_in(ros_master, field, tmp_path):
                          tmp_path / "localize.log")]
     probe = None
     try:
-        for name in ("reset", "pause", "resume", "step", "set_robot_pose", "place_part", "get_state"):
-            rospy.wait_for_service(f"/sim/{name}", timeout=30)
+        for name in SERVICES:
+            wait_for_service(f"/sim/{name}", timeout=30)
         gt, clock = Collector("/ground_truth", Odometry), Collector("/clock", Clock)
-        pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
+        pub = publisher("/cmd_vel", Twist, wait_for=30)
         procs.append(raf_process(["sim", "--port", str(sim_port), "--control-port", str(ctl_port), "--bridge",
                                   f"127.0.0.1:{port}", "--no-camera", "--no-server", "--status-every", "0"], env,
                                  tmp_path / "sim.log"))
         gt.wait(10, timeout=30)
-        srv = {n: rospy.ServiceProxy(f"/sim/{n}", t) for n, t in (
-            ("reset", ResetSimulation), ("pause", Trigger), ("resume", Trigger), ("step", StepSimulation),
-            ("set_robot_pose", SetRobotPose), ("place_part", PlacePart), ("get_state", GetSimulationState))}
-        st = srv["get_state"]()
+        st = sim("get_state")
         assert st.success and st.simulator == "stand-in"
         assert set(st.supported) == {"reset", "pause", "resume", "step", "set_robot_pose", "place_part", "get_state"}
         parts = json.loads(st.state_json)["parts"]
         assert _diag_services() == ("stand-in", "reset pause resume step set_robot_pose place_part get_state")
-        probe_out = tmp_path / "probe.out"
-        probe = subprocess.Popen([sys.executable, "-c", PROBE, "60"], env=env, stdout=open(probe_out, "w"),
-                                 stderr=subprocess.STDOUT, start_new_session=True)
-        wait_until(lambda: any(p["ok"] for p in _probe_lines(probe_out)), 20, what="the probe's first lookup")
+        probe = Probe(middleware, env, tmp_path / "probe.out")
+        wait_until(lambda: any(p["ok"] for p in probe.lines()), 20, what=f"the probe's first lookup (last: {probe.lines()[-1:]})")
 
         # drive 2 s: the localization (odometry from the start pose) follows
         tw = Twist()
@@ -121,60 +164,60 @@ def test_services_with_the_stand_in(ros_master, field, tmp_path):
             time.sleep(0.05)
         pub.publish(Twist())
         time.sleep(0.3)
-        before = [p for p in _probe_lines(probe_out) if p["ok"]][-1]
+        before = [p for p in probe.lines() if p["ok"]][-1]
         sp = field.start_pose
         assert math.hypot(before["x"] - sp.x, before["y"] - sp.y) > 0.15
 
         # pause, step, resume
-        assert srv["pause"]().success
-        t1 = srv["get_state"]().time
+        assert sim("pause").success
+        t1 = sim("get_state").time
         time.sleep(0.4)
-        st = srv["get_state"]()
+        st = sim("get_state")
         assert st.paused and st.time == t1
-        r = srv["step"](5)
+        r = sim("step", steps=5)
         assert r.success, r.message
-        assert srv["get_state"]().time == pytest.approx(t1 + 0.2, abs=1e-6)
-        r = srv["step"](0)
+        assert sim("get_state").time == pytest.approx(t1 + 0.2, abs=1e-6)
+        r = sim("step", steps=0)
         assert not r.success and "bad_argument" in r.message
-        assert srv["resume"]().success
-        r = srv["step"](3)
+        assert sim("resume").success
+        r = sim("step", steps=3)
         assert not r.success and "not_paused" in r.message
 
         # teleport and parts, with bad requests
         tx, ty = sp.x + 0.3, sp.y + 0.05  # free floor
-        r = srv["set_robot_pose"](tx, ty, 1.2)
+        r = sim("set_robot_pose", x=tx, y=ty, theta=1.2)
         assert r.success, r.message
         g = gt.wait(1, timeout=5, pred=lambda m: abs(m.pose.pose.position.x - tx) < 0.01)[-1].pose.pose.position
         assert abs(g.y - ty) < 0.01
-        r = srv["set_robot_pose"](9.0, 0.0, 0.0)
+        r = sim("set_robot_pose", x=9.0, y=0.0, theta=0.0)
         assert not r.success and "out_of_field" in r.message
         pid = parts[0]["id"]
-        r = srv["place_part"](part=pid, slot="outgoing_1")
+        r = sim("place_part", part=pid, slot="outgoing_1")
         assert r.success, r.message
         s = next(s for s in field.slots if s.name == "outgoing_1")
-        p = next(p for p in json.loads(srv["get_state"]().state_json)["parts"] if p["id"] == pid)
+        p = next(p for p in json.loads(sim("get_state").state_json)["parts"] if p["id"] == pid)
         assert p["pose"][:2] == pytest.approx(list(s.xy), abs=0.01)
-        r = srv["place_part"](part=pid, slot="nowhere_9")
+        r = sim("place_part", part=pid, slot="nowhere_9")
         assert not r.success and "unknown_slot" in r.message
-        r = srv["place_part"](part=999, x=0.0, y=0.0)
+        r = sim("place_part", part=999, x=0.0, y=0.0)
         assert not r.success and "unknown_part" in r.message
-        assert srv["place_part"](part=pid, remove=True).success
-        r = srv["reset"](round=9)
+        assert sim("place_part", part=pid, remove=True).success
+        r = sim("reset", round=9)
         assert not r.success and "bad_argument" in r.message
 
         # reset: a new stream from t = 0; the probe's TF carries the new pose, no stale transform
-        stamp_before = [p for p in _probe_lines(probe_out) if p["ok"]][-1]["stamp"]
+        stamp_before = [p for p in probe.lines() if p["ok"]][-1]["stamp"]
         clock.clear()
-        r = srv["reset"]()
+        r = sim("reset")
         t_reset = time.time()
         assert r.success, r.message
-        st = srv["get_state"]()
+        st = sim("get_state")
         assert st.x == pytest.approx(sp.x, abs=0.01) and st.y == pytest.approx(sp.y, abs=0.01)
         assert all(p["type"] for p in json.loads(st.state_json)["parts"])
-        assert min(c.clock.to_sec() for c in clock.wait(3, timeout=5)) < 0.5  # /clock went back
-        wait_until(lambda: len([p for p in _probe_lines(probe_out) if p["wall"] > t_reset + 0.8]) >= 8, 15,
+        assert min(stamp_s(c.clock) for c in clock.wait(3, timeout=5)) < 0.5  # /clock went back
+        wait_until(lambda: len([p for p in probe.lines() if p["wall"] > t_reset + 0.8]) >= 8, 15,
                    what="8 TF lookups after the reset")
-        after = [p for p in _probe_lines(probe_out) if p["wall"] > t_reset + 0.8]
+        after = [p for p in probe.lines() if p["wall"] > t_reset + 0.8]
         assert len(after) >= 8 and all(p["ok"] for p in after), after[:3]
         assert all(math.hypot(p["x"] - sp.x, p["y"] - sp.y) < 0.02 for p in after), after[-1]
         assert all(abs(math.remainder(p["yaw"] - sp.theta, 2 * math.pi)) < 0.02 for p in after)
@@ -184,63 +227,62 @@ def test_services_with_the_stand_in(ros_master, field, tmp_path):
         assert "the stand-in" in bridge_log and "supports all" in bridge_log
     finally:
         if probe is not None:
-            stop_process(probe)
+            probe.stop()
         for p in procs:
             stop_process(p)
 
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_services_with_simtwo_use_the_command_labels(ros_master, field, tmp_path):
-    import rospy
+@pytest.mark.middlewares
+def test_services_with_simtwo_use_the_command_labels(middleware, ros_graph, field, tmp_path):
     from nav_msgs.msg import Odometry
 
     from fakesim import FakeSim
     from robotatfactory.ros.sim_services import SIMTWO_PART_Z
-    from robotatfactory.srv import GetSimulationState, PlacePart, ResetSimulation, SetRobotPose, Trigger
 
     test_node()
-    env = ros_master.env()
+    env = ros_graph.env()
     port = free_port(socket.SOCK_DGRAM)
     nobody = free_port(socket.SOCK_DGRAM)  # no control channel there: SimTwo
     bridge = raf_process(["bridge", "--port", str(port), "--no-camera", "--set",
                           f"simulator/control=127.0.0.1:{nobody}"], env, tmp_path / "bridge.log")
-    sim = None
+    fake = None
     try:
-        rospy.wait_for_service("/sim/get_state", timeout=30)
+        wait_for_service("/sim/get_state", timeout=30)
         odom = Collector("/odom", Odometry)
-        sim = FakeSim(bridge=("127.0.0.1", port)).start()
+        fake = FakeSim(bridge=("127.0.0.1", port)).start()
         odom.wait(5, timeout=20)
-        st = rospy.ServiceProxy("/sim/get_state", GetSimulationState)()
+        st = sim("get_state")
         assert st.success and st.simulator == "simtwo"
         assert set(st.supported) == {"reset", "set_robot_pose", "place_part", "get_state"}
         assert st.x == pytest.approx(-0.6, abs=0.01) and st.state_json == ""
         assert _diag_services() == ("simtwo", "reset set_robot_pose place_part get_state")
-        r = rospy.ServiceProxy("/sim/pause", Trigger)()
+        r = sim("pause")
         assert not r.success and "not supported by SimTwo" in r.message
-        r = rospy.ServiceProxy("/sim/set_robot_pose", SetRobotPose)(0.2, 0.1, 1.0)
+        r = sim("set_robot_pose", x=0.2, y=0.1, theta=1.0)
         assert r.success, r.message
-        assert sim.pose() == pytest.approx((0.2, 0.1, 1.0), abs=1e-6)
-        r = rospy.ServiceProxy("/sim/place_part", PlacePart)(part=2, slot="machine_A_1")
+        assert fake.pose() == pytest.approx((0.2, 0.1, 1.0), abs=1e-6)
+        r = sim("place_part", part=2, slot="machine_A_1")
         assert r.success, r.message
         s = next(s for s in field.slots if s.name == "machine_A_1")
-        tp = sim.teleports[-1]
+        tp = fake.teleports[-1]
         assert tp.target == "Part2" and (tp.x, tp.y, tp.z) == pytest.approx((*s.xy, SIMTWO_PART_Z), abs=1e-6)
         assert math.remainder(tp.theta - s.facing - math.pi / 2, 2 * math.pi) == pytest.approx(0, abs=1e-5)  # %.6g
-        r = rospy.ServiceProxy("/sim/place_part", PlacePart)(part=2, slot="machine_A_1", type="R")
+        r = sim("place_part", part=2, slot="machine_A_1", type="R")
         assert not r.success and "recolour" in r.message
         # reset: the robot back to the field's start, odometry from zero there
-        r = rospy.ServiceProxy("/sim/reset", ResetSimulation)()
+        r = sim("reset")
         assert r.success, r.message
         sp = field.start_pose
-        assert sim.pose() == pytest.approx((sp.x, sp.y, sp.theta), abs=1e-5)
+        assert fake.pose() == pytest.approx((sp.x, sp.y, sp.theta), abs=1e-5)
         odom.clear()
         o = odom.wait(3, timeout=5)[-1].pose.pose.position
         assert math.hypot(o.x, o.y) < 0.01
-        r = rospy.ServiceProxy("/sim/reset", ResetSimulation)(round=2)
+        r = sim("reset", round=2)
         assert not r.success and "robot only" in r.message
         assert "SimTwo assumed" in (tmp_path / "bridge.log").read_text()
     finally:
-        if sim is not None:
-            sim.stop()
+        if fake is not None:
+            fake.stop()
         stop_process(bridge)
