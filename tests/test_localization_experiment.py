@@ -111,3 +111,57 @@ def test_xwd_reader(tmp_path):
     (tmp_path / "x.xwd").write_bytes(header.tobytes() + b"root\0" + px.tobytes())
     img = read_xwd(tmp_path / "x.xwd")
     assert img.shape == (2, 3, 3) and np.array_equal(img, px[:, :, :3])
+
+
+def test_bag_options(tmp_path):
+    from robotatfactory.errors import ConfigError
+
+    drive = tmp_path / "drive"  # a rosbag2 is a directory
+    drive.mkdir()
+    p = _parse("--bag", str(drive))
+    assert p.calibration == "auto" and p.bag == str(drive.resolve())
+    assert _parse().bag is None and _parse("--save-bag", str(tmp_path / "new.bag")).bag is None
+    for bad in (["--bag", str(tmp_path / "missing.bag")], ["--bag", str(drive), "--calibration", "none"],
+                ["--bag", str(drive), "--save-bag", str(tmp_path / "x.bag")], ["--save-bag", str(drive)]):
+        with pytest.raises(ConfigError):
+            _parse(*bad)
+
+
+@pytest.mark.middlewares
+def test_calibration_drive_recording_reads_back(middleware, tmp_path):
+    """The calibration drive's bag (this middleware's format) holds what raf calibrate reads: every 3rd image,
+    every odom and camera_info, under global names, at their header stamps."""
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from robotatfactory.experiments.localization import BagSink
+    from robotatfactory.ros import messages as rm
+    from robotatfactory.ros.bags import find_topic, open_bag
+    from robotatfactory.ros.mw.base import stamp_ns
+
+    path = tmp_path / ("drive.bag" if middleware == "ros1" else "drive")
+    sink = BagSink(path, image_every=3)
+    on_odom, on_info = sink.writer("odom", "odom"), sink.writer("camera/camera_info", "camera_info")
+    for k in range(7):
+        img = Image(height=2, width=3, encoding="bgr8", step=9, data=bytes([k] * 18))
+        img.header.stamp = rm.stamp_ms(40 * k + 7)
+        sink.image(img)
+        info = CameraInfo(height=2, width=3)
+        info.header.stamp = rm.stamp_ms(40 * k + 7)
+        on_info(info)
+        odom = Odometry()
+        odom.header.stamp = rm.stamp_ms(40 * k)
+        odom.twist.twist.linear.x = 0.1 * k
+        on_odom(odom)
+    sink.close()
+    on_odom(odom)  # a late callback after the close is dropped, not an error
+    assert sink.counts == {"images": 3, "odom": 7, "camera_info": 7}
+    with open_bag(path) as bag:
+        assert set(bag.topics) == {"/camera/image_raw", "/camera/camera_info", "/odom"}
+        assert find_topic(bag.topics, "camera/image_raw") == ["/camera/image_raw"]
+        images = list(bag.messages(["/camera/image_raw"]))
+        odoms = list(bag.messages(["/odom"]))
+    assert [t for _, t, _ in images] == [(40 * k + 7) * 1_000_000 for k in (0, 3, 6)]
+    assert [int(m.data[0]) for _, _, m in images] == [0, 3, 6]
+    assert [stamp_ns(m.header.stamp) for _, _, m in odoms] == [40 * k * 1_000_000 for k in range(7)]
+    assert odoms[-1][2].twist.twist.linear.x == pytest.approx(0.6)

@@ -180,6 +180,8 @@ def plan_from_args(args) -> Plan:
             raise ConfigError("--bag replays the calibration drive for --calibration auto: leave --calibration out")
         if getattr(args, "save_bag", None):
             raise ConfigError("--bag replays a recording; --save-bag keeps a new one: use one of them")
+    if getattr(args, "save_bag", None) and Path(args.save_bag).exists():
+        raise ConfigError(f"--save-bag {args.save_bag!r} exists already: give a new name (a bag is never overwritten)")
         cal, bag = "auto", str(Path(bag).resolve())
     if cal is None:
         cal = "auto" if mode == "simtwo" else ("true" if args.camera_error else "none")
@@ -227,40 +229,26 @@ class Recorder:
                       for k in ("accepted", "rejected")]
         # the calibration drive: camera/image_raw (every image_every-th frame), camera_info and odom to a bag
         self.bag = None
-        self.bag_counts = {"images": 0, "odom": 0, "camera_info": 0}
         if bag_path is not None:
             from sensor_msgs.msg import CameraInfo, Image
 
-            self.bag = open_bag_writer(bag_path)
-            self._bag_lock = threading.Lock()
-            self._image_every, self._image_n = max(1, int(image_every)), 0
-            self.subs += [node.subscribe("camera/image_raw", Image, self._bag_image, QoS.SENSOR, 20, large=True),
-                          node.subscribe("camera/camera_info", CameraInfo,
-                                         self._bag_write("camera/camera_info", "camera_info"), QoS.SENSOR, 20),
-                          node.subscribe("odom", Odometry, self._bag_write("odom", "odom"), QoS.RELIABLE, 100)]
+            self.bag = bag = BagSink(bag_path, image_every)
+            self.subs += [node.subscribe("camera/image_raw", Image, bag.image, QoS.SENSOR, 20, large=True),
+                          node.subscribe("camera/camera_info", CameraInfo, bag.writer("camera/camera_info",
+                                                                                      "camera_info"), QoS.SENSOR, 20),
+                          node.subscribe("odom", Odometry, bag.writer("odom", "odom"), QoS.RELIABLE, 100)]
         from diagnostic_msgs.msg import DiagnosticArray
 
         self.diag: dict[str, str] = {}
         self.subs.append(node.subscribe("/diagnostics", DiagnosticArray, self._on_diag, QoS.RELIABLE, 20))
 
-    def _bag_write(self, topic: str, counter: str):
-        def cb(msg):
-            with self._bag_lock:
-                if self.bag is not None:
-                    self.bag.write(topic, msg, stamp_ns(msg.header.stamp))
-                    self.bag_counts[counter] += 1
-        return cb
-
-    def _bag_image(self, msg):
-        self._image_n += 1
-        if (self._image_n - 1) % self._image_every == 0:
-            self._bag_write("camera/image_raw", "images")(msg)
+    @property
+    def bag_counts(self) -> dict:
+        return dict(self.bag.counts) if self.bag is not None else {"images": 0, "odom": 0, "camera_info": 0}
 
     def close_bag(self) -> None:
         if self.bag is not None:
-            with self._bag_lock:
-                self.bag.close()
-                self.bag = None
+            self.bag.close()
 
     def _on_diag(self, msg):
         for st in msg.status:
@@ -334,41 +322,46 @@ def stamp_ns(stamp) -> int:
     return ns(stamp)
 
 
-class _Ros1BagWriter:
-    """A ROS 1 bag (rosbag.Bag) written from rospy messages."""
+class BagSink:
+    """The calibration drive's recording: callbacks that write messages to a bag (:func:`open_bag_writer`)
+    under global topic names (``/camera/image_raw``), stamped with their header stamps; images only every
+    ``image_every``-th. ``counts``: messages written (images, odom, camera_info)."""
 
-    def __init__(self, path: Path):
-        import rosbag
+    def __init__(self, path: Path, image_every: int = 3):
+        self._bag = open_bag_writer(path)
+        self._lock = threading.Lock()
+        self._every, self._n = max(1, int(image_every)), 0
+        self.counts = {"images": 0, "odom": 0, "camera_info": 0}
+        self.closed = False
 
-        self._bag = rosbag.Bag(str(path), "w")
+    def writer(self, topic: str, counter: str):
+        def cb(msg):
+            with self._lock:
+                if not self.closed:
+                    self._bag.write("/" + topic.lstrip("/"), msg, stamp_ns(msg.header.stamp))
+                    self.counts[counter] += 1
+        return cb
 
-    def write(self, topic: str, msg, stamp_ns_: int) -> None:
-        from ..ros.mw.ros1 import time_msg
-
-        self._bag.write(topic, msg, time_msg(stamp_ns_))
+    def image(self, msg) -> None:
+        with self._lock:
+            self._n += 1
+            take = (self._n - 1) % self._every == 0
+        if take:
+            self.writer("camera/image_raw", "images")(msg)
 
     def close(self) -> None:
-        self._bag.close()
+        with self._lock:
+            if not self.closed:
+                self.closed = True
+                self._bag.close()
 
 
 def open_bag_writer(path: Path):
-    """The calibration drive's recording: an object with ``write(topic, msg, stamp_ns)`` and ``close()``.
-    Through :mod:`robotatfactory.ros.bags` where it offers a writer for this middleware's messages (a
-    rosbag2 on ROS 2), else rosbag.Bag (ROS 1). ROS 2 without it: ConfigError."""
-    from ..ros.mw import name
+    """The calibration drive's recording (:func:`robotatfactory.ros.bags.open_writer`): a ROS 1 bag on ROS 1, a
+    rosbag2 (MCAP) directory on ROS 2; ``write(topic, msg, stamp_ns)``, ``close()``."""
+    from ..ros.bags import default_format, open_writer
 
-    try:
-        from ..ros import bags
-    except ImportError:
-        bags = None
-    if bags is not None and hasattr(bags, "open_writer"):
-        return bags.open_writer(path)
-    if name() == "ros1":
-        return _Ros1BagWriter(path)
-    from ..errors import ConfigError
-
-    raise ConfigError("recording the calibration drive on ROS 2 needs robotatfactory.ros.bags (a rosbag2 writer); "
-                      "pass --calibration FILE or --bag FILE instead")
+    return open_writer(path, default_format())
 
 
 def _raf(*args: str) -> list[str]:
