@@ -8,7 +8,8 @@
 # usage: scripts/bootstrap.sh [demo|test [ARGS...]]
 #   (nothing)  set up only
 #   demo       set up, then run the main demo (.venv/bin/raf demo ARGS)
-#   test       set up, then run the whole test suite (.venv/bin/python -m pytest ARGS)
+#   test       set up, then run the whole test suite (.venv/bin/python -m pytest ARGS), then the tests marked
+#              `middlewares` on ROS 2 (.venv-ros2/bin/python -m pytest -m middlewares); see the test action
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -74,6 +75,25 @@ action=${1:-}
 case "$action" in
   "") ;;
   demo) exec .venv/bin/raf demo "$@" ;;
-  test) exec .venv/bin/python -m pytest "$@" ;;
+  test)
+    # Both middlewares: the whole suite in .venv (ROS 1; ARGS go to this run), then in .venv-ros2 the tests
+    # marked `middlewares` (the same files' [ros2] parameters: bridge, sim services, localization, ...).
+    # Exit non-zero if either run fails. One of them only: RAF_TEST_MIDDLEWARES=ros1 (the .venv run with
+    # ARGS) or ros2 (the .venv-ros2 run, ARGS added after -m middlewares); default both.
+    want=${RAF_TEST_MIDDLEWARES:-both}
+    case "$want" in ros1|ros2|both) ;; *) echo "RAF_TEST_MIDDLEWARES=$want: use ros1, ros2 or both" >&2; exit 2 ;; esac
+    rc1=0 rc2=0
+    if [ "$want" != ros2 ]; then
+      echo "[test] ROS 1 (.venv): python -m pytest $*"
+      .venv/bin/python -m pytest "$@" || rc1=$?
+    fi
+    if [ "$want" != ros1 ]; then
+      extra=()
+      if [ "$want" = ros2 ]; then extra=("$@"); fi
+      echo "[test] ROS 2 (.venv-ros2): python -m pytest -m middlewares ${extra[*]}"
+      .venv-ros2/bin/python -m pytest -m middlewares "${extra[@]}" || rc2=$?
+    fi
+    echo "[test] exit codes: ros1 $rc1 ($([ "$want" = ros2 ] && echo 'not run' || echo '.venv')), ros2 $rc2 ($([ "$want" = ros1 ] && echo 'not run' || echo '.venv-ros2 -m middlewares'))"
+    [ "$rc1" -eq 0 ] && [ "$rc2" -eq 0 ] ;;
   *) echo "usage: $0 [demo|test [ARGS...]]" >&2; exit 2 ;;
 esac
