@@ -21,10 +21,6 @@ if not (os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or os.environ.get("FAST
                             "fastdds.xml")
     if os.path.isfile(_profile):
         os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = _profile
-# Fast DDS: a shared-memory segment that holds camera images (fastdds.xml says why), unless the user chose
-# a profile; read when the first participant is made, so set before rclpy.init
-if not (os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")):
-    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = os.path.join(os.path.dirname(__file__), "fastdds.xml")
 
 import rclpy  # noqa: E402
 from builtin_interfaces.msg import Duration, Time  # noqa: E402
