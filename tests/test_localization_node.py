@@ -1,13 +1,17 @@
-"""The localization node under ROS (its own roscore on a free port): synthetic camera images of a robot
-driving a known straight line, its odometry, a LIDAR scan of the beacons and some garbage; the node's
-outputs checked against the known answers."""
+"""The localization node under ROS (its own roscore on a free port, or a ROS 2 domain of its own): synthetic
+camera images of a robot driving a known straight line, its odometry, a LIDAR scan of the beacons and some
+garbage; the node's outputs checked against the known answers. The first test runs on either middleware
+(rosutil's test node); the second starts the node with roslaunch (ROS 1)."""
 import math
 import time
 
 import numpy as np
 import pytest
 
-from rosutil import Collector, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+from rosutil import (Collector, publisher, raf_process, ros_master, stamp_s, stop_process, test_node,  # noqa: F401
+                     unpublish, wait_until)
+
+from robotatfactory.ros.mw import QoS
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -29,7 +33,6 @@ def node(ros_master, tmp_path_factory):
 
 
 def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, robot):
-    import rospy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
@@ -39,43 +42,39 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, ro
 
     from robotatfactory.localization.lidar import simulate_scan
     from robotatfactory.localization.synth import SceneRenderer, camera_world_pose, visible_markers
+    from robotatfactory.ros import messages as rm
 
     proc, log = node
     test_node()
-    pub_img = rospy.Publisher("/camera/image_raw", Image, queue_size=5)
-    pub_info = rospy.Publisher("/camera/camera_info", CameraInfo, queue_size=5)
-    pub_odom = rospy.Publisher("/odom", Odometry, queue_size=50)
-    pub_scan = rospy.Publisher("/scan", LaserScan, queue_size=5)
+    # as the bridge publishes them: images, camera_info and scans as sensor data, odometry reliable
+    pub_img = publisher("/camera/image_raw", Image, QoS.SENSOR, 5, wait_for=0)
+    pub_info = publisher("/camera/camera_info", CameraInfo, QoS.SENSOR, 5, wait_for=0)
+    pub_odom = publisher("/odom", Odometry, QoS.RELIABLE, 50, wait_for=0)
+    pub_scan = publisher("/scan", LaserScan, QoS.SENSOR, 5, wait_for=0)
     pose = Collector("/pose", PoseWithCovarianceStamped)
     cam = Collector("/camera_pose", PoseWithCovarianceStamped)
     fixes = Collector("/aruco/fixes/planar", PoseWithCovarianceStamped)
-    markers = Collector("/aruco/markers", MarkerArray)
+    markers = Collector("/aruco/markers", MarkerArray, qos=QoS.RELIABLE)  # per frame, not latched
     debug = Collector("/aruco/debug_image", Image)
     tf = Collector("/tf", TFMessage)
     diag = Collector("/diagnostics", DiagnosticArray)
-    wait_until(lambda: pub_odom.get_num_connections() and pub_img.get_num_connections()
-               and pose.sub.get_num_connections() and debug.sub.get_num_connections(), timeout=30,
-               what="the node's subscriptions")
+    wait_until(lambda: pub_odom.subscriber_count() and pub_img.subscriber_count() and pub_scan.subscriber_count()
+               and _publishers(pose.sub) and _publishers(debug.sub), timeout=30, what="the node's subscriptions")
     rend = SceneRenderer(field, robot.camera)
 
     def img_msg(img, t):
-        m = Image()
-        m.header.stamp = rospy.Time.from_sec(t)
-        m.header.frame_id = "camera_optical"
-        m.height, m.width = img.shape[:2]
-        m.encoding, m.step, m.data = "bgr8", img.shape[1] * 3, img.tobytes()
-        return m
+        return rm.image_bgr8(rm.stamp_s(t), "camera_optical", img.tobytes(), img.shape[1], img.shape[0])
 
     def odom_msg(t):
         m = Odometry()
-        m.header.stamp = rospy.Time.from_sec(t)
+        m.header.stamp = rm.stamp_s(t)
         m.header.frame_id, m.child_frame_id = "odom", "base_link"
-        m.pose.pose.position.x = V * t  # odometry: straight along its own x, from its own origin
+        m.pose.pose.position.x = float(V * t)  # odometry: straight along its own x, from its own origin
         m.pose.pose.orientation.w = 1.0
         return m
 
     info = CameraInfo()
-    info.K = robot.camera.K.ravel().tolist()
+    rm.set_camera_matrices(info, [], [float(v) for v in robot.camera.K.ravel()], [0.0] * 9, [0.0] * 12)
     rng = np.random.default_rng(0)
     t = 0.04
     k = 0
@@ -87,12 +86,12 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, ro
             pub_img.publish(img_msg(rend.render(truth(tc), blur_sigma=0.5, noise_sigma=2, rng=rng), tc))
         if k % 5 == 0:
             scan = LaserScan()
-            scan.header.stamp = rospy.Time.from_sec(t)
+            scan.header.stamp = rm.stamp_s(t)
             angles = robot.lidar.angles()
             scan.angle_min, scan.angle_increment = float(angles[0]), float(angles[1] - angles[0])
             scan.range_min, scan.range_max = 0.02, 6.0
             r = simulate_scan(truth(t), field.beacons, field.beacon_diameter, angles, rng=rng)
-            scan.ranges = np.where(r < 0, np.inf, r).tolist()
+            scan.ranges = [float(v) for v in np.where(r < 0, np.inf, r)]
             pub_scan.publish(scan)
         if k == 41:  # garbage: a truncated image, a wrong encoding (between two frames), a NaN odometry
             bad = img_msg(np.zeros((480, 640, 3), np.uint8), t)
@@ -109,8 +108,8 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, ro
         t += 0.04
         k += 1
     got = pose.wait(20, timeout=10)
-    last = pose.wait(1, timeout=5, pred=lambda m: m.header.stamp.to_sec() > 3.9)[-1]
-    tt = last.header.stamp.to_sec()
+    last = pose.wait(1, timeout=5, pred=lambda m: stamp_s(m.header.stamp) > 3.9)[-1]
+    tt = stamp_s(last.header.stamp)
     x, y = last.pose.pose.position.x, last.pose.pose.position.y
     assert math.hypot(x - truth(tt)[0], y - truth(tt)[1]) < 0.01
     q = last.pose.pose.orientation
@@ -119,7 +118,7 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, ro
     assert 0 < cov[0, 0] < 0.01 ** 2 and np.all(np.isfinite(cov))
     # the paper's camera pose: camera_optical in map
     c = cam.wait(5, timeout=5)[-1]
-    T = camera_world_pose(robot.camera, truth(c.header.stamp.to_sec()))
+    T = camera_world_pose(robot.camera, truth(stamp_s(c.header.stamp)))
     p = c.pose.pose.position
     assert math.dist((p.x, p.y, p.z), T[:3, 3]) < 0.03
     fixes.wait(5, timeout=5)
@@ -152,6 +151,15 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, ro
     assert int(v.get("bad_odom", "0")) == 1
     assert proc.poll() is None
     assert len(got) >= 20
+    for c in (pose, cam, fixes, markers, debug, tf, diag):
+        c.close()
+    for pub in (pub_img, pub_info, pub_odom, pub_scan):
+        unpublish(pub)
+
+
+def _publishers(sub) -> int:
+    """How many publishers a test subscription is connected to (either middleware)."""
+    return sub.get_num_connections() if hasattr(sub, "get_num_connections") else sub.get_publisher_count()
 
 
 def test_launch_file_starts_the_node_with_its_settings(ros_master, tmp_path):

@@ -11,7 +11,7 @@ rejection counts by reason. Every callback survives bad input: it is counted, lo
 skipped.
 
 QoS: images, camera_info and scans are sensor data (ROS 2: best effort, which also matches reliable
-publishers); odometry and every output are reliable. Each callback runs one message at a time, as rospy's
+publishers); odometry and every output (the debug image too) are reliable. Each callback runs one message at a time, as rospy's
 one thread per subscription does (ROS 2's executor would otherwise run two images at once).
 """
 from __future__ import annotations
@@ -79,7 +79,8 @@ class LocalizationNode:
         R = QoS.RELIABLE
         self.pub_markers = node.publisher(t["markers"], MarkerArray, R, 2)
         self.pub_poses = node.publisher(t["marker_poses"], PoseArray, R, 2)
-        self.pub_debug = node.publisher(t["debug_image"], Image, QoS.SENSOR, 1)
+        # reliable: it then reaches reliable viewers (RViz's default) as well as best-effort ones
+        self.pub_debug = node.publisher(t["debug_image"], Image, R, 1)
         self.pub_camera_pose = node.publisher(t["camera_pose"], PoseWithCovarianceStamped, R, 5)
         self.pub_fix = {m: node.publisher(f"{t['fixes']}/{m}", PoseWithCovarianceStamped, R, 5)
                         for m in nc.methods()}
