@@ -1,5 +1,6 @@
-"""The bridge with the stand-in simulator: real roscore (free port), ``raf sim`` and the bridge as processes
-(``raf bridge`` and ``roslaunch robotatfactory bridge.launch``), an in-process rospy test node."""
+"""The bridge with the stand-in simulator, on each middleware (a roscore on a free port / a private ROS 2
+domain): ``raf sim`` and the bridge as processes (``raf bridge``; ROS 1 also ``roslaunch robotatfactory
+bridge.launch``), the in-process test node of rosutil."""
 from __future__ import annotations
 
 import json
@@ -12,7 +13,8 @@ import time
 import numpy as np
 import pytest
 
-from rosutil import ROOT, Collector, free_port, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+from rosutil import (ROOT, Collector, TFTree, free_port, publisher, raf_process, ros_graph, ros_master,  # noqa: F401
+                     stamp_s, stop_process, test_node, unpublish, wait_for_node, wait_until)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.render]
 
@@ -27,16 +29,15 @@ def _sim(env, port, sim_port, cam, log, *extra):
                         "--lockstep", "--realtime", "--lockstep-timeout", "3", "--status-every", "5", *extra], env, log)
 
 
-def test_raf_sim_through_the_bridge(ros_master, tmp_path):
-    import rospy
-    import tf2_ros
+@pytest.mark.middlewares
+def test_raf_sim_through_the_bridge(middleware, ros_graph, tmp_path):
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Image, LaserScan
 
     test_node()
     port, sim_port, cam = _ports()
-    env = ros_master.env()
+    env = ros_graph.env()
     # the grid idealisation on both sides (raf sim --camera-timing grid, the bridge's grid lock): exact stamps
     bridge = raf_process(["bridge", "--port", str(port), "--camera", cam, "--set", "camera/bracket=nearest",
                           "--set", "camera/use_grid=true"], env, tmp_path / "bridge.log")
@@ -44,14 +45,13 @@ def test_raf_sim_through_the_bridge(ros_master, tmp_path):
     try:
         odom, gt = Collector("/odom", Odometry), Collector("/ground_truth", Odometry)
         img, scan = Collector("/camera/image_raw", Image), Collector("/scan", LaserScan)
-        pub = rospy.Publisher("/cmd_vel", Twist, queue_size=1)
-        wait_until(lambda: pub.get_num_connections() > 0, 30, what="the bridge subscribing to cmd_vel")
+        pub = publisher("/cmd_vel", Twist, wait_for=30)  # the bridge subscribed
         sim = _sim(env, port, sim_port, cam, tmp_path / "sim.log", "--start-pose=-0.7,0.35,0",
                    "--camera-timing", "grid")
         img.wait(45, timeout=60)
         scan.wait(3, timeout=10)
         # camera stamps: the render ticks of the simulator's camera clock (k/15 s), once the phase is learned
-        stamps = np.array([m.header.stamp.to_sec() for m in img.msgs])
+        stamps = np.array([stamp_s(m.header.stamp) for m in img.msgs])
         assert np.all(np.diff(stamps) > 0)
         k = stamps[-12:] * 15
         assert np.allclose(k, np.round(k), atol=1e-6), k
@@ -64,11 +64,10 @@ def test_raf_sim_through_the_bridge(ros_master, tmp_path):
         r = np.array(sc.ranges)
         assert np.isfinite(r).sum() > 100 and np.nanmin(r) > 0.02  # walls and ribs within 6 m
         # TF: the field and the robot chain
-        buf = tf2_ros.Buffer()
-        listener = tf2_ros.TransformListener(buf)
-        assert buf.can_transform("map", "aruco_13", rospy.Time(0), rospy.Duration(10))
-        assert buf.can_transform("odom", "camera_optical", rospy.Time(0), rospy.Duration(10))
-        listener.unregister()
+        tf = TFTree()
+        assert tf.can_transform("map", "aruco_13", 10)
+        assert tf.can_transform("odom", "camera_optical", 10)
+        tf.close()
         # a cmd_vel moves the simulated robot
         g0, o0 = gt.msgs[-1].pose.pose.position, odom.msgs[-1].pose.pose.position
         tw = Twist()
@@ -88,13 +87,16 @@ def test_raf_sim_through_the_bridge(ros_master, tmp_path):
         assert math.hypot(gt.msgs[-1].pose.pose.position.x - g1.x, gt.msgs[-1].pose.pose.position.y - g1.y) < 0.002
         for c in (odom, gt, img, scan):
             c.close()
+        unpublish(pub)
     finally:
         if sim is not None:
             stop_process(sim)
         assert stop_process(bridge) == 0, (tmp_path / "bridge.log").read_text()[-3000:]
 
 
-def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(ros_master, tmp_path, field, robot):
+@pytest.mark.middlewares
+def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(middleware, ros_graph, tmp_path, field,
+                                                                           robot):
     """The defaults on both sides: raf sim's SimTwo-like render cadence (frames at the ends of 17 ms chunks,
     no grid) in real time, and raf bridge's elapsed-time stamping, within one control cycle of the true
     render times. The simulator runs in this process so that each published frame's true render time is
@@ -103,7 +105,6 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(ros_m
     import hashlib
     import threading
 
-    import rospy
     from sensor_msgs.msg import Image
 
     from robotatfactory.ros.messages import image_to_bgr
@@ -137,14 +138,13 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(ros_m
 
     test_node()
     port, _, cam = _ports()
-    bridge = raf_process(["bridge", "--port", str(port), "--camera", cam], ros_master.env(), tmp_path / "bridge.log")
+    bridge = raf_process(["bridge", "--port", str(port), "--camera", cam], ros_graph.env(), tmp_path / "bridge.log")
     img = Collector("/camera/image_raw", Image)
     sim = Simulator(field, robot, SimConfig(seed=2, lidar=False, competition=False, start_pose=(-0.6, -0.2, 0.3)))
     runner = Recording(sim, RunnerConfig(port=0, bridge=("127.0.0.1", port), camera_bind=cam, server_port=None,
                                          mode="realtime", duration=5.0, quiet=True))
     try:
-        wait_until(lambda: any(n.endswith("raf_bridge_camera") for n in __import__("rosnode").get_node_names()),
-                   30, what="the bridge's camera node")
+        wait_for_node("raf_bridge_camera", 30)
         t = threading.Thread(target=run_and_close, daemon=True)
         t.start()
         t.join(30)
@@ -153,7 +153,7 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(ros_m
         for m in img.msgs:
             key = hashlib.sha1(image_to_bgr(m).tobytes()).digest()
             if key in truth:
-                errs.append(m.header.stamp.to_sec() - truth[key])
+                errs.append(stamp_s(m.header.stamp) - truth[key])
         img.close()
         assert not t.is_alive() and len(truth) >= 60
         assert len(errs) >= 40, (len(errs), len(img.msgs))
@@ -170,37 +170,49 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(ros_m
     finally:
         runner.request_stop()
         assert stop_process(bridge) == 0, (tmp_path / "bridge.log").read_text()[-3000:]
-        del rospy
 
 
-def test_bridge_launch_in_a_namespace_with_a_frame_prefix(ros_master, tmp_path):
-    import rospy
-    import tf2_ros
+@pytest.mark.middlewares
+def test_bridge_in_a_namespace_with_a_frame_prefix(middleware, ros_graph, tmp_path):
+    """ROS 1: ``roslaunch robotatfactory bridge.launch ns:=robot1 frame_prefix:=robot1`` (its parameters on the
+    master); ROS 2 (no launch package from PyPI): ``raf bridge --ns robot1 --frame-prefix robot1``, its
+    parameters declared on /robot1/raf_bridge. The same topics and frames on both."""
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Image
 
     test_node()
     port, sim_port, cam = _ports()
-    env = ros_master.env()
-    launch = subprocess.Popen(["roslaunch", "robotatfactory", "bridge.launch", "ns:=robot1", "frame_prefix:=robot1",
-                               f"port:={port}", f"camera:={cam}"], env=env, stdout=open(tmp_path / "launch.log", "wb"),
-                              stderr=subprocess.STDOUT, start_new_session=True)
+    env = ros_graph.env()
+    if middleware == "ros1":
+        launch = subprocess.Popen(["roslaunch", "robotatfactory", "bridge.launch", "ns:=robot1",
+                                   "frame_prefix:=robot1", f"port:={port}", f"camera:={cam}"], env=env,
+                                  stdout=open(tmp_path / "launch.log", "wb"), stderr=subprocess.STDOUT,
+                                  start_new_session=True)
+    else:
+        launch = raf_process(["bridge", "--ns", "robot1", "--frame-prefix", "robot1", "--port", str(port), "--camera",
+                              cam], env, tmp_path / "launch.log")
     sim = None
     try:
         odom = Collector("/robot1/odom", Odometry)
         img = Collector("/robot1/camera/image_raw", Image)
-        wait_until(lambda: any(n == "/robot1/raf_bridge" for n in __import__("rosnode").get_node_names()), 30,
-                   what="/robot1/raf_bridge")
+        wait_for_node("/robot1/raf_bridge", 30)
         sim = _sim(env, port, sim_port, cam, tmp_path / "sim.log", "--no-camera")
         m = odom.wait(5, timeout=60)[-1]
         assert (m.header.frame_id, m.child_frame_id) == ("robot1/odom", "robot1/base_link")
-        assert rospy.get_param("/robot1/raf_bridge/frame_prefix") == "robot1"
-        assert rospy.get_param("/use_sim_time") is True
-        buf = tf2_ros.Buffer()
-        listener = tf2_ros.TransformListener(buf)
-        assert buf.can_transform("robot1/odom", "robot1/camera_optical", rospy.Time(0), rospy.Duration(10))
-        assert buf.can_transform("map", "aruco_13", rospy.Time(0), rospy.Duration(10))
-        listener.unregister()
+        if middleware == "ros1":
+            import rospy
+
+            assert rospy.get_param("/robot1/raf_bridge/frame_prefix") == "robot1"
+            assert rospy.get_param("/use_sim_time") is True
+        else:
+            from rosutil import node_parameters
+
+            p = node_parameters("/robot1/raf_bridge", ["frame_prefix", "use_sim_time"])
+            assert p["frame_prefix"][0] == "robot1" and p["use_sim_time"][0] is True
+        tf = TFTree()
+        assert tf.can_transform("robot1/odom", "robot1/camera_optical", 10)
+        assert tf.can_transform("map", "aruco_13", 10)
+        tf.close()
         assert not img.msgs  # --no-camera: the simulator publishes none, the bridge invents none
         odom.close()
         img.close()
