@@ -1,6 +1,7 @@
 """``raf experiment localization``: the paper's second validation test, made quantitative, where it would run.
 
-Runs, each in its own process against a private roscore on a free port: the stand-in simulator (``raf sim``,
+Runs on ROS 1 or ROS 2 (``raf --middleware ros2 experiment localization``), each in its own process against a
+private graph (a roscore on a free port / a ROS 2 domain id of its own): the stand-in simulator (``raf sim``,
 LIDAR beacons in the team areas), the bridge (``raf bridge``) and the localization (``raf localize`` with
 every method computed). This process drives a route (:mod:`robotatfactory.localization.route`: the
 ``reference`` loop the localization was tuned on and the held-out ``second`` route, a figure-eight with
@@ -15,15 +16,16 @@ Two modes (every key and table carries the mode's name):
 - ``simtwo`` (default): the stand-in as SimTwo behaves -- its defaults (camera frames not on a grid of
   simulation time, whole-sweep LIDAR updates with the robot's own wheels in the scan, SimTwo's speed
   controller), no lockstep (SimTwo cannot wait for a reply), the wheel calibration error, and the camera
-  calibration from ``raf calibrate`` on a recording of a short calibration drive (``--calibration auto``)
-  instead of the renderer's own values.
+  calibration from ``raf calibrate`` on a recording of a short calibration drive (``--calibration auto``; a ROS
+  1 bag on ROS 1, a rosbag2 on ROS 2; ``--save-bag FILE`` keeps it, ``--bag FILE`` replays a recorded drive,
+  of either format, instead of driving one) instead of the renderer's own values.
 - ``ideal`` (``--ideal``): the idealisations the earlier figures were measured with, as far as ``raf sim``
   offers them (lockstep, camera on the render grid, per-ray LIDAR, no self-hits, the project's own speed
   controller) and the exact camera calibration.
 
 With ``--out DIR``: per route a trajectory figure and an error-against-time figure, the TF tree (tf2_tools
-view_frames, PDF and PNG), an RViz screenshot taken under Xvfb, the RViz configuration and the processes'
-logs.
+view_frames, PDF and PNG; ROS 1), an RViz screenshot taken under Xvfb (ROS 1), the RViz configuration and the
+processes' logs.
 """
 from __future__ import annotations
 
