@@ -126,12 +126,15 @@ def raf_process(args: list[str], env: dict, log: Path | None = None) -> subproce
 
 # QoS a test subscriber asks for, by topic (the last part of the name): ROS 2 needs a best-effort subscriber
 # for the sensor topics and a transient-local one to get latched messages; ROS 1 ignores it
-QOS_OF = {"scan": QoS.SENSOR, "image_raw": QoS.SENSOR, "camera_info": QoS.SENSOR, "tf_static": QoS.LATCHED,
-          "markers": QoS.LATCHED}
+# (a transient-local subscriber does not match a volatile publisher: only the topics that are latched)
+QOS_OF = {"scan": QoS.SENSOR, "camera/image_raw": QoS.SENSOR, "camera/camera_info": QoS.SENSOR,
+          "tf_static": QoS.LATCHED, "field/markers": QoS.LATCHED}
 
 
 def qos_of(topic: str) -> QoS:
-    return QOS_OF.get(topic.rstrip("/").rsplit("/", 1)[-1], QoS.RELIABLE)
+    """The QoS a test subscriber of ``topic`` asks for (by the end of its name: ``/robot1/scan`` is a scan)."""
+    t = "/" + topic.strip("/")
+    return next((q for k, q in QOS_OF.items() if t.endswith("/" + k)), QoS.RELIABLE)
 
 
 class Collector:

@@ -15,7 +15,8 @@ from rosutil import Collector, middleware, publisher, ros_master, test_node, unp
 pytestmark = [pytest.mark.ros]
 
 
-def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(ros_master, field):  # noqa: F811
+@pytest.mark.middlewares
+def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(middleware, ros_master, field):  # noqa: F811
     tnode = test_node()
     from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
     from nav_msgs.msg import Odometry, Path

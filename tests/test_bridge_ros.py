@@ -339,6 +339,10 @@ def test_bad_input_is_counted_and_good_frames_keep_flowing(rig):
                                                      "rejected_foreign_protocol", "rejected_oversized", "stale")}
     assert d == {"rejected_malformed": 2, "rejected_foreign_source": 1, "rejected_foreign_protocol": 2,
                  "rejected_oversized": 1, "stale": 1}
+    # the camera process reports on its own period: wait for its count to move, then check it moved by one
+    wait_until(lambda: latest_diag(diag, "camera", t_bad)[1]["rejected_wrong_size"] != cam_before["rejected_wrong_size"],
+               5, what="the camera's diagnostics counting the wrong-sized frame")
+    time.sleep(0.6)
     _, cam_after = latest_diag(diag, "camera", time.monotonic() - 0.3)
     assert int(cam_after["rejected_wrong_size"]) - int(cam_before["rejected_wrong_size"]) == 1
     # the node is alive and still publishing

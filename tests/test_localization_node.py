@@ -24,7 +24,7 @@ def truth(t):
 
 
 @pytest.fixture(scope="module")
-def node(ros_master, tmp_path_factory):
+def node(middleware, ros_master, tmp_path_factory):
     log = tmp_path_factory.mktemp("loc") / "localize.log"
     proc = raf_process(["localize", "--no-sim-time", "--set", "node/diagnostics_period=0.25",
                         "--set", "node/log_period=0.5"], ros_master.env(), log)
@@ -32,7 +32,8 @@ def node(ros_master, tmp_path_factory):
     stop_process(proc)
 
 
-def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, robot):
+@pytest.mark.middlewares
+def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, middleware, field, robot):
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
@@ -151,6 +152,17 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, field, ro
     assert int(v.get("bad_odom", "0")) == 1
     assert proc.poll() is None
     assert len(got) >= 20
+    # the settings as each middleware shows parameters: on the master (ROS 1), declared on the node (ROS 2)
+    if middleware == "ros1":
+        import rospy
+
+        assert rospy.get_param("/raf_localization/node/diagnostics_period") == 0.25
+    else:
+        from rosutil import node_parameters
+
+        p = node_parameters("/raf_localization", ["node.diagnostics_period", "use_sim_time"])
+        assert p["node.diagnostics_period"][0] == 0.25 and p["node.diagnostics_period"][1].description
+        assert p["use_sim_time"][0] is False  # --no-sim-time
     for c in (pose, cam, fixes, markers, debug, tf, diag):
         c.close()
     for pub in (pub_img, pub_info, pub_odom, pub_scan):
