@@ -49,6 +49,7 @@ class DriveLimits:
     v_wheel: float = 0.46  # m/s at either wheel's rim (from_robot: the same fraction of the top speed)
     a_lat: float = 1.0  # m/s^2 lateral acceleration on arcs
     half_track: float = 0.0675  # m, half the wheel track (the wheel-speed limit on arcs)
+    ff_lead: float = 2.0  # control cycles the curvature feed-forward reads ahead (the wheels' response delay)
 
     @classmethod
     def from_robot(cls, robot, fraction: float = 0.45, a_max: float = 0.8, **kw) -> DriveLimits:
@@ -228,7 +229,9 @@ class PathFollower:
                 herr = wrap(aim - th)
                 if self.phase == "turn" and abs(herr) <= L.heading_tolerance / 2:
                     self.phase = "drive"
-                if abs(herr) > L.heading_tolerance:
+                # driving, only a heading far off the path's stops it (the cross-track aim alone does not)
+                if abs(herr) > L.heading_tolerance and (self.phase == "turn" or self.v == 0.0
+                                                        or abs(wrap(psi - th)) > 2 * L.heading_tolerance):
                     self.phase = "turn"
                 if self.phase == "drive":
                     prof = self._prof[self.k]
@@ -237,10 +240,7 @@ class PathFollower:
                     v_t = min(v_allowed, max(to_end, 0.0) / self.dt if not (last and self.end_speed > 0) else v_allowed)
                     v_t *= max(0.0, math.cos(herr))
                     # feed-forward: the curvature where the robot will be once w has changed
-                    vv = max(self.v, v_t)
-                    _, _, _, kap = p.at(s + 2 * vv * self.dt)
-                    # start turning before the arc: half the distance the turn rate needs to build up
-                    _, _, _, kap = p.at(s + max(2 * vv * self.dt, 0.5 * vv * vv * abs(kap) / L.alpha_max))
+                    kap = self._feed_forward_curvature(p, s, max(self.v, v_t))
                     v_ff = max(self.v, 0.0)
                     w_t = v_ff * kap + self._turn_rate(herr, drive=True)
                     w_t = max(-L.w_max, min(L.w_max, w_t))
@@ -264,6 +264,22 @@ class PathFollower:
         v_out = -self.v if self.reverse else self.v
         done = self.phase == "done" and (passed_end or (self.v == 0.0 and self.w == 0.0))
         return FollowerOutput(v_out, self.w, done, self.phase, self.k, cross, herr, remaining)
+
+    def _feed_forward_curvature(self, p: Piece, s: float, v: float) -> float:
+        """The path's curvature averaged over a window centred a command delay ahead, as long as the
+        distance the turn rate needs to ramp up to an arc's (alpha_max): the turn rate then rises half a
+        window before an arc and falls half a window before its end, and the heading at the end is the
+        path's (the mean keeps the arc's total turn) instead of lagging behind it (1/m)."""
+        L = self.limits
+        c = s + L.ff_lead * v * self.dt  # the command's delay through the wheels' speed controllers
+        i0 = int(np.searchsorted(p.s, c - 0.3))
+        i1 = int(np.searchsorted(p.s, c + 0.3))
+        k_near = float(np.max(np.abs(p.kappa[i0:i1 + 1]))) if i1 > i0 else 0.0
+        window = v * v * min(k_near, L.w_max / max(v, 1e-6)) / L.alpha_max  # m the ramp takes
+        if window <= 0.005:
+            return p.at(c)[3]
+        ss = np.linspace(c - window / 2, c + window / 2, 7)
+        return float(np.mean(np.interp(ss, p.s, p.kappa)))
 
     def _turn_rate(self, err: float, drive: bool = False) -> float:
         L = self.limits

@@ -22,7 +22,7 @@ import numpy as np
 
 from .footprint import Footprint, pose_in_front
 from .obstacles import FieldObstacles
-from .smooth import SmoothPath, smooth_path
+from .smooth import RADII, SmoothPath, smooth_path
 
 _NEIGHBOURS = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)]
 
@@ -177,7 +177,7 @@ class PathPlanner:
 
     # ------------------------------------------------------------------------------------------ smoothing
     def smooth(self, path: Path, footprint: Footprint, final_straight: float = 0.0,
-               inflate: float = 0.012) -> SmoothPath:
+               inflate: float = 0.012, min_radius: float = 0.0, final_min_radius: float = 0.0) -> SmoothPath:
         """``path`` with its corners rounded into arcs (:func:`~.smooth.smooth_path`) wherever the robot's
         exact outline, grown by ``inflate`` m and heading along the arc, stays clear of every obstacle and
         within the floor's allowance. Where the turning circle is clear (the grid) the outline is too."""
@@ -202,7 +202,8 @@ class PathPlanner:
                     return False
             return True
 
-        return smooth_path(pts, arc_clear, final_straight=final_straight)
+        return smooth_path(pts, arc_clear, final_straight=final_straight, final_min_radius=final_min_radius,
+                           radii=tuple(r for r in RADII if r >= min_radius))
 
     def plan_to_pose(self, start, goal, footprint: Footprint, distances=(0.3, 0.24, 0.19, 0.15, 0.12, 0.09, 0.06),
                      turn_cost: float = 0.08) -> tuple[Path, bool]:

@@ -48,6 +48,8 @@ for _m in MODES:
         TARGETS[f"{_m}_r{_r}_last_score_median_s"] = f"<= {_t:.0f} s (simulated)"
         TARGETS[f"{_m}_r{_r}_false_starts"] = "== 0"
         TARGETS[f"{_m}_r{_r}_parts_pushed"] = "== 0"
+AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
+                  "uncertainty_limit")
 DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "slow_distance", "lookahead", "heading_tolerance", "w_max",
                   "alpha_max", "v_final")
 
@@ -68,6 +70,50 @@ def add_arguments(parser) -> None:
     parser.add_argument("--drive", metavar="NAME=VALUE", action="append", default=[],
                         help="a DriveLimits setting for the agent, e.g. k_heading=8 (repeatable; "
                              f"one of {', '.join(DRIVE_SETTINGS)})")
+    parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
+                        help="a SimConfig setting of the bare stand-in (repeatable), e.g. magnet=weld where the "
+                             "simulator has that option; the default is the simulator's own default")
+    parser.add_argument("--agent", metavar="NAME=VALUE", action="append", default=[],
+                        help="a RoundAgent setting (repeatable; one of " + ", ".join(AGENT_SETTINGS)
+                             + "; smooth=0: stop and turn at every corner, the earlier behaviour)")
+
+
+def parse_agent(items) -> dict:
+    """``--agent NAME=VALUE`` items: RoundAgent settings (numbers; ``smooth`` 0 or 1)."""
+    from ..errors import ConfigError
+
+    out = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or name not in AGENT_SETTINGS:
+            raise ConfigError(f"--agent {item!r}: expected NAME=VALUE with NAME one of {', '.join(AGENT_SETTINGS)}")
+        try:
+            out[name] = bool(int(value)) if name == "smooth" else float(value)
+        except ValueError:
+            raise ConfigError(f"--agent {item!r}: {value!r} is not a number") from None
+    return out
+
+
+def parse_sim(items) -> dict:
+    """``--sim NAME=VALUE`` items: SimConfig fields for the bare stand-in (a number where it parses as one)."""
+    import dataclasses
+
+    from ..errors import ConfigError
+    from ..sim import SimConfig
+
+    names = {f.name for f in dataclasses.fields(SimConfig)}
+    out = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or name not in names or name in ("camera", "lidar", "round_no", "seed", "start_after"):
+            raise ConfigError(f"--sim {item!r}: expected NAME=VALUE with NAME a SimConfig field the run does not set")
+        try:
+            out[name] = int(value) if value.strip().lstrip("-").isdigit() else float(value)
+        except ValueError:
+            out[name] = value.strip()
+    return out
 
 
 def parse_drive(items) -> dict:
@@ -87,7 +133,8 @@ def parse_drive(items) -> dict:
 
 
 def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | None = None,
-               field_name: str | None = None, record_path: bool = False) -> dict:
+               field_name: str | None = None, record_path: bool = False, agent_options: dict | None = None,
+               sim_options: dict | None = None) -> dict:
     """One round on the bare stand-in with ground truth as the agent's pose; a flat dict of the run's
     figures (plus ``path`` [(t, x, y)] and ``events`` [(t, text, x, y)] when ``record_path``)."""
     from ..agent.behaviour import RoundAgent
@@ -107,7 +154,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     limits = DriveLimits.from_robot(robot, **(drive or {}))
     wall0 = time.perf_counter()
     sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, round_no=round_no, seed=seed,
-                                            start_after=1.0))
+                                            start_after=1.0, **(sim_options or {})))
     server = FactoryServer(sim.factory, port=0, clock=lambda: sim.time).start()
     walls = FieldObstacles(field, [])
     fp, fc = robot_footprint(robot), carrying_footprint(robot, field.part)
@@ -126,7 +173,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     try:
         with FactoryClient(*server.address, timeout=0.5) as client:
             client.wait_pong()
-            agent = RoundAgent(field, robot, limits=limits)
+            agent = RoundAgent(field, robot, limits=limits, **(agent_options or {}))
             contact = False
             while sim.time < limit and agent.mode != "done":
                 if agent.wants_state:
@@ -144,7 +191,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                 if sim.seq % 25 == 0:
                     now = ((o.x, o.y, o.theta), sim.pose)
                     if prev is not None:
-                        slip.append(_relative_error(prev, now))
+                        slip.append(_relative_error(prev, now) + (round(sim.time, 2),))
                     prev = now
                 if sim.seq % 5 == 0:
                     x, y, _ = sim.pose
@@ -276,9 +323,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, timeout: flo
 
 
 def _job(spec):
-    round_no, seed, limit, drive, field_name, record = spec
+    round_no, seed, limit, drive, field_name, record, agent_options, sim_options = spec
     try:
-        return play_round(round_no, seed, limit, drive, field_name, record)
+        return play_round(round_no, seed, limit, drive, field_name, record, agent_options, sim_options)
     except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
         return {"round": round_no, "seed": seed, "error": f"{type(e).__name__}: {e}", "max_score": False,
                 "points": 0, "max_points": -1, "last_score_s": math.nan, "notes": [], "false_start": False,
@@ -452,13 +499,17 @@ def run(args, out_dir: Path | None) -> dict:
     drive = parse_drive(args.drive)
     field_name = getattr(args, "field", None)
     first = int(args.first_seed)
-    specs = [(r, s, float(args.limit), drive, field_name, out_dir is not None and s == first)
+    agent_options = parse_agent(getattr(args, "agent", None))
+    sim_options = parse_sim(getattr(args, "sim", None))
+    specs = [(r, s, float(args.limit), drive, field_name, out_dir is not None and s == first, agent_options,
+              sim_options)
              for r in rounds for s in range(first, first + args.seeds)]
     t0 = time.perf_counter()
     jobs = max(1, int(args.jobs))
     if mode == "full_stack":  # realtime and camera-heavy: one at a time
-        if drive:
-            raise ConfigError("--drive is not passed to raf agent (full_stack): the node uses the defaults")
+        if drive or agent_options or sim_options:
+            raise ConfigError("--drive, --agent and --sim are not passed to the whole stack (full_stack): the nodes "
+                              "use their defaults")
         runs = [play_full_stack(r, s, out_dir) for r, s, *_ in specs]
         jobs = 1
     elif jobs == 1 or len(specs) == 1:
@@ -473,6 +524,8 @@ def run(args, out_dir: Path | None) -> dict:
             print(f"round {r['round']} seed {r['seed']}: {r['error']}", file=sys.stderr)
     out = summarize(mode, runs)
     out["drive_settings"] = json.dumps(drive) if drive else "defaults"
+    out["agent_settings"] = json.dumps(agent_options) if agent_options else "defaults"
+    out["sim_settings"] = json.dumps(sim_options) if sim_options else "defaults"
     out["wall_s"] = round(wall, 1)
     out["jobs"] = jobs
     if out_dir is not None:
