@@ -173,6 +173,12 @@ class Collector:
             self.msgs.clear()
             self.times.clear()
 
+    def publishers(self) -> int:
+        """How many publishers this subscription is connected to (ROS 1) / the topic has (ROS 2)."""
+        if middleware() == "ros2":
+            return self.node.node.count_publishers(self.node.resolve(self.topic))
+        return self.sub.get_num_connections()
+
     def close(self):
         unsubscribe(self.sub)
 

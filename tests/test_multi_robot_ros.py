@@ -1,6 +1,7 @@
 """Two robots end to end: ``raf sim --robots 2`` (lockstep, cameras on), one bridge and one localization node
 per robot in namespaces robot1/robot2 with frame prefixes (as launch/multi_robot.launch starts them), a
-private roscore. Both drive and both are localized on their own TF trees."""
+private roscore or ROS 2 domain (the first test runs on each middleware). Both drive and both are localized on
+their own TF trees."""
 from __future__ import annotations
 
 import math
@@ -9,7 +10,8 @@ import time
 
 import pytest
 
-from rosutil import Collector, raf_process, ros_master, stop_process, test_node, wait_until  # noqa: F401
+from rosutil import (Collector, TFTree, call_service, publisher, raf_process, ros_graph, ros_master,  # noqa: F401
+                     srv_types, stop_process, test_node, unpublish, wait_until)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.render]
 
@@ -36,14 +38,13 @@ def _yaw(q) -> float:
     return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
 
 
-def test_two_robots_drive_and_are_localized(ros_master, tmp_path):
-    import rospy
-    import tf2_ros
+@pytest.mark.middlewares
+def test_two_robots_drive_and_are_localized(middleware, ros_graph, tmp_path):
     from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
     from nav_msgs.msg import Odometry
 
     test_node()
-    env = ros_master.env()
+    env = ros_graph.env()
     port, sim_port, cam = _free_pair(socket.SOCK_DGRAM), _free_pair(socket.SOCK_DGRAM), _free_pair(socket.SOCK_STREAM)
     procs = []
     try:
@@ -54,11 +55,11 @@ def test_two_robots_drive_and_are_localized(ros_master, tmp_path):
                                       "--camera", f"tcp://127.0.0.1:{cam + off}", "--set", "simulator/control=",
                                       *extra], env, tmp_path / f"bridge{k}.log"))
             procs.append(raf_process(["localize", "--ns", ns, "--frame-prefix", ns], env, tmp_path / f"loc{k}.log"))
-        pubs = [rospy.Publisher(f"/robot{k}/cmd_vel", Twist, queue_size=1) for k in (1, 2)]
+        pubs = [publisher(f"/robot{k}/cmd_vel", Twist, wait_for=0) for k in (1, 2)]
         gt = [Collector(f"/robot{k}/ground_truth", Odometry) for k in (1, 2)]
         pose = [Collector(f"/robot{k}/pose", PoseWithCovarianceStamped) for k in (1, 2)]
-        wait_until(lambda: all(p.get_num_connections() for p in pubs)
-                   and all(c.sub.get_num_connections() for c in pose), 40, what="bridges and localization nodes")
+        wait_until(lambda: all(p.subscriber_count() for p in pubs)
+                   and all(c.publishers() for c in pose), 40, what="bridges and localization nodes")
         procs.append(raf_process(["sim", "--robots", "2", "--port", str(sim_port), "--bridge",
                                   f"127.0.0.1:{port}", "--camera-bind", f"tcp://127.0.0.1:{cam}", "--no-server",
                                   "--lockstep", "--realtime", "--lockstep-timeout", "3", "--status-every", "5"],
@@ -76,8 +77,7 @@ def test_two_robots_drive_and_are_localized(ros_master, tmp_path):
                 p.publish(t)
             time.sleep(0.05)
         time.sleep(1.0)  # a second of fixes after the stop
-        buf = tf2_ros.Buffer()
-        listener = tf2_ros.TransformListener(buf)
+        tftree = TFTree()
         for k in (1, 2):
             g = gt[k - 1].msgs[-1].pose.pose
             moved = math.hypot(g.position.x - starts[k - 1].x, g.position.y - starts[k - 1].y)
@@ -90,23 +90,21 @@ def test_two_robots_drive_and_are_localized(ros_master, tmp_path):
             dth = (_yaw(est.orientation) - _yaw(g.orientation) + math.pi) % (2 * math.pi) - math.pi
             assert abs(dth) < 0.1, (k, dth)
             # its own TF tree: map -> robotk/odom (localization) -> robotk/base_link (bridge)
-            tf = buf.lookup_transform("map", f"robot{k}/base_link", rospy.Time(0), rospy.Duration(10))
-            tr = tf.transform.translation
-            assert math.hypot(tr.x - g.position.x, tr.y - g.position.y) < 0.06, (k, tr)
-        listener.unregister()
+            T = tftree.lookup("map", f"robot{k}/base_link", 10)
+            assert math.hypot(T[0, 3] - g.position.x, T[1, 3] - g.position.y) < 0.06, (k, T[:2, 3])
+        tftree.close()
         p1, p2 = (c.msgs[-1].pose.pose.position for c in gt)
         assert math.hypot(p1.x - p2.x, p1.y - p2.y) > 0.1  # two robots, not one seen twice
         # robot 2's sim/set_robot_pose (through the teleport labels of its Commands) moves robot 2 only
-        from robotatfactory.srv import SetRobotPose
-
-        rospy.wait_for_service("/robot2/sim/set_robot_pose", 10)
-        r = rospy.ServiceProxy("/robot2/sim/set_robot_pose", SetRobotPose)(0.3, -0.2, 0.5)
+        r = call_service("/robot2/sim/set_robot_pose", srv_types().SetRobotPose, 10, x=0.3, y=-0.2, theta=0.5)
         assert r.success, r.message
         g2 = gt[1].msgs[-1].pose.pose.position
         g1 = gt[0].msgs[-1].pose.pose.position
         assert math.hypot(g2.x - 0.3, g2.y + 0.2) < 0.01 and math.hypot(g1.x - p1.x, g1.y - p1.y) < 0.005
         for c in (*gt, *pose):
             c.close()
+        for p in pubs:
+            unpublish(p)
     finally:
         codes = [stop_process(p) for p in reversed(procs)]
     assert codes[0] == 0, (tmp_path / "sim.log").read_text()[-3000:]
