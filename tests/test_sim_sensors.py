@@ -311,8 +311,9 @@ def test_contact_switch_presses_against_a_wall_only(field, robot):
 
 
 def test_electromagnet_picks_carries_and_releases_a_part(field, robot):
+    """The weld idealisation (magnet="weld"); SimTwo's force model: tests/test_sim_magnet.py."""
     part = PartPlacement("R", 0.0, -0.3, math.pi)  # plate towards -x, at x = -0.032
-    sim = make(field, robot, lidar=False, start_pose=(-0.2, -0.3, 0.0), extra_parts=(part,))
+    sim = make(field, robot, lidar=False, start_pose=(-0.2, -0.3, 0.0), extra_parts=(part,), magnet="weld")
     pid = sim.parts.ids[0]
     start = sim.part_pose(pid)
     # magnet on while approaching: nothing happens until the plate is within the 2 cm beam

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
-from ..sim.config import PID_TIMINGS, SPEED_CONTROLS
+from ..sim.config import MAGNETS, PID_TIMINGS, SPEED_CONTROLS
 
 NAME = "sim"
 HELP = "run the stand-in simulator: MuJoCo physics, SimTwo's UDP/ZMQ protocol, the competition and its server"
@@ -111,6 +111,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    default="script_enabled",
                    help="when SimTwo's PID runs against the script calls: script_enabled (0 V for 9 ms after each "
                         "call, default), scene_enabled or script_holds_voltage (no gap)")
+    g.add_argument("--magnet", choices=MAGNETS, default="force",
+                   help="force: SimTwo's electromagnet, a 5 N pull along one 2 cm ray while it meets a part's plate, "
+                        "every physics step: a part can hang askew, slip off or be lost (default); weld: the "
+                        "idealisation, a facing plate is welded flat to the magnet and never lost")
 
     g = p.add_argument_group("output")
     g.add_argument("--status-every", type=float, default=1.0, metavar="S",
@@ -159,7 +163,8 @@ def run(args) -> int:
                        processing_delay=args.processing_delay, start_after=args.start_after,
                        camera_timing=args.camera_timing,
                        lidar_update=args.lidar_update, lidar_self_hits=not args.no_lidar_self_hits,
-                       speed_control=args.speed_control, simtwo_pid_timing=args.pid_timing)
+                       speed_control=args.speed_control, simtwo_pid_timing=args.pid_timing,
+                       magnet=args.magnet)
     if args.status_every < 0:
         raise ConfigError(f"--status-every {args.status_every}: must be >= 0")
 

@@ -27,6 +27,7 @@ class PartPlacement:
 LIDAR_UPDATES = ("sweep", "per_ray")
 SPEED_CONTROLS = ("simtwo", "simtwo_per_cycle", "ideal_pi")
 PID_TIMINGS = ("script_enabled", "scene_enabled", "script_holds_voltage")
+MAGNETS = ("force", "weld")
 MAX_ROBOTS = 4  # robots in one scene (raf sim --robots)
 
 
@@ -67,6 +68,11 @@ class SimConfig:
       ``"scene_enabled"`` (``active='1'`` in the scene XML: it runs in the script's own physics step, no
       gap) or ``"script_holds_voltage"`` (switched on by the script, which also re-applies the
       controller's last output each call, ``SetAxisVoltageRef(GetAxisU)``: no gap).
+    * ``magnet``: ``"force"`` (SimTwo: a finite pull of 0.5*Vin*fmax/(1 + k2*d)^2 = 5 N along the magnet's
+      single ray, at the part's centre of mass, recomputed every physics step, only while the ray's nearest
+      hit is a part's plate: a part can hang askew, be pulled in from a small gap, slip or be lost; see
+      :mod:`robotatfactory.sim.magnet`) or ``"weld"`` (idealised: a plate facing the magnet within 45 deg
+      and within the beam is welded, centred and flat, and can never be lost).
     """
 
     seed: int = 0
@@ -92,6 +98,7 @@ class SimConfig:
     lidar_self_hits: bool = True
     speed_control: str = "simtwo"
     simtwo_pid_timing: str = "script_enabled"
+    magnet: str = "force"
 
     def __post_init__(self):
         if self.start_pose is not None:
@@ -112,7 +119,7 @@ class SimConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError(f"seed {self.seed!r}: must be a non-negative integer")
         for name, allowed in (("lidar_update", LIDAR_UPDATES), ("speed_control", SPEED_CONTROLS),
-                              ("simtwo_pid_timing", PID_TIMINGS)):
+                              ("simtwo_pid_timing", PID_TIMINGS), ("magnet", MAGNETS)):
             if getattr(self, name) not in allowed:
                 raise ConfigError(f"{name} {getattr(self, name)!r}: expected one of {', '.join(allowed)}")
 

@@ -47,7 +47,8 @@ G_ROBOT = G_DECOR  # the robot's base-body parts render and are seen by no ray (
 RENDER_GROUPS = (1, 1, 1, 1, 1, 0)
 LIDAR_GROUPS = (1, 0, 0, 1, 1, 0)
 LIDAR_SELF_GROUPS = (0, 1, 0, 0, 0, 0)
-MAGNET_GROUPS = (0, 0, 0, 0, 1, 0)
+MAGNET_GROUPS = (0, 0, 0, 0, 1, 0)  # the weld's beam (magnet="weld"): plates only
+MAGNET_FORCE_GROUPS = (1, 0, 0, 1, 1, 0)  # SimTwo's solenoid ray: its nearest hit of walls, robots, parts, plates
 CONTACT_GROUPS = (1, 0, 0, 1, 1, 0)
 
 # collision bits: walls, moving bodies (robot body, parts), the floor, the robot's rolling elements
@@ -57,6 +58,7 @@ B_WALL, B_MOVING, B_FLOOR, B_WHEEL = 1, 2, 4, 8
 BASE_COM_X = -0.02  # m: the base's centre of mass sits 2 cm behind the axle so the caster carries load
 MAGNET_Z = 0.035  # m: height of the electromagnet beam = the centre of a part's plate
 BUMPER_HALF = (0.005, 0.01, 0.01)  # m: the magnet, x in [0.07, 0.08], 2 cm wide, as tall as a part's plate
+SOLENOID_FACE_HALF = (0.005, 0.015, 0.01)  # m: magnet="force": the contact face, as wide as SimTwo's 30 mm solenoid
 WHEEL_FRICTION = (1.0, 0.005, 0.0001)
 PART_FRICTION = (0.4, 0.005, 0.0001)
 WALL_FRICTION = (0.3, 0.005, 0.0001)
@@ -378,6 +380,19 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field, n
                       pos=[mx - BUMPER_HALF[0], 0, MAGNET_Z], rgba=[0.55, 0.55, 0.6, 1])
     g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, g_body
     g.friction = list(WALL_FRICTION)
+    if config.magnet == "force":
+        # SimTwo's solenoid shell (AGV.xml 89-96: a cylinder of radius 0.015 m, surface mu 0.1) is what a held
+        # plate rests against: a hidden 30 mm wide face takes the housing's contacts (the housing above stays
+        # what the camera and the rays see), with the shell's friction (priority: its own, not the max) and a
+        # stiff contact like ODE's (soft_cfm 1e-5), so that a pulled plate neither creeps nor sinks
+        g.contype = g.conaffinity = 0
+        g = body.add_geom(name=f"{p}robot_solenoid_face", type=mujoco.mjtGeom.mjGEOM_BOX,
+                          size=list(SOLENOID_FACE_HALF), pos=[mx - SOLENOID_FACE_HALF[0], 0, MAGNET_Z],
+                          rgba=[0, 0, 0, 0])
+        g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_HIDDEN
+        g.friction = [float(robot.electromagnet.get("mu", 0.1)), WALL_FRICTION[1], WALL_FRICTION[2]]
+        g.priority = 1
+        g.solref, g.solimp = list(STIFF_SOLREF), list(STIFF_SOLIMP)
     # the wheels' outline for walls and parts: a box around both tyres, clear of the floor
     wwidth = float(robot.wheel.get("width", 0.02))
     r = robot.wheel_radius

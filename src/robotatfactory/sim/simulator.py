@@ -31,6 +31,7 @@ from . import scene as sc  # noqa: E402
 from .camera import CameraFrame, RenderCadence, Renderer, ScheduledFrame  # noqa: E402
 from .config import SimConfig  # noqa: E402
 from .motor import DCMotor, MotorParams, SimTwoPID, SimTwoPIDParams, SpeedControllerParams, SpeedPI  # noqa: E402
+from .magnet import MagnetForce, MagnetParams  # noqa: E402
 from .parts import PartBodies  # noqa: E402
 from .sensors import Encoder, Lidar  # noqa: E402
 
@@ -85,6 +86,7 @@ class Simulator:
         name2id = mujoco.mj_name2id
         self.parts = PartBodies(m, self.info)
         self._plate_geoms = {name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"part_{pid}_plate"): pid for pid in self.info.parts}
+        self._part_geoms = {name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"part_{pid}_body"): pid for pid in self.info.parts}
         for pid, letter, *_ in parts:
             self.parts.set_letter(pid, letter)
 
@@ -163,6 +165,14 @@ class Simulator:
         self.voltage_override: tuple[float, float] | None = None  # open-loop motor voltages (SetAxisVoltageRef)
         self.magnet_on = False
         self.held: int | None = None
+        # SimTwo's electromagnet (magnet="force"): a force every physics step; None: the weld idealisation
+        self._magnet = None
+        self._mag_engaged = None
+        if config.magnet == "force":
+            self._magnet = MagnetForce(MagnetParams.from_spec(robot.electromagnet), m, self.data, mujoco,
+                                       self._robot_body, sc.MAGNET_Z, self._plate_geoms, self._part_geoms,
+                                       dict(self.parts.body), sc.MAGNET_FORCE_GROUPS, self.dt,
+                                       bodyexclude=self._ray_exclude)
 
         # sensors (robot k >= 2: its own noise stream)
         seed = config.seed if k == 1 else config.seed + UNIT_SEED_STRIDE * (k - 1)
@@ -273,8 +283,11 @@ class Simulator:
         return float(v[a] * math.cos(th) + v[a + 1] * math.sin(th)), float(v[a + 5])
 
     def set_pose(self, x: float, y: float, theta: float) -> None:
-        """Put the robot at rest at (x, y, theta); releases a held part. Encoders keep counting from here."""
+        """Put the robot at rest at (x, y, theta); releases a held part (a force pending from the magnet is
+        dropped; a magnet still on pulls again what is in front of it). Encoders keep counting from here."""
         self._release()
+        if self._magnet is not None:
+            self._magnet.release()
         q = self.data.qpos
         a = self._qa
         q[a:a + 7] = (x, y, q[a + 2], math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2))
@@ -290,6 +303,8 @@ class Simulator:
         for u in self.units:
             if u.held == part_id:
                 u._release()
+            if u._magnet is not None and u._magnet.pulled == part_id:
+                u._magnet.release()
         self.parts.place(self.data, part_id, x, y, facing)
         mujoco.mj_forward(self.model, self.data)
 
@@ -312,7 +327,10 @@ class Simulator:
         if self.pid_params is None:
             self.controllers[0].target = wl
             self.controllers[1].target = wr
-        if cmd.magnet and not self.magnet_on:
+        if self._magnet is not None:  # SimTwo: SetSensorVin(R, i, on * vin_on), the force follows every step
+            self.magnet_on = bool(cmd.magnet)
+            self._magnet.vin = self._magnet.p.vin_on if cmd.magnet else 0.0
+        elif cmd.magnet and not self.magnet_on:
             self.magnet_on = True
         elif not cmd.magnet and self.magnet_on:
             self.magnet_on = False
@@ -362,10 +380,17 @@ class Simulator:
         plans = [u._plan_cycle(s0, n) for u in units]
         m, d = self.model, self.data
         step = mujoco.mj_step
+        mags = [u._mag_engaged for u in units if u._mag_engaged is not None]
         for j in range(n):
             for u in units:
                 u._drive_step(s0 + j)
+            for mg in mags:
+                mg.pre_step()
             step(m, d)
+            for mg in mags:  # ODE cleared every accumulator in the step: all forces first, then the new ones
+                mg.clear()
+            for mg in mags:
+                mg.post_step(s0 + j + 1, clear=False)
             for u, (lidar_slot, events) in zip(units, plans):
                 if lidar_slot[j] >= 0:
                     u._log_lidar_pose(lidar_slot[j])
@@ -418,7 +443,14 @@ class Simulator:
                     self._render_frame(sf)
                 else:
                     events.setdefault(sf.step - s0 - 1, []).append(("camera", sf))
-        if self.magnet_on and self.held is None:
+        self._mag_engaged = None
+        if self._magnet is not None:
+            engaged, j = self._magnet.plan(s0, n)
+            if engaged:
+                self._mag_engaged = self._magnet
+            elif j is not None:
+                events.setdefault(j, []).append(("magnet_idle", 0))
+        elif self.magnet_on and self.held is None:
             self._magnet_check()
             for j in range(MAGNET_CHECK_STEPS - 1, n, MAGNET_CHECK_STEPS):
                 events.setdefault(j, []).append(("magnet", 0))
@@ -438,6 +470,8 @@ class Simulator:
                 self._render_frame(arg)
             elif kind == "magnet" and self.held is None:
                 self._magnet_check()
+            elif kind == "magnet_idle":
+                self._magnet.idle_measure()
 
     def _log_lidar_pose(self, slot: int) -> None:
         q = self.data.qpos
@@ -452,6 +486,7 @@ class Simulator:
         (ml, mr), (pl, pr) = self.motors, self.controllers
         vo = self.voltage_override
         simtwo = self.pid_params is not None
+        mag = self._mag_engaged
         for j in range(n):
             wl, wr = qvel[il], qvel[ir]
             if vo is not None:
@@ -467,7 +502,11 @@ class Simulator:
                 ul, ur = pl.output, pr.output
             ctrl[self._act[0]] = ml.step(ul, wl)
             ctrl[self._act[1]] = mr.step(ur, wr)
+            if mag is not None:
+                mag.pre_step()
             mujoco.mj_step(m, d)
+            if mag is not None:
+                mag.post_step(s0 + j + 1)
             if lidar_slot[j] >= 0:
                 self._log_lidar_pose(lidar_slot[j])
             if j in events:
@@ -485,6 +524,7 @@ class Simulator:
         qa = self._qa
         step = mujoco.mj_step
         poses = self._lidar.poses if self._lidar is not None else None
+        mag = self._mag_engaged
         ml, mr = self.motors
         pl, pr = self.controllers
         mp, cp = self.motor_params, self.controller_params
@@ -564,7 +604,11 @@ class Simulator:
             Ir += di
             Ir = imax if Ir > imax else (-imax if Ir < -imax else Ir)
             ctrl[ar] = kt * Ir
+            if mag is not None:
+                mag.pre_step()
             step(m, d)
+            if mag is not None:
+                mag.post_step(s0 + j + 1)
             slot = lidar_slot[j]
             if slot >= 0:
                 poses[slot] = qpos[qa:qa + 7].tolist()
@@ -588,6 +632,7 @@ class Simulator:
         qa = self._qa
         step = mujoco.mj_step
         poses = self._lidar.poses if self._lidar is not None else None
+        mag = self._mag_engaged
         ml, mr = self.motors
         pl, pr = self.controllers
         mp, pp = self.motor_params, self.pid_params
@@ -631,7 +676,11 @@ class Simulator:
             Ir += di
             Ir = imax if Ir > imax else (-imax if Ir < -imax else Ir)
             ctrl[ar] = kt * Ir
+            if mag is not None:
+                mag.pre_step()
             step(m, d)
+            if mag is not None:
+                mag.post_step(s0 + j + 1)
             slot = lidar_slot[j]
             if slot >= 0:
                 poses[slot] = qpos[qa:qa + 7].tolist()
@@ -662,6 +711,8 @@ class Simulator:
         if self._lidar is not None:
             self._lidar.cast(m, d, mujoco)
         self.contact = self._contact_pressed()
+        if self._magnet is not None:  # the part the magnet pulls (what the factory counts as held)
+            self.held = self._magnet.pulled
 
     def _apply_teleports(self, teleports) -> None:
         if teleports:
@@ -686,6 +737,8 @@ class Simulator:
         for u in self.units:
             if u.held == pid:
                 u._release()
+            if u._magnet is not None and u._magnet.pulled == pid:
+                u._magnet.release()
         x, y = tp.slot.xy
         self.parts.place(self.data, pid, x, y, tp.slot.facing)
         self.parts.set_letter(pid, tp.new_type.letter)
@@ -825,7 +878,7 @@ class RobotUnit(Simulator):
     main simulator's :meth:`Simulator.step_all`."""
 
     _SHARED = ("reference_drive", "field", "robot", "config", "factory", "referee", "setup", "info", "spec",
-               "model", "data", "dt", "steps_per_cycle", "parts", "_plate_geoms", "motor_params",
+               "model", "data", "dt", "steps_per_cycle", "parts", "_plate_geoms", "_part_geoms", "motor_params",
                "controller_params", "_ctrl_every", "speed_control", "pid_params", "_magnet_groups",
                "_contact_groups", "units")
 
