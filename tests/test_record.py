@@ -23,8 +23,8 @@ from robotatfactory.ros.master import private_graph, stop_process
 from robotatfactory.ros.mw.base import stamp_ns
 
 ROOT = Path(__file__).resolve().parents[1]
-MIDDLEWARE = mw.name()
-FORMATS = {"ros1": ["bag"], "ros2": ["mcap", "sqlite3"]}[MIDDLEWARE]
+FORMATS = {"ros1": ["bag"], "ros2": ["mcap", "sqlite3"]}
+pytestmark = pytest.mark.middlewares  # conftest's `middleware`: ros1 in .venv, ros2 in .venv-ros2
 # real ROS 2 Jazzy's tf2_msgs/msg/TFMessage (scripts/check_ros2.py checks the venv's build against it)
 TF_MESSAGE_HASH = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
 
@@ -35,12 +35,16 @@ def _time_msg(ns: int):
 
 # ---- unit: the writer and the reader ---------------------------------------------------------------------
 
-@pytest.mark.parametrize("fmt", FORMATS)
-def test_messages_round_trip_through_a_bag(tmp_path, fmt):
+def test_messages_round_trip_through_a_bag(tmp_path, middleware):
+    for fmt in FORMATS[middleware]:
+        _round_trip(tmp_path, fmt)
+
+
+def _round_trip(tmp_path, fmt):
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Image
 
-    path = tmp_path / ("b.bag" if fmt == "bag" else "b")
+    path = tmp_path / ("b.bag" if fmt == "bag" else f"b_{fmt}")
     img = np.random.default_rng(1).integers(0, 255, (48, 64, 3), dtype=np.uint8)
     with bags.open_writer(path, fmt) as w:
         for k in range(5):
@@ -66,8 +70,8 @@ def test_messages_round_trip_through_a_bag(tmp_path, fmt):
     assert np.array_equal(image_to_bgr(im), img)
 
 
-def test_a_bag_is_never_overwritten_and_bad_paths_say_so(tmp_path):
-    p = tmp_path / ("x.bag" if MIDDLEWARE == "ros1" else "x")
+def test_a_bag_is_never_overwritten_and_bad_paths_say_so(tmp_path, middleware):
+    p = tmp_path / ("x.bag" if middleware == "ros1" else "x")
     bags.open_writer(p).close()
     with pytest.raises(ConfigError, match="exists already"):
         bags.open_writer(p)
@@ -77,7 +81,7 @@ def test_a_bag_is_never_overwritten_and_bad_paths_say_so(tmp_path):
         bags.BagWriter(tmp_path / "y", "zip")
 
 
-def test_type_names():
+def test_type_names(middleware):
     assert bags.normalize_type("nav_msgs/Odometry") == "nav_msgs/msg/Odometry"
     assert bags.normalize_type("/nav_msgs/msg/Odometry") == "nav_msgs/msg/Odometry"
     from nav_msgs.msg import Odometry
@@ -111,11 +115,11 @@ HASHES = textwrap.dedent("""
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_record_a_run_and_read_it_back(tmp_path):
-    graph = private_graph(MIDDLEWARE)
+def test_record_a_run_and_read_it_back(tmp_path, middleware):
+    graph = private_graph(middleware)
     graph.start()
     env = graph.env()
-    out = tmp_path / ("run.bag" if MIDDLEWARE == "ros1" else "run")
+    out = tmp_path / ("run.bag" if middleware == "ros1" else "run")
     up = subprocess.Popen([sys.executable, "-m", "robotatfactory", "up", "--free-ports", "--no-localize",
                            "--log-dir", str(tmp_path / "logs")], env=env, cwd=ROOT, stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT, text=True, start_new_session=True)
@@ -135,7 +139,7 @@ def test_record_a_run_and_read_it_back(tmp_path):
                               "--topics", "odom", "/tf", "/tf_static", "scan", "camera/camera_info", "/clock"],
                              env=env, cwd=ROOT, capture_output=True, text=True, timeout=120)
         assert rec.returncode == 0, rec.stdout[-2000:] + rec.stderr[-3000:]
-        if MIDDLEWARE == "ros2":
+        if middleware == "ros2":
             h = subprocess.run([sys.executable, "-c", HASHES, "/odom", "/tf", "/scan"], env=env, cwd=ROOT,
                                capture_output=True, text=True, timeout=60)
             assert h.returncode == 0, h.stderr[-2000:]
@@ -149,7 +153,7 @@ def test_record_a_run_and_read_it_back(tmp_path):
 
     with bags.open_bag(out) as b:
         topics = b.topics
-        assert b.format == ("rosbag1" if MIDDLEWARE == "ros1" else "rosbag2")
+        assert b.format == ("rosbag1" if middleware == "ros1" else "rosbag2")
         assert topics["/odom"].msgtype == "nav_msgs/msg/Odometry" and topics["/odom"].count >= 30, topics
         assert topics["/tf"].count >= 30 and topics["/tf_static"].count >= 1, topics
         assert topics["/clock"].count >= 30 and topics["/scan"].count >= 5, topics
@@ -177,7 +181,7 @@ def test_record_a_run_and_read_it_back(tmp_path):
     assert any(c.startswith("aruco_") for c in children), children
     assert infos and infos[0].width == 640 and infos[0].height == 480
 
-    if MIDDLEWARE == "ros2":
+    if middleware == "ros2":
         import yaml
 
         meta = yaml.safe_load((out / "metadata.yaml").read_text())["rosbag2_bagfile_information"]

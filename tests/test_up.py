@@ -14,11 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from robotatfactory.ros import mw
 from robotatfactory.ros.master import private_graph, stop_process
 
 ROOT = Path(__file__).resolve().parents[1]
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.middlewares]
 
 LISTENER = textwrap.dedent("""
     import sys, threading, time
@@ -88,9 +87,11 @@ def _session_members(sids) -> list[int]:
     return out
 
 
-@pytest.fixture(params=mw.available())
-def graph(request):
-    g = private_graph(request.param)
+@pytest.fixture
+def graph(middleware):
+    """A private graph of this interpreter's middleware (conftest's ``middleware``: ros1 in .venv, ros2 in
+    .venv-ros2), which ``raf up`` joins (ROS_MASTER_URI / ROS_DOMAIN_ID in its environment)."""
+    g = private_graph(middleware)
     g.start()
     try:
         yield g
