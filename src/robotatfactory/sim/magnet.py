@@ -96,8 +96,9 @@ class MagnetForce:
         self.groups = np.asarray(groups, dtype=np.uint8)
         self.bodyexclude = bodyexclude
         self.dt = float(dt)
-        self._origin_local = np.array([params.x - params.ray_behind_face, 0.0, float(z)])
+        self._ol = (params.x - params.ray_behind_face, 0.0, float(z))  # the ray's origin in the robot's frame
         self._gid = np.zeros(1, dtype=np.int32)
+        self._pnt, self._vec = np.zeros(3), np.zeros(3)
         self.vin = 0.0
         self.value = 0  # TSensor.Measures[0].value (refreshed every period)
         self._t = 0.0  # TimeFromLastMeasure
@@ -115,16 +116,26 @@ class MagnetForce:
         """True when the steps must run :meth:`pre_step`/:meth:`post_step` (on, or a force still pending)."""
         return self.vin > 0.0 or self._set_on is not None
 
+    def _origin(self) -> tuple[float, float, float]:
+        """The ray's origin in the world now (plain floats: this runs twice per physics step while on)."""
+        d, b = self.data, self.robot_body
+        p, R = d.xpos[b], d.xmat[b]
+        ox, _, oz = self._ol
+        return (float(p[0] + R[0] * ox + R[2] * oz), float(p[1] + R[3] * ox + R[5] * oz),
+                float(p[2] + R[6] * ox + R[8] * oz))
+
     def origin_dir(self):
-        d = self.data
-        R = d.xmat[self.robot_body].reshape(3, 3)
-        return d.xpos[self.robot_body] + R @ self._origin_local, np.ascontiguousarray(R[:, 0])
+        """(origin, direction) of the ray in the world now, as arrays."""
+        R = self.data.xmat[self.robot_body]
+        return np.array(self._origin()), np.array((R[0], R[3], R[6]))
 
     def measure(self) -> None:
         """Cast the ray from the present state (SimTwo's collision before a step)."""
-        origin, direction = self.origin_dir()
-        dist = self._mj.mj_ray(self.model, self.data, origin, direction, self.groups, 1, self.bodyexclude,
-                               self._gid)
+        R = self.data.xmat[self.robot_body]
+        o, v = self._pnt, self._vec
+        o[0], o[1], o[2] = self._origin()
+        v[0], v[1], v[2] = R[0], R[3], R[6]
+        dist = self._mj.mj_ray(self.model, self.data, o, v, self.groups, 1, self.bodyexclude, self._gid)
         gid = int(self._gid[0])
         if gid < 0 or not 0.0 <= dist <= self.p.beam:
             self._m = (None, False, -1.0, None)
@@ -133,7 +144,7 @@ class MagnetForce:
         ferro = pid is not None
         if pid is None:
             pid = self.part_geoms.get(gid)  # a part's body: hit, not ferromagnetic (None: a wall, a robot)
-        self._m = (pid, ferro, float(dist), origin + dist * direction)
+        self._m = (pid, ferro, float(dist), (o[0] + dist * v[0], o[1] + dist * v[1], o[2] + dist * v[2]))
 
     def _tick(self, s: int) -> bool:
         """SimTwo's TimeFromLastMeasure after stand-in step ``s`` (1-based); True when the value refreshes."""
@@ -200,13 +211,13 @@ class MagnetForce:
         pid, ferro, dist, hit = m
         self.dist = dist
         if self.value > 0 and pid is not None and self.vin > 0.0:  # (Vin = 0 sets a zero force: none)
-            origin, _ = self.origin_dir()
-            vec = origin - hit
+            ox, oy, oz = self._origin()  # SensorPos after the step; the hit point is from before it
+            vx, vy, vz = ox - hit[0], oy - hit[1], oz - hit[2]
             f = self.p.force(self.vin, dist)
-            n = math.sqrt(float(vec @ vec))
+            n = math.sqrt(vx * vx + vy * vy + vz * vz)
             if n > 0:
                 f = f / n
-            vec = vec * f
+            vec = np.array((vx * f, vy * f, vz * f))
             b = self.part_bodies[pid]
             self.data.xfrc_applied[b, :3] = vec
             self.data.xfrc_applied[self.robot_body, :3] = -vec

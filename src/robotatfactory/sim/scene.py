@@ -19,6 +19,9 @@ group what                                        camera  LIDAR     magnet    co
       spheres, wheel guard, part boxes)
 ====  ==========================================  ======  ========  ========  =======
 
+The magnet column is the weld's beam (``magnet="weld"``); SimTwo's solenoid ray (``magnet="force"``,
+``MAGNET_FORCE_GROUPS``) sees groups 0, 3 and 4 and pulls only when its nearest hit is a plate.
+
 (*) SimTwo's LIDAR rays are ODE rays attached to the robot's base body: they never hit geoms on that body
 (its shells) but do hit the wheels, separate bodies (Viewer.pas 853-862 ``CreateOneRaySensor``, 2998-3011,
 ``nearCallback`` 346-410). The simulator casts the world with ``LIDAR_GROUPS`` and the robot's own wheels
