@@ -74,7 +74,7 @@ def run(args) -> int:
     def make_node(node):
         from ..ros.recorder import Recorder
 
-        rec = Recorder(node, writer, topics).start()
+        rec = Recorder(node, writer, topics, wall_time=args.no_sim_time).start()
         if args.duration is not None:
             def stop_later():
                 end = time.monotonic() + args.duration

@@ -10,7 +10,8 @@ are, e.g. ``/tf_static`` and the field's markers), and the bag records the offer
 ``ros2 bag play`` republishes latched topics as latched.
 
 Bag time is the node's clock at reception: simulation time under ``use_sim_time`` (the default, as the
-bridge publishes ``/clock``), 0 for what arrives before the first ``/clock`` (the latched topics).
+bridge publishes ``/clock``), 0 for what arrives before the first ``/clock`` (the latched topics); or the
+wall clock (``wall_time``).
 """
 from __future__ import annotations
 
@@ -31,8 +32,11 @@ IMAGE_TOPICS = ("camera/image_raw", "aruco/debug_image")
 class Recorder:
     """Records ``topics`` (resolved names) from ``node`` into ``writer`` until :meth:`stop`."""
 
-    def __init__(self, node: Node, writer: BagWriter, topics: list[str], rescan: float = 0.5):
+    def __init__(self, node: Node, writer: BagWriter, topics: list[str], rescan: float = 0.5,
+                 wall_time: bool = False):
+        """``wall_time``: bag time from the wall clock instead of the node's (ROS) clock."""
         self.node = node
+        self.wall_time = wall_time
         self.writer = writer
         self.topics = [node.resolve(t) for t in topics]
         self.rescan = rescan
@@ -69,7 +73,7 @@ class Recorder:
                 self.node.warn(f"record: listing the graph's topics failed: {e}", throttle=10.0)
 
     def _stamp(self) -> int:
-        return stamp_ns(self.node.now())
+        return time.time_ns() if self.wall_time else stamp_ns(self.node.now())
 
     # -- per middleware -------------------------------------------------------------------------------
     def _scan(self) -> None:
