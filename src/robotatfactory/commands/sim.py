@@ -217,6 +217,7 @@ def run(args) -> int:
             extras.append("factory server udp %s:%d" % runner.server.address)
         if sim.setup is not None:
             extras.append(sim.setup.describe())
+        extras.append(f"magnet {sim.config.magnet}")  # force (SimTwo's) or weld (the idealisation)
         print(f"raf sim: field {field.name}, commands on udp {host}:{port}, frames to udp {c.bridge[0]}:{c.bridge[1]}, "
               f"{c.mode}{' lockstep' if c.lockstep else ''}; " + "; ".join(extras), flush=True)
         result = runner.run()
@@ -256,6 +257,7 @@ def _run_several(field, sim, runner_config) -> int:
             extras.append("factory server udp %s:%d (sees every robot)" % runner.server.address)
         if sim.setup is not None:
             extras.append(sim.setup.describe())
+        extras.append(f"magnet {sim.config.magnet}")  # force (SimTwo's) or weld (the idealisation)
         print(f"raf sim: field {field.name}, {len(sim.units)} robots, {c.mode}{' lockstep' if c.lockstep else ''}; "
               + "; ".join(extras), flush=True)
         for line in runner.describe():
