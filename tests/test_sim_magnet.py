@@ -177,6 +177,30 @@ def test_turning_on_the_spot_loses_the_part_the_weld_keeps(field, robot, magnet)
     sim.close()
 
 
+def test_a_glancing_collision_knocks_the_part_off_centre(field, robot):
+    """Carrying at 0.4 m/s into a free part standing 5 cm to the side of the path: the carried part is knocked
+    sideways along the magnet's face (measured 15 mm) and stays on it; the weld does not let it move."""
+    from robotatfactory.sim import Simulator
+
+    shifts = {}
+    for magnet in ("force", "weld"):
+        # from x = -0.2 towards machine B's wall (x = 0.337): the obstacle stands at x = 0.25
+        parts = (PartPlacement("R", -0.2 + TOUCH + 0.002, 0.0, math.pi), PartPlacement("G", 0.25, 0.05, 0.0))
+        sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, competition=False, magnet=magnet,
+                                                start_pose=(-0.2, 0.0, 0.0), extra_parts=parts))
+        for _ in range(5):
+            sim.step_cycle(Command(0.0, 0.0, True))
+        obstacle = sim.part_pose(sim.parts.ids[1])
+        drive(sim, ramp(0, 0, 0.4, 0, 27))
+        moved = sim.part_pose(sim.parts.ids[1])
+        assert math.hypot(moved[0] - obstacle[0], moved[1] - obstacle[1]) > 0.003  # it was hit and pushed
+        assert sim.held == sim.parts.ids[0], magnet
+        shifts[magnet] = abs(rel(sim)[1])
+        sim.close()
+    assert shifts["weld"] < 5e-4
+    assert shifts["force"] > 0.005
+
+
 def test_a_part_seen_from_behind_is_not_pulled(field, robot):
     """The ray's nearest hit is the part's body, not its plate: not ferromagnetic, no pull (SimTwo's
     UpdateMeasures tests the hit solid's <ferromagnetic/>)."""
