@@ -7,7 +7,7 @@ only. The ROS 1 twin is launch/competition.launch (the same arguments).
 Ports are sim.launch.py's defaults unless given (sim_port, port, camera, server_port, control_port).
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
+from launch.actions import DeclareLaunchArgument, GroupAction, IncludeLaunchDescription
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
@@ -34,25 +34,31 @@ def generate_launch_description():
         DeclareLaunchArgument("max_input_age", default_value="0.5",
                               description="s after which pose/odom count as stale (the robot stops)"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz 2"),
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "ros2", "sim.launch.py"])),
-            launch_arguments={
-                "field": arg("field"),
-                "sim_args": ["--realtime --round ", arg("round"), " --seed ", arg("seed"), " --start-after ",
-                             arg("start_after"), " ", arg("sim_extra")],
-                "map_to_odom": "none",
-                "port": arg("port"),
-                "sim_port": arg("sim_port"),
-                "control_port": arg("control_port"),
-                "camera": arg("camera"),
-                "server_port": arg("server_port"),
-                "rviz": arg("rviz"),
-            }.items(),
-        ),
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "ros2", "localization.launch.py"])),
-            launch_arguments={"field": arg("field")}.items(),
-        ),
+        # each include in a scoped group: its arguments (and the defaults it declares, e.g. config) stay in it,
+        # as in roslaunch; otherwise the bridge's config file would become the localization's
+        GroupAction(scoped=True, actions=[
+            IncludeLaunchDescription(
+                PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "ros2", "sim.launch.py"])),
+                launch_arguments={
+                    "field": arg("field"),
+                    "sim_args": ["--realtime --round ", arg("round"), " --seed ", arg("seed"), " --start-after ",
+                                 arg("start_after"), " ", arg("sim_extra")],
+                    "map_to_odom": "none",
+                    "port": arg("port"),
+                    "sim_port": arg("sim_port"),
+                    "control_port": arg("control_port"),
+                    "camera": arg("camera"),
+                    "server_port": arg("server_port"),
+                    "rviz": arg("rviz"),
+                }.items(),
+            ),
+        ]),
+        GroupAction(scoped=True, actions=[
+            IncludeLaunchDescription(
+                PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "ros2", "localization.launch.py"])),
+                launch_arguments={"field": arg("field")}.items(),
+            ),
+        ]),
         Node(
             package="robotatfactory", executable="agent_node", name="raf_agent", output="screen",
             additional_env={"RAF_MIDDLEWARE": "ros2"},

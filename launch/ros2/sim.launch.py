@@ -12,7 +12,8 @@ import os
 import shlex
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, IncludeLaunchDescription, OpaqueFunction, Shutdown
+from launch.actions import (DeclareLaunchArgument, ExecuteProcess, GroupAction, IncludeLaunchDescription,
+                            OpaqueFunction, Shutdown)
 from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
@@ -53,16 +54,18 @@ def generate_launch_description():
         DeclareLaunchArgument("camera", default_value="tcp://127.0.0.1:9899", description="the camera's ZMQ endpoint"),
         DeclareLaunchArgument("server_port", default_value="44832", description="factory-state server UDP port"),
         OpaqueFunction(function=_raf_sim),
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "ros2", "bridge.launch.py"])),
-            launch_arguments={
-                "field": arg("field"),
-                "map_to_odom": arg("map_to_odom"),
-                "port": arg("port"),
-                "camera": arg("camera"),
-                "sim_control": ["127.0.0.1:", arg("control_port")],
-            }.items(),
-        ),
+        GroupAction(scoped=True, actions=[  # the include's arguments stay in it, as in roslaunch
+            IncludeLaunchDescription(
+                PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "ros2", "bridge.launch.py"])),
+                launch_arguments={
+                    "field": arg("field"),
+                    "map_to_odom": arg("map_to_odom"),
+                    "port": arg("port"),
+                    "camera": arg("camera"),
+                    "sim_control": ["127.0.0.1:", arg("control_port")],
+                }.items(),
+            ),
+        ]),
         Node(package="rviz2", executable="rviz2", name="rviz2", arguments=["-f", "map"], output="screen",
              condition=IfCondition(arg("rviz"))),
     ])
