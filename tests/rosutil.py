@@ -84,7 +84,7 @@ def test_node(name: str = "raf_test"):
             api = mw.api()
             if middleware() == "ros2":
                 node = api.init_node(name, argv=[sys.argv[0]], anonymous=True, signals=False)
-                _SPIN = threading.Thread(target=node.spin, name="raf-test-spin", daemon=True)
+                _SPIN = threading.Thread(target=_spin_ros2, args=(node,), name="raf-test-spin", daemon=True)
                 _SPIN.start()
                 atexit.register(_destroy_ros2_node, node)
             else:
@@ -100,6 +100,29 @@ def test_node(name: str = "raf_test"):
 test_node.__test__ = False  # not a pytest test
 
 
+SPIN_ERRORS: list[str] = []  # what the ROS 2 spin thread caught (a test may check it is empty)
+
+
+def _spin_ros2(node) -> None:
+    """Spin the test node until it shuts down. An error from one round (e.g. an entity destroyed by a test
+    while the executor was collecting it) is recorded and printed, and spinning goes on: the spin thread
+    must outlive every test of the process."""
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    ex = MultiThreadedExecutor(num_threads=4, context=node.node.context)
+    node.executor = ex
+    ex.add_node(node.node)
+    while node.ok():
+        try:
+            ex.spin_once(timeout_sec=0.1)
+        except ExternalShutdownException:
+            break
+        except Exception as e:  # noqa: BLE001 - see the docstring
+            SPIN_ERRORS.append(repr(e))
+            if len(SPIN_ERRORS) <= 5:
+                print(f"rosutil: the test node's spin caught {e!r}", file=sys.stderr, flush=True)
+
+
 def _destroy_ros2_node(node) -> None:
     """Stop the spin thread, destroy the node, shut rclpy down: a daemon thread still in rclpy at interpreter
     exit aborts Python."""
@@ -108,6 +131,9 @@ def _destroy_ros2_node(node) -> None:
     node.shutdown()
     if _SPIN is not None:
         _SPIN.join(5)
+    if SPIN_ERRORS:
+        print(f"rosutil: the test node's spin thread caught {len(SPIN_ERRORS)} error(s), the first: {SPIN_ERRORS[0]}",
+              file=sys.stderr, flush=True)
     node.destroy()
     rclpy.try_shutdown()
 
