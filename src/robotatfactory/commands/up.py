@@ -268,10 +268,10 @@ def run(args) -> int:
     if args.duration is not None and not args.duration > 0:
         raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
     rviz = _rviz_cmd(mw) if args.rviz else None
-    log_dir = Path(args.log_dir) if args.log_dir else Path(tempfile.mkdtemp(prefix="raf-up-"))
-    log_dir.mkdir(parents=True, exist_ok=True)
     ports = _ports(args.free_ports)
     env, graph, where = _graph(args, mw)
+    log_dir = Path(args.log_dir) if args.log_dir else Path(tempfile.mkdtemp(prefix="raf-up-"))
+    log_dir.mkdir(parents=True, exist_ok=True)
     children = Children(log_dir, env)
     raf = [sys.executable, "-m", "robotatfactory"]
 
