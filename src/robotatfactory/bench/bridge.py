@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import socket
 import subprocess
 import sys
@@ -61,6 +62,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--middlewares", default=None, metavar="ros1,ros2",
                         help="the middlewares to measure, one after the other (default: every one whose "
                              "environment exists: .venv for ros1, .venv-ros2 for ros2)")
+    parser.add_argument("--bridge-args", default="", metavar="ARGS",
+                        help="more arguments for raf bridge, one string, given with = (e.g. --bridge-args=--no-sim-time): "
+                             "to measure a variant; the results name them")
     parser.add_argument("--repeats", type=int, default=1,
                         help="rounds of measurements (default 1); figures are medians, the headline ones also "
                              "listed per run")
@@ -68,7 +72,7 @@ def add_arguments(parser) -> None:
 
 def _measure_options(args) -> list[str]:
     return ["--rate", str(args.rate), "--seconds", str(args.seconds), "--camera-seconds", str(args.camera_seconds),
-            "--camera-fps", str(args.camera_fps)]
+            "--camera-fps", str(args.camera_fps), f"--bridge-args={args.bridge_args or ''}"]
 
 
 def middlewares_to_measure(spec: str | None) -> list[str]:
@@ -192,7 +196,7 @@ def measure(args) -> dict:
     procs = Procs(tmp)
     try:
         procs.start("bridge", raf_cmd("bridge", "--port", str(port), "--camera", f"tcp://127.0.0.1:{cam_port}",
-                                      "--set", "watchdog/timeout=1000"), env)
+                                      "--set", "watchdog/timeout=1000", *shlex.split(args.bridge_args or "")), env)
         for what in ("odom", "image"):
             procs.start(f"sub_{what}", [sys.executable, "-m", "robotatfactory.bench._bridge_sub",
                                         str(tmp / f"sub_{what}.json"), what], env)
@@ -347,6 +351,7 @@ def measure(args) -> dict:
     p99 = ms(odom_lat["alone"], 99)
     return {
         "middleware": middleware(),
+        "bridge_args": args.bridge_args or "(none)",
         "graph_startup_s": startup_s,
         "sensor_frames_per_s": args.rate,
         "reply_rtt_median_ms": ms(rtt_by["alone"], 50),
