@@ -45,3 +45,16 @@ def pytest_generate_tests(metafunc):
     command runs the ``middlewares``-marked tests in both environments (scripts/bootstrap.sh test)."""
     if "middleware" in metafunc.fixturenames:
         metafunc.parametrize("middleware", _middlewares(), scope="session")
+
+
+@pytest.fixture(autouse=True)
+def _callbacks_of_the_test_node_did_not_raise():
+    """A callback that raises on rosutil's ROS 2 test node (a node under test run in this process, e.g. the
+    agent's) fails the test it happened in (rosutil's spin thread catches it so that later tests still hear)."""
+    ru = sys.modules.get("rosutil")
+    n0 = len(ru.SPIN_ERRORS) if ru is not None else 0
+    yield
+    ru = sys.modules.get("rosutil")
+    if ru is not None and len(ru.SPIN_ERRORS) > n0:
+        new = ru.SPIN_ERRORS[n0:]
+        pytest.fail(f"{len(new)} callback error(s) on the test node; the first:\n{new[0]}", pytrace=False)
