@@ -14,15 +14,20 @@ Events (``events``: list of (t, text)) say what it did: the task chosen, picked,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+
+import numpy as np
 
 from ..competition.parts import PartType
 from .delay import DelayEstimator, lanes_of
-from .docking import Docker
+from .docking import Docker, DockSettings
 from .follower import DriveLimits, PathFollower
 from .footprint import carrying_footprint, dock_distance, robot_footprint
-from .obstacles import FieldObstacles, PartObstacle
-from .planner import NoPath, PathPlanner
+from .obstacles import FieldObstacles, PartObstacle, square_polygon
+from .recovery import Relocalizer, StuckDetector, uncertainty_of
+from .hybrid import CarryPlanner, NoCarryPath
+from .planner import NoPath, Path, PathPlanner
+from .smooth import Piece, SmoothPath
 from .state import ZONES, FactoryState, SlotRef
 from .tasks import Done, Move, TaskPolicy, Wait
 
@@ -47,6 +52,11 @@ class AgentCounters:
     no_path: int = 0
     timeouts: int = 0
     stale_pose_cycles: int = 0
+    relocalizations: int = 0  # times it stopped to look at markers (the pose's uncertainty too large)
+    relocalize_timeouts: int = 0  # ... and went on after relocalize_timeout without the uncertainty shrinking
+    blocked: int = 0  # legs found stuck or timed out and re-planned around the spot
+    parts_lost: int = 0  # the contact switch released while carrying
+    replans_off_path: int = 0  # legs planned again because the robot was far off its path
 
 
 @dataclass
@@ -64,12 +74,27 @@ class RoundAgent:
     # arc no tighter than this (m; else a stop and a turn in place); any arc at least min_radius (m)
     # (measured over rounds 1-3 x 10 seeds: 0.04 / 0.1 / 0.02 / 0.06 cost 1.5-4 s a round for no gain; arcs
     # down to 0.035 m right before a place let the carried part graze ribs)
+    v_dock: float = DockSettings.v_dock  # m/s, the pick approach (contact stops it)
+    v_place: float = DockSettings.v_place  # m/s, the place approach (the part enters between ribs)
     place_straight: float = 0.03
+    place_standoff: float = 0.05  # m: a place's leg ends this much farther out (the docker settles on the normal)
     place_min_radius: float = 0.08
     pick_straight: float = 0.015
     pick_min_radius: float = 0.045
     min_radius: float = 0.045
-    smooth: bool = True  # paths with arcs, the last leg along the slot's normal (False: stop at every corner)
+    uncertainty_limit: float = 0.03  # m (position std) above which it stops to re-localize (with a std input)
+    heading_uncertainty_limit: float = 0.1  # rad
+    relocalize_timeout: float = 12.0  # s looking at markers before it goes on regardless
+    replans: int = 2  # re-plans of one leg around a blocked spot before the leg counts as failed
+    block_memory: float = 20.0  # s a blocked spot stays an obstacle
+    lost_cycles: int = 5  # cycles without contact while carrying = the part was lost
+    smooth: bool = True
+    # carrying: forward arcs of at least carry_radius m and straight reversing only, never a turn on the spot
+    # (SimTwo's magnet loses the part on the spot; the stand-in's default since 22 Nov 2026)
+    carry_arcs: bool = False
+    carry_radius: float = 0.3
+    carry_a_lat: float = 0.2  # m/s^2 on those arcs (the part slides sideways on the magnet's face)
+    carry_inflate: float = 0.015  # m around the loaded outline (the part swings on the face)  # paths with arcs, the last leg along the slot's normal (False: stop at every corner)
     events: list = field(default_factory=list)
     counters: AgentCounters = field(default_factory=AgentCounters)
 
@@ -80,7 +105,8 @@ class RoundAgent:
         self.policy = TaskPolicy.for_field(f)
         self.delays = DelayEstimator(lanes_of(f))
         self.follower = PathFollower(self.limits, self.dt)
-        self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part)
+        self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
+                             DockSettings(v_dock=self.v_dock, v_place=self.v_place))
         self.fp_empty = robot_footprint(r)
         self.fp_carry = carrying_footprint(r, f.part)
         self.d_dock = dock_distance(r, f.part)
@@ -96,11 +122,21 @@ class RoundAgent:
         self.path = None
         self._last_poll = -math.inf
         self.failures: dict[SlotRef, int] = {}  # failed tasks per source slot
+        self.place_failed: dict[SlotRef, int] = {}  # failed places per destination slot
         self._mode_t0 = 0.0
         self._budget = math.inf  # s the current leg may take before it is abandoned
         self._released_t: float | None = None  # when the magnet let go of the part being placed
         self._v = self._w = 0.0
         self.t = 0.0
+        self.relocalizer = Relocalizer(f, self._can_turn)
+        self.stuck = StuckDetector()
+        self.blocked_spots: list[tuple[float, float, float]] = []  # (x, y, until t)
+        self._resume: str | None = None  # the leg to re-plan after re-localizing
+        self._reloc_quiet_until = -math.inf
+        self._reloc_t0 = 0.0
+        self._calm = 0  # cycles with the uncertainty back below the limit
+        self._leg_replans = 0
+        self._no_contact = 0
 
     # ------------------------------------------------------------------------------------------ inputs
     @property
@@ -108,8 +144,8 @@ class RoundAgent:
         """What the robot is doing this cycle, for the time split (docs/agent.md): ``wait_start``,
         ``decide`` (deciding or waiting for a machine), ``drive`` (moving along a path, turning on the way
         included), ``turn`` (turning in place on a path), ``final_turn``, ``dock_approach``, ``dock_wait``
-        (magnet on/off, standing), ``dock_back`` (backing out), ``done``."""
-        if self.mode in ("wait_start", "decide", "done"):
+        (magnet on/off, standing), ``dock_back`` (backing out), ``relocalize`` (standing, looking at markers), ``done``."""
+        if self.mode in ("wait_start", "decide", "done", "relocalize"):
             return self.mode
         if self.mode in ("to_pick", "to_place"):
             ph = self.follower.phase
@@ -140,13 +176,35 @@ class RoundAgent:
             self.mode = "decide"
 
     # ------------------------------------------------------------------------------------------ cycle
-    def step(self, t: float, pose, contact: bool) -> AgentCommand:
+    def step(self, t: float, pose, contact: bool, uncertainty=None) -> AgentCommand:
+        """One control cycle: ``t`` (s), the pose estimate (x, y, theta) or None when stale, the contact
+        switch, and optionally the pose's uncertainty (:func:`~.recovery.uncertainty_of`: a position std
+        in m, (position m, heading rad), or a 3x3 / 6x6 covariance). Returns what to send."""
         self.t = float(t)
         if pose is None:  # stale estimate: brake and wait (the caller decides what is stale)
             self.counters.stale_pose_cycles += 1
             return self._brake()
         if self.mode in ("wait_start", "done"):
             return self._brake()
+        unc = uncertainty_of(uncertainty)
+        uncertain = unc is not None and (unc[0] > self.uncertainty_limit or unc[1] > self.heading_uncertainty_limit)
+        if self.mode == "relocalize":
+            return self._relocalize(pose, unc)
+        if uncertain and self.mode in ("to_pick", "to_place") and self.t >= self._reloc_quiet_until:
+            self.counters.relocalizations += 1
+            self._event(self.t, f"pose uncertain ({unc[0] * 1000:.0f} mm, {unc[1]:.2f} rad): stopping to look at "
+                                "markers")
+            self._resume, self.mode = self.mode, "relocalize"
+            self._reloc_t0, self._calm = self.t, 0
+            self.follower.stop()
+            self.relocalizer.start(pose)
+            return self._brake()
+        if self.mode == "to_place" and self.carrying is not None:
+            # the contact switch stays pressed while a part hangs on the magnet
+            self._no_contact = 0 if contact else self._no_contact + 1
+            if self._no_contact >= self.lost_cycles:
+                self._part_lost()
+                return self._brake()
         if self.mode == "decide":
             if self.state_time < self.need_state_after:
                 return self._brake()
@@ -154,13 +212,27 @@ class RoundAgent:
             if self.mode == "decide" or self.mode == "done":
                 return self._brake()
         if self.mode in ("to_pick", "to_place") and self.t - self._mode_t0 > self._budget:
-            self._timeout(f"{self.mode.replace('_', ' ')} {self.target} took more than {self._budget:.0f} s")
+            if self._leg_replans < self.replans:
+                self._blocked(pose, f"took more than {self._budget:.0f} s")
+            else:
+                self._timeout(f"{self.mode.replace('_', ' ')} {self.target} took more than {self._budget:.0f} s")
             return self._brake()
         if self.mode in ("pick", "place") and self.t - self._mode_t0 > self.dock_timeout \
                 and self.docker.phase not in ("back", "done", "failed"):
             self.docker.abort(pose)  # back out first, then the failure comes through the docker
         if self.mode in ("to_pick", "to_place"):
+            if self.stuck.update(self.t, pose, self._v, self._w):
+                if self._leg_replans < self.replans:
+                    self._blocked(pose, "stuck")
+                else:
+                    self._timeout(f"{self.mode.replace('_', ' ')} {self.target}: stuck after {self.replans} re-plans")
+                return self._brake()
             o = self.follower.step(pose)
+            if o.off_path:  # far off the path (a slip, a push): plan again from here
+                self._event(self.t, f"{o.off_path * 100:.0f} cm off the path: re-planning")
+                self.counters.replans_off_path += 1
+                self._go(self.mode, pose)
+                return self._brake()
             if o.done:
                 self._start_dock(pose)
             return self._cmd(o.v, o.w)
@@ -180,10 +252,11 @@ class RoundAgent:
     def _decide(self, pose) -> None:
         st = self.state
         if self.carrying is not None:  # a place failed or the destination changed: find a new one
-            dest = self.policy.destinations(st, self.carrying)
+            dest = self._usable(self.policy.destinations(st, self.carrying))
             if not dest:
                 return  # hold the part until a destination is free (re-polled every state_period)
             self.target = dest[0]
+            self._leg_replans = 0
             self._go("to_place", pose)
             return
         ready = {ln.input: self.delays.expected_ready(ln.input) for ln in self.delays.lanes}
@@ -200,7 +273,13 @@ class RoundAgent:
             return  # stay, poll again
         self.target = task.source
         self.attempts = 0
+        self._leg_replans = 0
         self._go("to_pick", pose)
+
+    def _usable(self, dest: list) -> list:
+        """Destinations without ``give_up_after`` - 1 failed places (else all: a slot is better than none)."""
+        ok = [d for d in dest if self.place_failed.get(d, 0) < self.give_up_after - 1]
+        return ok or dest
 
     def _obstacles(self, exclude: SlotRef | None = None) -> FieldObstacles:
         parts = []
@@ -209,14 +288,80 @@ class RoundAgent:
                 if p is not None and SlotRef(zone, n) != exclude:
                     s = self.field.slot(zone, n)
                     parts.append(PartObstacle(*s.xy, s.facing))
-        return FieldObstacles(self.field, parts)
+        self.blocked_spots = [b for b in self.blocked_spots if b[2] > self.t]
+        return FieldObstacles(self.field, parts, extra=[square_polygon(x, y, 0.06) for x, y, _ in self.blocked_spots])
+
+    def _can_turn(self, pose) -> bool:
+        """The exact outline (carrying or not, 5 mm margin) at ``pose`` touches nothing."""
+        fp = self.fp_carry if self.carrying is not None else self.fp_empty
+        if getattr(self, "_turn_obstacles", None) is None or self._turn_obstacles[0] != self.state_time:
+            self._turn_obstacles = (self.state_time, self._obstacles() if self.state is not None else
+                                    FieldObstacles(self.field, []))
+        return not self._turn_obstacles[1].collides(fp.inflated(0.005), pose)
+
+    def _relocalize(self, pose, unc) -> AgentCommand:
+        """Standing still, turn towards markers until the uncertainty is back below 60 % of the limits for
+        5 cycles, or relocalize_timeout; then re-plan the interrupted leg from here."""
+        calm = unc is None or (unc[0] <= 0.6 * self.uncertainty_limit and unc[1] <= 0.6 * self.heading_uncertainty_limit)
+        self._calm = self._calm + 1 if calm else 0
+        timed_out = self.t - self._reloc_t0 > self.relocalize_timeout
+        if self._calm >= 5 or timed_out:
+            if timed_out:  # go on driving (new views of markers) for as long before looking again
+                self._reloc_quiet_until = self.t + self.relocalize_timeout
+                self.counters.relocalize_timeouts += 1
+                self._event(self.t, f"re-localizing took more than {self.relocalize_timeout:.0f} s: going on")
+            else:
+                self._event(self.t, f"pose certain again after {self.t - self._reloc_t0:.1f} s")
+            mode, self._resume = self._resume or "decide", None
+            if mode in ("to_pick", "to_place"):
+                self._go(mode, pose)
+            else:
+                self.mode, self.need_state_after = "decide", self.t
+            return self._brake()
+        if abs(self._v) > 1e-9:  # stop first
+            return self._brake()
+        w = self.relocalizer.step(pose, self.dt) if self.carrying is None else 0.0  # no spin with a part on
+        al = self.limits.alpha_max * self.dt
+        self._w += max(-al, min(al, w - self._w))
+        return self._cmd(0.0, self._w)
+
+    def _blocked(self, pose, why: str) -> None:
+        """Something the map lacks blocks the leg: remember the spot ahead of the robot as an obstacle for
+        block_memory s and re-plan the leg around it (at most ``replans`` times per leg)."""
+        self._leg_replans += 1
+        self.counters.blocked += 1
+        fp = self.fp_carry if self.carrying is not None else self.fp_empty
+        ahead = (fp.front + 0.03) if self._v >= 0 else (fp.back - 0.03)
+        x = pose[0] + ahead * math.cos(pose[2])
+        y = pose[1] + ahead * math.sin(pose[2])
+        self.blocked_spots.append((x, y, self.t + self.block_memory))
+        self._event(self.t, f"blocked ({why}) near ({x:.2f}, {y:.2f}): re-planning around it")
+        self.follower.stop()
+        self._go(self.mode, pose)
+
+    def _part_lost(self) -> None:
+        self.counters.parts_lost += 1
+        self._event(self.t, f"lost the {self.carrying.label} part on the way to {self.target}")
+        self.carrying = None
+        self.magnet = False
+        self._no_contact = 0
+        self.follower.stop()
+        self.mode, self.need_state_after = "decide", self.t
 
     def _go(self, mode: str, pose) -> None:
         fp = self.fp_carry if self.carrying is not None else self.fp_empty
         slot = self.field.slot(self.target.zone, self.target.number)
         pl = PathPlanner(self._obstacles())
+        self.follower.limits = self.limits
+        if self.carrying is not None and self.carry_arcs and self._go_carrying(mode, pose, pl, slot):
+            return
         try:
             goal = pl.approach_pose(slot, self.d_dock, fp)
+            if self.carrying is not None and self.place_standoff > 0:  # room to settle on the normal
+                g2 = (goal[0] - self.place_standoff * math.cos(goal[2]),
+                      goal[1] - self.place_standoff * math.sin(goal[2]), goal[2])
+                if pl.is_free(g2[:2], fp):
+                    goal = g2
             if self.smooth:  # the last leg along the slot's normal: docking follows on at speed
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp)
             else:
@@ -238,8 +383,64 @@ class RoundAgent:
             self.follower.start(path.points, final_heading=goal[2])
         self.mode = mode
         self._mode_t0 = self.t
+        self.stuck.reset()
+        self._no_contact = 0
         lim = self.limits  # generous: three times the straight-line time, plus every turn and 10 s
         self._budget = 10.0 + 3.0 * path.length / lim.v_max + len(path.points) * math.pi / lim.w_max * 2
+
+    def _go_carrying(self, mode: str, pose, pl: PathPlanner, slot) -> bool:
+        """The leg to a place on arcs only (:mod:`.hybrid`): to a point on the slot's normal, then straight to
+        the approach pose and on into the place at speed. False when no such path is found (the caller
+        plans the usual path, with turns on the spot)."""
+        fp = self.fp_carry
+        try:
+            goal = pl.approach_pose(slot, self.d_dock, fp)
+        except NoPath:
+            return False
+        cp = CarryPlanner(pl.obstacles, fp, radius=self.carry_radius, max_expansions=5000,
+                          inflate=self.carry_inflate)
+        bx, by = -math.cos(goal[2]), -math.sin(goal[2])
+        sp = None
+        err = NoCarryPath("no straight line along the normal is clear")
+        for d in (0.12, 0.06, 0.0):  # a straight line along the normal before the approach pose, if it can
+            target = (goal[0] + d * bx, goal[1] + d * by, goal[2]) if d > 0 else goal
+            if d > 0 and not all(cp.free(goal[0] + u * d * bx, goal[1] + u * d * by, goal[2])
+                                 for u in np.linspace(0, 1, 6)):
+                continue
+            try:
+                sp = cp.plan(tuple(pose), target)
+                break
+            except NoCarryPath as e:
+                err = e
+        if sp is None:
+            self._event(self.t, f"{err}: turning on the spot instead")
+            return False
+        if d == 0.0:
+            target = goal
+        if target is not goal:  # the straight line on to the approach pose: forwards, along the normal
+            last = sp.pieces[-1]
+            n = max(2, int(math.hypot(goal[0] - target[0], goal[1] - target[1]) / 0.01) + 1)
+            line = np.linspace(last.xy[-1], goal[:2], n)
+            h = math.atan2(goal[1] - line[0][1], goal[0] - line[0][0])
+            if last.reverse:  # the search ended backing up: a stop, then a forward piece
+                ss = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+                sp = SmoothPath(sp.pieces + (Piece(line, ss, np.full(n, h), np.zeros(n)),))
+            else:
+                xy = np.concatenate([last.xy, line[1:]])
+                ss = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+                psi = np.concatenate([last.psi, np.full(n - 1, h)])
+                piece = Piece(xy, ss, psi, np.concatenate([last.kappa, np.zeros(n - 1)]))
+                sp = SmoothPath(sp.pieces[:-1] + (piece,))
+        self.path = Path(tuple((float(x), float(y)) for x, y in sp.points[::5]) + (tuple(map(float, goal[:2])),),
+                         fp.radius)
+        self.follower.limits = replace(self.limits, a_lat=self.carry_a_lat)  # gentle arcs: the part slides
+        self.follower.start(sp, final_heading=None, end_speed=self.docker.entry_speed("place"), no_spin=True)
+        self.mode = mode
+        self._mode_t0 = self.t
+        self.stuck.reset()
+        self._no_contact = 0
+        self._budget = 10.0 + 3.0 * sp.length / self.limits.v_max + 2.0 * len(sp.pieces)
+        return True
 
     def _retreat(self, carrying: bool) -> float:
         """Distance from the slot centre to back out to (m): the approach distance of the footprint the
@@ -247,8 +448,11 @@ class RoundAgent:
         slot = self.field.slot(self.target.zone, self.target.number)
         fp = self.fp_carry if carrying else self.fp_empty
         pl = PathPlanner(self._obstacles(exclude=self.target))
-        x, y, _ = pl.approach_pose(slot, self.d_dock, fp)
-        d = math.hypot(x - slot.xy[0], y - slot.xy[1])
+        try:
+            x, y, _ = pl.approach_pose(slot, self.d_dock, fp)
+            d = math.hypot(x - slot.xy[0], y - slot.xy[1])
+        except NoPath:  # (a remembered blocked spot in front of the slot): the turning circle's distance
+            d = self.d_dock + fp.radius - fp.front + 0.02
         if slot.role == "input":  # a machine starts only once base_link is 0.17 m from its input
             d = max(d, MACHINE_CLEARANCE)
         return d
@@ -274,12 +478,13 @@ class RoundAgent:
             self._event(self.t, f"picked the {self.carrying.label} part from {self.target}")
             self.state = self.state.with_slot(self.task.source, None)  # expected until the server says
             self.target = self.task.target
-            dest = self.policy.destinations(self.state.with_slot(self.task.source, None), self.carrying)
+            dest = self._usable(self.policy.destinations(self.state.with_slot(self.task.source, None), self.carrying))
             if self.target not in dest:  # the planned place was taken meanwhile
                 self.target = dest[0] if dest else None
             if self.target is None:
                 self.mode, self.need_state_after = "decide", self.t
                 return
+            self._leg_replans = 0
             self._go("to_place", pose)
             return
         self.counters.places += 1
@@ -312,6 +517,7 @@ class RoundAgent:
                 return
         else:
             self.counters.place_failures += 1
+            self.place_failed[self.target] = self.place_failed.get(self.target, 0) + 1
             if reason == "still_held":
                 self.magnet = False
         self.carrying = None if self.mode == "pick" else self.carrying

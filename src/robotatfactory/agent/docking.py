@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 
 from .follower import DriveLimits, PathFollower
 from .footprint import HOLD_GAP, PLATE_THICKNESS, pose_in_front
+from .recovery import StuckDetector
 
 
 @dataclass(frozen=True)
@@ -31,7 +32,7 @@ class DockSettings:
     """Speeds (m/s), distances (m), times (s) of the final approach."""
 
     v_dock: float = 0.1  # pick approach (the contact switch stops it; braking from there takes ~6 mm)
-    v_place: float = 0.2  # place approach (to a pose, no contact needed)
+    v_place: float = 0.12  # place approach (to a pose, no contact needed; the part enters between ribs)
     overshoot: float = 0.01  # m past the dock pose the pick approach aims at (the contact stops it first)
     gap: float = 0.003  # m between the magnet face and the plate at the nominal dock pose
     settle: float = 0.1  # s standing still with the magnet switched on/off
@@ -48,7 +49,7 @@ class DockOutput:
     magnet: bool
     phase: str  # approach, grip, release, back, done, failed
     done: bool = False
-    failed: str | None = None  # no_contact, part_lost, still_held
+    failed: str | None = None  # no_contact, part_lost, still_held, blocked, timeout
 
 
 class Docker:
@@ -73,6 +74,8 @@ class Docker:
         self._slot = None
         self._retreat = 0.0
         self._failing: str | None = None
+        self.stuck = StuckDetector(window=1.0, min_command=0.03, min_motion=0.008, min_rotation=0.03)
+        self._steps = 0
 
     # ------------------------------------------------------------------------------------------ geometry
     def dock_distance(self) -> float:
@@ -102,14 +105,17 @@ class Docker:
     def _begin(self, mode: str, slot, pose, retreat: float, distance: float, v0: float = 0.0) -> None:
         self.mode, self._slot, self._retreat = mode, slot, float(retreat)
         self._failing = None
+        self.stuck.reset()
+        self._steps = 0
         target = pose_in_front(slot, distance)
         self.follower.limits = self.approach_limits if mode == "pick" else self.place_limits
         # from the point of the slot's normal nearest the robot: the approach follows the normal
         start = self._on_normal(pose)
-        self.follower.start([start, target[:2]], final_heading=None)
+        carrying = mode == "place"  # a part on the magnet: steer while driving, never turn on the spot
+        self.follower.start([start, target[:2]], final_heading=None, no_spin=carrying)
         self.follower.v = max(0.0, min(float(v0), self.follower.limits.v_max))
         aligned = abs(math.remainder(pose[2] - target[2], 2 * math.pi)) < 0.1
-        self.follower.phase = "drive" if aligned else "turn"  # turning: it brakes first, then turns in place
+        self.follower.phase = "drive" if aligned or carrying else "turn"  # turning: it brakes, then turns in place
         self.phase = "approach"
 
     def _on_normal(self, pose, ahead: float = 0.01) -> tuple[float, float]:
@@ -124,6 +130,10 @@ class Docker:
     def step(self, pose, contact: bool) -> DockOutput:
         """One control cycle from the pose estimate and the contact switch."""
         if self.phase == "approach":
+            if self.stuck.update(self._steps * self.dt, pose, self.follower.v, 0.0):
+                self.abort(pose, "blocked")  # driving, not moving: something is in the way (a rib, a part)
+                return self._out(0.0, 0.0)
+            self._steps += 1
             out = self.follower.step(pose)
             if self.mode == "pick" and contact:
                 self.follower.stop()  # brake within the limits (a few mm at v_dock), magnet on at once
@@ -177,7 +187,8 @@ class Docker:
         back = pose_in_front(self._slot, self._retreat)
         self.follower.limits = self.back_limits
         # along the slot's normal, from the point of it nearest the robot (a lateral error is steered out)
-        self.follower.start([self._on_normal(pose, 0.0), back[:2]], reverse=True)
+        self.follower.start([self._on_normal(pose, 0.0), back[:2]], reverse=True,
+                            no_spin=self.magnet)  # backing out with the part: straight, no turn on the spot
         self.follower.phase = "drive"
         self.phase = "back"
 

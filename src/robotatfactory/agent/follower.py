@@ -43,12 +43,18 @@ class DriveLimits:
     slow_distance: float = 0.05  # docking approaches slowly anyway (0.2 m: +15 s in round 1)
     heading_tolerance: float = 0.2
     lookahead: float = 0.12
-    k_heading: float = 8.0  # 1/s: w = k_heading * heading error, within the limits (4: slow tails of turns)
+    k_heading: float = 8.0  # 1/s: turning on the spot, w = k_heading * heading error, within the limits
+    # 1/s: driving, w = v kappa + k_drive * heading error (8 oscillates with a pose one cycle late: the place
+    # approach then jams the part between ribs; measured rounds 1-3, docs/agent.md)
+    k_drive: float = 4.0
     position_tolerance: float = 0.005  # m: the end is reached within this distance along the path
     heading_goal_tolerance: float = 0.015  # rad: the final heading is reached within this
     v_wheel: float = 0.46  # m/s at either wheel's rim (from_robot: the same fraction of the top speed)
     a_lat: float = 1.0  # m/s^2 lateral acceleration on arcs
     half_track: float = 0.0675  # m, half the wheel track (the wheel-speed limit on arcs)
+    spin_curvature: float = 6.0  # 1/m: with no_spin, |w| <= this x v + spin_slack (rad/s)
+    spin_slack: float = 0.15
+    max_off_path: float = 0.1  # m: farther from the path the follower stops and says so (off_path)
     ff_lead: float = 2.0  # control cycles the curvature feed-forward reads ahead (the wheels' response delay)
 
     @classmethod
@@ -77,6 +83,7 @@ class FollowerOutput:
     cross_track: float  # signed distance to the path, left positive
     heading_error: float  # to the aim point (or the final heading), rad
     remaining: float  # path length left (m)
+    off_path: float = 0.0  # m from the path when more than max_off_path (the robot stopped following), else 0
 
 
 class PathFollower:
@@ -89,12 +96,14 @@ class PathFollower:
         self.final_heading: float | None = None
         self.reverse = False
         self.end_speed = 0.0
+        self.no_spin = False
         self.k = 0
         self.v = 0.0
         self.w = 0.0
         self.phase = "done"
         self._s = 0.0
         self._i = 0
+        self._dist = 0.0
         self._prof: list[np.ndarray] = []
 
     @property
@@ -102,17 +111,20 @@ class PathFollower:
         return self.path.points
 
     def start(self, path, final_heading: float | None = None, reverse: bool = False,
-              end_speed: float = 0.0) -> None:
+              end_speed: float = 0.0, no_spin: bool = False) -> None:
         """A new path: a :class:`SmoothPath` or (x, y) waypoints (m; the first is where the robot is).
         ``end_speed`` (m/s) > 0: the path ends without stopping (no final heading then), ``done`` is
-        reported when its end is passed. The commanded speeds carry over (no jump when a path replaces
-        another while moving)."""
+        reported when its end is passed. ``no_spin``: never turn on the spot (carrying a part on SimTwo's
+        magnet): the turn rate stays within ``spin_curvature`` times the speed, plus the feedback's
+        ``spin_slack``; the path's pieces must start along the robot's heading (:mod:`.hybrid`). The
+        commanded speeds carry over (no jump when a path replaces another while moving)."""
         if not isinstance(path, SmoothPath):
             path = smooth_path(path)
         self.path = path
         self.final_heading = final_heading
         self.reverse = reverse
         self.end_speed = float(end_speed)
+        self.no_spin = bool(no_spin)
         self.k = 0
         self._s, self._i = 0.0, 0
         self._prof = [self._profile(p, last=(j == len(path.pieces) - 1)) for j, p in enumerate(path.pieces)]
@@ -120,7 +132,7 @@ class PathFollower:
         if total <= 1e-9:
             self.phase = "final_turn" if final_heading is not None else "done"
         else:
-            self.phase = "turn"
+            self.phase = "drive" if no_spin else "turn"
             while self.path.pieces[self.k].length <= 1e-9 and self.k < len(self.path.pieces) - 1:
                 self.k += 1
 
@@ -171,6 +183,7 @@ class PathFollower:
         xy = p.xy
         n = len(xy)
         if n == 1:
+            self._dist = float(math.hypot(x - xy[0, 0], y - xy[0, 1]))
             return 0.0, 0.0
         i0 = max(self._i - 2, 0)
         i1 = min(n - 1, self._i + 40)
@@ -190,32 +203,39 @@ class PathFollower:
         _, _, psi, _ = p.at(min(s, p.length))
         qx, qy, _, _ = p.at(min(max(s, 0.0), p.length))
         cross = -(x - qx) * math.sin(psi) + (y - qy) * math.cos(psi)
+        self._dist = float(np.min(dist))
         if s > p.length:
             ex, ey = xy[-1]
             cross = -(x - ex) * math.sin(psi) + (y - ey) * math.cos(psi)
+            self._dist = abs(cross)
         return s, float(cross)
 
     def step(self, pose) -> FollowerOutput:
         """One control cycle from the pose estimate (x, y, theta); returns the command to send."""
         L = self.limits
         x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
-        if self.reverse:
+        pieces = self.path.pieces
+        rev = self.reverse != (bool(pieces[self.k].reverse) if pieces and self.k < len(pieces) else False)
+        if rev:
             th = wrap(th + math.pi)  # drive the back first: the follower works on the flipped heading
         cross = herr = 0.0
         remaining = 0.0
         v_t = w_t = 0.0
-        pieces = self.path.pieces
         passed_end = False
         if self.phase in ("turn", "drive") and pieces:
             p = pieces[self.k]
             s, cross = self._project(p, x, y)
+            if self._dist > L.max_off_path:  # lost the path: stop following it, the caller re-plans
+                self.stop()
+                return FollowerOutput(-self.v if rev else self.v, self.w, False, "done", self.k, cross, 0.0, 0.0,
+                                      off_path=self._dist)
             to_end = p.length - s
             last = self.k == len(pieces) - 1
             remaining = max(to_end, 0.0) + sum(q.length for q in pieces[self.k + 1:])
             if to_end <= L.position_tolerance and not last and self.v == 0.0:
-                self.k += 1  # stopped at a corner: the next piece starts with a turn in place
+                self.k += 1  # stopped at a corner (a turn in place next) or a change of direction
                 self._i = 0
-                self.phase = "turn"
+                self.phase = "drive" if self.no_spin else "turn"
                 return self.step(pose)
             if last and (to_end <= L.position_tolerance or (self.end_speed > 0.0 and to_end <= self.v * self.dt / 2)):
                 if self.end_speed > 0.0:
@@ -230,8 +250,8 @@ class PathFollower:
                 if self.phase == "turn" and abs(herr) <= L.heading_tolerance / 2:
                     self.phase = "drive"
                 # driving, only a heading far off the path's stops it (the cross-track aim alone does not)
-                if abs(herr) > L.heading_tolerance and (self.phase == "turn" or self.v == 0.0
-                                                        or abs(wrap(psi - th)) > 2 * L.heading_tolerance):
+                if abs(herr) > L.heading_tolerance and not self.no_spin and (
+                        self.phase == "turn" or self.v == 0.0 or abs(wrap(psi - th)) > 2 * L.heading_tolerance):
                     self.phase = "turn"
                 if self.phase == "drive":
                     prof = self._prof[self.k]
@@ -244,10 +264,13 @@ class PathFollower:
                     v_ff = max(self.v, 0.0)
                     w_t = v_ff * kap + self._turn_rate(herr, drive=True)
                     w_t = max(-L.w_max, min(L.w_max, w_t))
+                    if self.no_spin:  # turning only as much as the speed allows: an arc, never a spin
+                        cap = L.spin_curvature * max(self.v, v_t) + L.spin_slack
+                        w_t = max(-cap, min(cap, w_t))
                 elif self.v == 0.0:  # turning in place only once stopped
                     w_t = self._turn_rate(herr)
         if self.phase == "final_turn":
-            target = self.final_heading if not self.reverse else wrap(self.final_heading + math.pi)
+            target = self.final_heading if not rev else wrap(self.final_heading + math.pi)
             herr = wrap(target - th)
             if abs(herr) <= L.heading_goal_tolerance and abs(self.w) <= L.alpha_max * self.dt:
                 self.phase = "done"
@@ -261,7 +284,7 @@ class PathFollower:
         self.w += max(-dw, min(dw, w_t - self.w))
         if self.phase == "done" and not passed_end and abs(self.v) < 1e-9 and abs(self.w) < 1e-9:
             self.v = self.w = 0.0
-        v_out = -self.v if self.reverse else self.v
+        v_out = -self.v if rev else self.v
         done = self.phase == "done" and (passed_end or (self.v == 0.0 and self.w == 0.0))
         return FollowerOutput(v_out, self.w, done, self.phase, self.k, cross, herr, remaining)
 
@@ -284,7 +307,7 @@ class PathFollower:
     def _turn_rate(self, err: float, drive: bool = False) -> float:
         L = self.limits
         if drive:  # a correction on top of the feed-forward
-            return math.copysign(min(L.w_max, L.k_heading * abs(err)), err)
+            return math.copysign(min(L.w_max, L.k_drive * abs(err)), err)
         # braking-distance limited so an in-place turn stops on the heading
         cap = min(L.w_max, math.sqrt(2 * L.alpha_max * abs(err)), L.k_heading * abs(err) + 0.05)
         return math.copysign(cap, err) if abs(err) > 1e-4 else 0.0

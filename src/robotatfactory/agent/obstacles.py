@@ -39,6 +39,11 @@ def _rect_polygon(cx: float, cy: float, sx: float, sy: float, yaw: float) -> np.
     return local @ np.array([[c, s], [-s, c]]) + (cx, cy)
 
 
+def square_polygon(x: float, y: float, side: float) -> np.ndarray:
+    """4x2 corners of an axis-aligned square of ``side`` m centred at (x, y): a spot to keep away from."""
+    return _rect_polygon(x, y, side, side, 0.0)
+
+
 def part_polygon(part_spec, p: PartObstacle) -> np.ndarray:
     """4x2 corners of a standing part (body plus plate), field frame."""
     d = float(part_spec.depth) + PLATE_THICKNESS
@@ -64,12 +69,13 @@ class FieldObstacles:
     """Obstacles of one field plus the parts given; exact checks and the clearance grid."""
 
     def __init__(self, field, parts: tuple[PartObstacle, ...] | list[PartObstacle] = (), resolution: float = 0.01,
-                 floor_overhang: float = 0.02):
+                 floor_overhang: float = 0.02, extra=()):
         self.field = field
         self.parts = tuple(parts)
         self.resolution = res = float(resolution)
         self.polygons: list[np.ndarray] = [b.footprint() for b in field.boxes]
         self.polygons += [part_polygon(field.part, p) for p in self.parts]
+        self.polygons += [np.asarray(e, dtype=float).reshape(-1, 2) for e in extra]  # convex, e.g. a blocked spot
         self._centres = np.array([poly.mean(axis=0) for poly in self.polygons])
         self._radii = np.array([np.max(np.hypot(*(poly - poly.mean(axis=0)).T)) for poly in self.polygons])
         o = float(floor_overhang)

@@ -29,8 +29,9 @@ class Piece:
 
     xy: np.ndarray
     s: np.ndarray
-    psi: np.ndarray
-    kappa: np.ndarray
+    psi: np.ndarray  # the direction of motion (the robot's heading + pi on a piece driven backwards)
+    kappa: np.ndarray  # of the motion's direction, per metre
+    reverse: bool = False  # driven backwards (the robot's back first)
 
     @property
     def length(self) -> float:

@@ -49,8 +49,9 @@ for _m in MODES:
         TARGETS[f"{_m}_r{_r}_false_starts"] = "== 0"
         TARGETS[f"{_m}_r{_r}_parts_pushed"] = "== 0"
 AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
-                  "uncertainty_limit")
-DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "slow_distance", "lookahead", "heading_tolerance", "w_max",
+                  "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock", "v_place",
+                  "place_standoff")
+DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "k_drive", "a_lat", "v_wheel", "slow_distance", "lookahead", "heading_tolerance", "w_max",
                   "alpha_max", "v_final")
 
 
@@ -73,9 +74,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
                         help="a SimConfig setting of the bare stand-in (repeatable), e.g. magnet=weld where the "
                              "simulator has that option; the default is the simulator's own default")
+    parser.add_argument("--pose-noise", default="0,0", metavar="M,RAD",
+                        help="bare_truth: white noise (standard deviations, m and rad) added to the agent's pose "
+                             "every cycle, e.g. 0.003,0.02 (default 0,0)")
+    parser.add_argument("--pose-delay", type=int, default=0, metavar="CYCLES",
+                        help="bare_truth: the agent's pose this many control cycles late (default 0)")
     parser.add_argument("--agent", metavar="NAME=VALUE", action="append", default=[],
                         help="a RoundAgent setting (repeatable; one of " + ", ".join(AGENT_SETTINGS)
-                             + "; smooth=0: stop and turn at every corner, the earlier behaviour)")
+                             + "; smooth=0: stop and turn at every corner, the earlier behaviour; carry_arcs=0: turn on the spot "
+                             "with a part too)")
 
 
 def parse_agent(items) -> dict:
@@ -89,7 +96,7 @@ def parse_agent(items) -> dict:
         if not sep or name not in AGENT_SETTINGS:
             raise ConfigError(f"--agent {item!r}: expected NAME=VALUE with NAME one of {', '.join(AGENT_SETTINGS)}")
         try:
-            out[name] = bool(int(value)) if name == "smooth" else float(value)
+            out[name] = bool(int(value)) if name in ("smooth", "carry_arcs") else float(value)
         except ValueError:
             raise ConfigError(f"--agent {item!r}: {value!r} is not a number") from None
     return out
@@ -134,7 +141,8 @@ def parse_drive(items) -> dict:
 
 def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | None = None,
                field_name: str | None = None, record_path: bool = False, agent_options: dict | None = None,
-               sim_options: dict | None = None) -> dict:
+               sim_options: dict | None = None, pose_noise: tuple[float, float] = (0.0, 0.0),
+               pose_delay: int = 0) -> dict:
     """One round on the bare stand-in with ground truth as the agent's pose; a flat dict of the run's
     figures (plus ``path`` [(t, x, y)] and ``events`` [(t, text, x, y)] when ``record_path``)."""
     from ..agent.behaviour import RoundAgent
@@ -167,6 +175,19 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     last_xy = {}
     odo = DiffDriveOdometry(robot)
     odo.reset(baseline=(0, 0), t=0.0)
+    # the pose the agent gets: ground truth, optionally with white noise (m, rad) and late by whole cycles (a
+    # stand-in for the EKF's error and the transport; docs/agent.md measured 0.6 mm median, 8.6 mm 95th pct.)
+    rng = __import__("random").Random(seed * 7919 + round_no)
+    late = []
+
+    def pose_in(p):
+        late.append(tuple(p))
+        q = late.pop(0) if len(late) > pose_delay else late[0]
+        if pose_noise[0] or pose_noise[1]:
+            q = (q[0] + rng.gauss(0.0, pose_noise[0]), q[1] + rng.gauss(0.0, pose_noise[0]),
+                 q[2] + rng.gauss(0.0, pose_noise[1]))
+        return q
+
     split: dict[str, float] = {}  # s per agent activity (RoundAgent.activity)
     slip = []  # per second: |odometry's relative motion - the truth's| (m, rad) and the truth's length (m)
     prev = None
@@ -180,7 +201,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                     st = client.poll_state()
                     if st is not None:
                         agent.on_state(st, sim.time)
-                c = agent.step(sim.time, sim.pose, contact)
+                c = agent.step(sim.time, pose_in(sim.pose), contact)
                 act = agent.activity
                 split[act] = split.get(act, 0.0) + robot.control_period
                 if not sim.factory.started and (c.v or c.w or c.magnet):
@@ -323,9 +344,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, timeout: flo
 
 
 def _job(spec):
-    round_no, seed, limit, drive, field_name, record, agent_options, sim_options = spec
+    round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay = spec
     try:
-        return play_round(round_no, seed, limit, drive, field_name, record, agent_options, sim_options)
+        return play_round(round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay)
     except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
         return {"round": round_no, "seed": seed, "error": f"{type(e).__name__}: {e}", "max_score": False,
                 "points": 0, "max_points": -1, "last_score_s": math.nan, "notes": [], "false_start": False,
@@ -501,15 +522,23 @@ def run(args, out_dir: Path | None) -> dict:
     first = int(args.first_seed)
     agent_options = parse_agent(getattr(args, "agent", None))
     sim_options = parse_sim(getattr(args, "sim", None))
+    try:
+        noise = tuple(float(x) for x in str(getattr(args, "pose_noise", "0,0")).split(","))
+        assert len(noise) == 2 and min(noise) >= 0.0
+    except (ValueError, AssertionError):
+        raise ConfigError(f"--pose-noise {args.pose_noise!r}: expected M,RAD (two non-negative numbers)") from None
+    delay = int(getattr(args, "pose_delay", 0))
+    if delay < 0:
+        raise ConfigError("--pose-delay must be >= 0")
     specs = [(r, s, float(args.limit), drive, field_name, out_dir is not None and s == first, agent_options,
-              sim_options)
+              sim_options, noise, delay)
              for r in rounds for s in range(first, first + args.seeds)]
     t0 = time.perf_counter()
     jobs = max(1, int(args.jobs))
     if mode == "full_stack":  # realtime and camera-heavy: one at a time
-        if drive or agent_options or sim_options:
-            raise ConfigError("--drive, --agent and --sim are not passed to the whole stack (full_stack): the nodes "
-                              "use their defaults")
+        if drive or agent_options or sim_options or any(noise) or delay:
+            raise ConfigError("--drive, --agent, --sim, --pose-noise and --pose-delay are not passed to the whole "
+                              "stack (full_stack): the nodes use their defaults and the EKF's pose")
         runs = [play_full_stack(r, s, out_dir) for r, s, *_ in specs]
         jobs = 1
     elif jobs == 1 or len(specs) == 1:
@@ -526,6 +555,8 @@ def run(args, out_dir: Path | None) -> dict:
     out["drive_settings"] = json.dumps(drive) if drive else "defaults"
     out["agent_settings"] = json.dumps(agent_options) if agent_options else "defaults"
     out["sim_settings"] = json.dumps(sim_options) if sim_options else "defaults"
+    out["pose_noise_m_rad"] = ",".join(f"{x:g}" for x in noise)
+    out["pose_delay_cycles"] = delay
     out["wall_s"] = round(wall, 1)
     out["jobs"] = jobs
     if out_dir is not None:
