@@ -114,3 +114,45 @@ def test_extrapolation_is_exact_on_arcs():
     assert extrapolate((1.0, 2.0, 3.0), 0.2, 1.0, 0.0) == (1.0, 2.0, 3.0)
     # the turn in place: heading only, wrapped
     assert extrapolate((0.0, 0.0, 3.0), 0.0, 2.0, 0.1) == pytest.approx((0.0, 0.0, 3.2 - 2 * math.pi))
+
+
+def test_a_rounded_corner_is_driven_through_without_stopping(robot):
+    """A 90 degree corner rounded with a 0.2 m arc: the robot turns while it drives (the speed stays up, the
+    turn rate follows the arc), within the wheels' speed limit, and stays within a few mm of the path."""
+    from robotatfactory.agent.smooth import smooth_path
+
+    lim = DriveLimits.from_robot(robot)
+    dt = robot.control_period
+    sp = smooth_path([(0.0, 0.0), (0.8, 0.0), (0.8, 0.8)], arc_clear=lambda xy, psi: True, radii=(0.2,))
+    assert len(sp.pieces) == 1  # no stop: the corner is an arc
+    f = PathFollower(lim, dt)
+    f.start(sp)
+    x, y, th = 0.0, 0.0, 0.0
+    outs, worst = [], 0.0
+    for _ in range(1000):
+        o = f.step((x, y, th))
+        outs.append(o)
+        x += o.v * math.cos(th) * dt
+        y += o.v * math.sin(th) * dt
+        th = wrap(th + o.w * dt)
+        worst = max(worst, float(np.min(np.hypot(sp.points[:, 0] - x, sp.points[:, 1] - y))))
+        if o.done:
+            break
+    assert outs[-1].done and math.hypot(x - 0.8, y - 0.8) < 0.01
+    on_arc = [o for o in outs if 0.75 * math.pi / 2 > abs(wrap(o.heading_error)) and 0.3 < o.remaining < 0.9]
+    v = np.array([o.v for o in outs])
+    w = np.array([o.w for o in outs])
+    assert v[(v > 0)].size and min(o.v for o in on_arc) > 0.15  # no stop at the corner
+    assert np.all(v + np.abs(w) * lim.half_track <= lim.v_wheel + 1e-9)
+    assert np.all(np.abs(np.diff(v)) <= lim.a_max * dt + 1e-12)
+    assert np.all(np.abs(np.diff(w)) <= lim.alpha_max * dt + 1e-12)
+    assert w.max() > 1.0  # it did turn while driving
+    assert worst < 0.01
+
+
+def test_far_off_the_path_the_follower_stops_and_says_so(robot):
+    lim = DriveLimits.from_robot(robot)
+    f = PathFollower(lim, robot.control_period)
+    f.start([(0.0, 0.0), (1.0, 0.0)])
+    o = f.step((0.3, 0.5, 0.0))  # half a metre beside it (pushed, or a pose jump)
+    assert o.off_path > lim.max_off_path and not o.done and f.phase == "done"

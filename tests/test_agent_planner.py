@@ -107,3 +107,34 @@ def test_parts_on_the_floor_are_avoided_and_walls_block(field, geo):
     # a footprint too large for every corridor has no path
     with pytest.raises(NoPath):
         pl.plan((-0.6, 0.0), (0.6, 0.0), 0.4)
+
+
+@pytest.mark.parametrize("src,dst,carry", [(("incoming", 1), ("outgoing", 3), True),
+                                           (("outgoing", 2), ("incoming", 3), False),
+                                           (("machine_A", 2), ("machine_B", 1), True),
+                                           (("incoming", 4), ("machine_B", 3), True)])
+def test_rounded_paths_keep_the_exact_outline_clear(field, robot, src, dst, carry):
+    """Corners rounded into arcs (PathPlanner.smooth): the outline heading along the arc, exactly, touches
+    nothing anywhere on the path; the path still ends on the slot's normal (plan_to_pose)."""
+    from robotatfactory.agent.footprint import carrying_footprint, dock_distance, robot_footprint, wrap
+
+    fp = carrying_footprint(robot, field.part) if carry else robot_footprint(robot)
+    ob = FieldObstacles(field, [])
+    pl = PathPlanner(ob)
+    d = dock_distance(robot, field.part)
+    start = pl.approach_pose(field.slot(*src), d, fp)
+    goal = pl.approach_pose(field.slot(*dst), d, fp)
+    path, aligned = pl.plan_to_pose(start[:2], goal, fp)
+    sp = pl.smooth(path, fp, final_straight=0.03 if aligned else 0.0, final_min_radius=0.08)
+    arcs = sum(int(np.any(p.kappa != 0)) for p in sp.pieces)
+    assert sp.stops <= max(len(path.points) - 2, 0)
+    if src == ("incoming", 1):  # its corners are rounded (measured: two arcs, no stop)
+        assert arcs >= 1
+    for p in sp.pieces:
+        for (x, y), h in zip(p.xy, p.psi):
+            if math.hypot(x - start[0], y - start[1]) > 0.02:  # (the start: turning there is checked already)
+                assert not ob.collides(fp, (float(x), float(y), float(h))), (x, y, h)
+    last = sp.pieces[-1]
+    assert np.hypot(*(last.xy[-1] - goal[:2])) < 1e-6 and np.all(last.kappa[-3:] == 0)
+    if aligned:  # the last leg along the slot's normal: docking follows on without a turn
+        assert abs(wrap(last.psi[-1] - goal[2])) < 1e-6

@@ -37,6 +37,7 @@ class DockSettings:
     gap: float = 0.003  # m between the magnet face and the plate at the nominal dock pose
     settle: float = 0.1  # s standing still with the magnet switched on/off
     v_back: float = 0.25
+    lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
     magnet_early: bool = True  # the magnet on during the pick approach: it takes the plate within its beam
 
 
@@ -62,7 +63,7 @@ class Docker:
         self.magnet_x = float(magnet_x)
         self.part = part
         self.approach_limits = replace(limits, v_max=settings.v_dock, v_final=settings.v_dock, slow_distance=0.0,
-                                       position_tolerance=0.002)
+                                       position_tolerance=0.002, lookahead=settings.lookahead)
         self.place_limits = replace(self.approach_limits, v_max=settings.v_place, v_final=settings.v_place)
         self.back_limits = replace(limits, v_max=settings.v_back, v_final=settings.v_back, slow_distance=0.0,
                                    position_tolerance=0.003)

@@ -267,6 +267,8 @@ class PathFollower:
                     if self.no_spin:  # turning only as much as the speed allows: an arc, never a spin
                         cap = L.spin_curvature * max(self.v, v_t) + L.spin_slack
                         w_t = max(-cap, min(cap, w_t))
+                    # the outer wheel within v_wheel: the steering keeps its turn rate, the speed gives way
+                    v_t = max(0.0, min(v_t, L.v_wheel - abs(w_t) * L.half_track))
                 elif self.v == 0.0:  # turning in place only once stopped
                     w_t = self._turn_rate(herr)
         if self.phase == "final_turn":
