@@ -357,14 +357,22 @@ class RoundAgent:
             return
         try:
             goal = pl.approach_pose(slot, self.d_dock, fp)
-            if self.carrying is not None and self.place_standoff > 0:  # room to settle on the normal
+            goals = [goal]
+            if self.carrying is not None and self.place_standoff > 0:  # room to settle on the normal first
                 g2 = (goal[0] - self.place_standoff * math.cos(goal[2]),
                       goal[1] - self.place_standoff * math.sin(goal[2]), goal[2])
                 if pl.is_free(g2[:2], fp):
-                    goal = g2
+                    goals = [g2, goal]
             if self.smooth:  # the last leg along the slot's normal: docking follows on at speed
-                path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp)
+                for g in goals:  # the leg ending farther out if it can arrive along the normal there
+                    path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp)
+                    if aligned:
+                        break
+                goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
+                if not aligned and len(goals) > 1:
+                    path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp)
             else:
+                goal = goals[0]
                 path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
         except NoPath as e:
             self.counters.no_path += 1
