@@ -2,7 +2,7 @@
 
 Mode (every key and the table carry it, ``mode`` key):
 
-- ``bare_truth`` (the only mode so far): the agent's :class:`~robotatfactory.agent.behaviour.RoundAgent`
+- ``bare_truth`` (the default): the agent's :class:`~robotatfactory.agent.behaviour.RoundAgent`
   around the in-process stand-in :class:`~robotatfactory.sim.Simulator` with its default (SimTwo-like)
   behaviour, the real :class:`~robotatfactory.competition.FactoryServer` on loopback and the agent's UDP
   client. **The pose the agent gets is the simulator's ground truth**, not the EKF's: no bridge, no
@@ -22,6 +22,11 @@ worst time of the last scoring delivery, and the targets of the issue:
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts pushed;
 - median last-delivery time: round 1 <= 60 s, round 2 <= 80 s, round 3 <= 120 s (simulated).
+
+Options of mode bare_truth: ``--sim NAME=VALUE`` (a SimConfig field, e.g. ``magnet=weld``), ``--agent
+NAME=VALUE`` (RoundAgent settings), ``--drive NAME=VALUE`` (DriveLimits), ``--pose-noise M,RAD`` and
+``--pose-delay CYCLES`` (the agent's pose noisy and late); per run also the time split per
+``RoundAgent.activity`` and where parts were pushed.
 
 Runs go in parallel over ``--jobs`` processes (default 2: the machine's cores). With ``--out DIR``: a
 top-view figure of the first seed's run per round (path, pick and place events) and ``runs.json`` with
