@@ -41,7 +41,8 @@ class DockSettings:
     place_short: float = 0.006
     v_back: float = 0.25
     lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
-    magnet_early: bool = True  # the magnet on during the pick approach: it takes the plate within its beam
+    magnet_early: bool = True
+    compensate_offset: bool = True  # place with the robot as far off the slot's normal as it was at the pick  # the magnet on during the pick approach: it takes the plate within its beam
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,9 @@ class Docker:
         self._failing: str | None = None
         self.stuck = StuckDetector(window=1.0, min_command=0.03, min_motion=0.008, min_rotation=0.03)
         self._steps = 0
+        self.held_offset = 0.0  # m: the held part's centre to the right of the magnet's centre line, estimated
+        self._shift = 0.0
+        self._lateral: list[float] = []
 
     # ------------------------------------------------------------------------------------------ geometry
     def dock_distance(self) -> float:
@@ -111,16 +115,30 @@ class Docker:
         self._failing = None
         self.stuck.reset()
         self._steps = 0
-        target = pose_in_front(slot, distance)
+        self._shift = self.held_offset if mode == "place" and self.settings.compensate_offset else 0.0
+        self._lateral = []
+        target = self._shifted(pose_in_front(slot, distance))
         self.follower.limits = self.approach_limits if mode == "pick" else self.place_limits
         # from the point of the slot's normal nearest the robot: the approach follows the normal
-        start = self._on_normal(pose)
+        start = self._shifted(self._on_normal(pose))
         carrying = mode == "place"  # a part on the magnet: steer while driving, never turn on the spot
         self.follower.start([start, target[:2]], final_heading=None, no_spin=carrying)
         self.follower.v = max(0.0, min(float(v0), self.follower.limits.v_max))
         aligned = abs(math.remainder(pose[2] - target[2], 2 * math.pi)) < 0.1
         self.follower.phase = "drive" if aligned or carrying else "turn"  # turning: it brakes, then turns in place
         self.phase = "approach"
+
+    def _shifted(self, p):
+        """``p`` (x, y[, theta]) moved sideways by the held part's offset: the robot's left of the approach
+        (facing the slot) is (sin facing, -cos facing)."""
+        f = self._slot.facing
+        q = (p[0] + self._shift * math.sin(f), p[1] - self._shift * math.cos(f))
+        return q + tuple(p[2:])
+
+    def _lateral_offset(self, pose) -> float:
+        """base_link's offset from the slot's normal to the robot's left (m; the robot facing the slot)."""
+        s = self._slot
+        return (pose[0] - s.xy[0]) * math.sin(s.facing) - (pose[1] - s.xy[1]) * math.cos(s.facing)
 
     def _on_normal(self, pose, ahead: float = 0.01) -> tuple[float, float]:
         s = self._slot
@@ -139,7 +157,14 @@ class Docker:
                 return self._out(0.0, 0.0)
             self._steps += 1
             out = self.follower.step(pose)
+            if self.mode == "pick":
+                self._lateral = (self._lateral + [self._lateral_offset(pose)])[-6:]
             if self.mode == "pick" and contact:
+                # the magnet holds the part where it met it: the robot's offset from the slot's normal now is
+                # the part's from the magnet's centre line, to be repeated at the place (mean of 6 cycles)
+                self.held_offset = sum(self._lateral) / len(self._lateral)
+                if self.settings.compensate_offset:
+                    self._shift = self.held_offset  # backing out: the part stays on the slot's normal
                 self.follower.stop()  # brake within the limits (a few mm at v_dock), magnet on at once
                 self.phase, self._wait = "grip", 0.0
                 self.magnet = True
@@ -191,7 +216,7 @@ class Docker:
         back = pose_in_front(self._slot, self._retreat)
         self.follower.limits = self.back_limits
         # along the slot's normal, from the point of it nearest the robot (a lateral error is steered out)
-        self.follower.start([self._on_normal(pose, 0.0), back[:2]], reverse=True,
+        self.follower.start([self._shifted(self._on_normal(pose, 0.0)), self._shifted(back)[:2]], reverse=True,
                             no_spin=self.magnet)  # backing out with the part: straight, no turn on the spot
         self.follower.phase = "drive"
         self.phase = "back"
