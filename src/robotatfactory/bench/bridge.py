@@ -290,7 +290,7 @@ def measure(args) -> dict:
         ready = [tmp / f"sub_{w}.json.ready" for w in ("odom", "image")]
         t_up = time.monotonic()
         if not paced(90.0, None, True, until=lambda: all(p.exists() for p in ready)):
-            raise RuntimeError("the bridge or the bench subscribers did not come up in 90 s: "
+            raise RuntimeError(f"the bridge or the bench subscribers did not come up in 90 s (logs in {tmp}): "
                                f"{procs.tail('bridge')}\n{procs.tail('sub_odom')}\n{procs.tail('sub_image')}")
         startup_s = time.monotonic() - t_up
         paced(2.0, None, True)
@@ -330,6 +330,9 @@ def measure(args) -> dict:
     finally:
         procs.stop_all()
         graph.cleanup()
+    import shutil
+
+    shutil.rmtree(tmp, ignore_errors=True)  # the processes' logs: kept only when the run failed
 
     # --- analysis ---
     odom_lat = {"alone": [], "camera": []}
