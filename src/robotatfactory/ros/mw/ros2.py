@@ -1,7 +1,11 @@
 """The node interface on ROS 2 Jazzy (rclpy from the ``ros-jazzy-*`` PyPI wheels, ``.venv-ros2``).
 
-Callbacks run on a multi-threaded executor in one reentrant callback group, as rospy runs each
-subscription in a thread of its own: a slow image callback never holds up odometry. Parameters are
+Callbacks run on rclpy's ``EventsExecutor`` by default (``RAF_ROS2_EXECUTOR=events|single|multi``): one
+thread, events handled as they come. The multi-threaded executor (closest to rospy's thread per
+subscription) was measured to burn most of a core on the 100 Hz ``/clock`` a sim-time node hears
+(ros2/rclpy#1223, #1378, #1452): the bridge's odom p99 was 242-500 ms beside it, 2.4-2.6 ms with the events
+executor and 4.1 ms with the single-threaded one (docs/benchmarks.md). The bridge's control path runs in its
+own thread, never in a callback; a callback that must wait (a sim/* service) holds up only the others. Parameters are
 declared (name ``udp.port``, the type of the default, a description, a range where one is known) before
 they are read, so ``ros2 param list/describe`` shows every one. Discovery stays on this machine unless
 ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
@@ -106,7 +110,7 @@ class Ros2Node(Node):
         self._static_pub = None
         self._static: dict = {}
         self._keep: list = []
-        self.executor: MultiThreadedExecutor | None = None
+        self.executor = None  # made by spin() (make_executor) unless set before
 
     @property
     def name(self) -> str:
@@ -228,7 +232,7 @@ class Ros2Node(Node):
         self._shutdown.set()
 
     def spin(self) -> None:
-        ex = self.executor or MultiThreadedExecutor(num_threads=4, context=self.node.context)
+        ex = self.executor or make_executor(self.node.context)
         self.executor = ex
         ex.add_node(self.node)
         try:
@@ -262,6 +266,25 @@ def _emit(lg, level: str, text: str) -> None:
         lg.error(text)
     else:
         lg.fatal(text)
+
+
+EXECUTORS = ("events", "single", "multi")
+
+
+def make_executor(context, kind: str | None = None):
+    """The executor a node spins on: ``kind`` or ``RAF_ROS2_EXECUTOR`` (default ``events``)."""
+    kind = (kind or os.environ.get("RAF_ROS2_EXECUTOR", "events")).strip().lower()
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    if kind == "single":
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor(context=context)
+    if kind == "multi":
+        return MultiThreadedExecutor(num_threads=4, context=context)
+    raise ConfigError(f"RAF_ROS2_EXECUTOR={kind!r}: use one of {', '.join(EXECUTORS)}")
 
 
 def _homogeneous(values: list) -> list:
