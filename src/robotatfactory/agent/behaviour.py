@@ -94,6 +94,12 @@ class RoundAgent:
     carry_arcs: bool = False
     carry_radius: float = 0.3
     carry_a_lat: float = 0.2  # m/s^2 on those arcs (the part slides sideways on the magnet's face)
+    # carrying on SimTwo's force magnet with the default legs (turns on the spot allowed): gentler limits while
+    # a part is on the magnet (0 = the normal limits); the carry envelope is in docs/agent.md
+    carry_w_max: float = 1.0  # rad/s
+    carry_alpha_max: float = 4.0  # rad/s^2
+    carry_v_max: float = 0.3  # m/s
+    carry_v_back: float = 0.2  # m/s backing out of a slot with the part
     carry_inflate: float = 0.015  # m around the loaded outline (the part swings on the face)  # paths with arcs, the last leg along the slot's normal (False: stop at every corner)
     events: list = field(default_factory=list)
     counters: AgentCounters = field(default_factory=AgentCounters)
@@ -105,8 +111,12 @@ class RoundAgent:
         self.policy = TaskPolicy.for_field(f)
         self.delays = DelayEstimator(lanes_of(f))
         self.follower = PathFollower(self.limits, self.dt)
+        cl = {k: v for k, v in (("w_max", self.carry_w_max), ("alpha_max", self.carry_alpha_max),
+                                ("v_max", self.carry_v_max)) if v > 0}
+        self.carry_limits = replace(self.limits, **cl)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
-                             DockSettings(v_dock=self.v_dock, v_place=self.v_place))
+                             DockSettings(v_dock=self.v_dock, v_place=self.v_place,
+                                          v_back_carrying=self.carry_v_back or DockSettings.v_back))
         self.fp_empty = robot_footprint(r)
         self.fp_carry = carrying_footprint(r, f.part)
         self.d_dock = dock_distance(r, f.part)
@@ -352,7 +362,7 @@ class RoundAgent:
         fp = self.fp_carry if self.carrying is not None else self.fp_empty
         slot = self.field.slot(self.target.zone, self.target.number)
         pl = PathPlanner(self._obstacles())
-        self.follower.limits = self.limits
+        self.follower.limits = self.limits if self.carrying is None else self.carry_limits
         if self.carrying is not None and self.carry_arcs and self._go_carrying(mode, pose, pl, slot):
             return
         try:

@@ -40,6 +40,7 @@ class DockSettings:
     # and pressed the part against the slot's back: grazing hits; the rules allow 3 cm)
     place_short: float = 0.006
     v_back: float = 0.25
+    v_back_carrying: float = 0.25  # m/s backing out of a slot with the part on the magnet
     lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
     magnet_early: bool = True
     compensate_offset: bool = True  # place with the robot as far off the slot's normal as it was at the pick  # the magnet on during the pick approach: it takes the plate within its beam
@@ -214,7 +215,9 @@ class Docker:
     def _back(self, pose) -> None:
         """Back straight out along the slot's normal to ``retreat`` m from its centre."""
         back = pose_in_front(self._slot, self._retreat)
-        self.follower.limits = self.back_limits
+        self.follower.limits = self.back_limits if not self.magnet else replace(
+            self.back_limits, v_max=min(self.back_limits.v_max, self.settings.v_back_carrying),
+            v_final=min(self.back_limits.v_final, self.settings.v_back_carrying))
         # along the slot's normal, from the point of it nearest the robot (a lateral error is steered out)
         self.follower.start([self._shifted(self._on_normal(pose, 0.0)), self._shifted(back)[:2]], reverse=True,
                             no_spin=self.magnet)  # backing out with the part: straight, no turn on the spot

@@ -63,7 +63,16 @@ MAGNET_Z = 0.035  # m: height of the electromagnet beam = the centre of a part's
 BUMPER_HALF = (0.005, 0.01, 0.01)  # m: the magnet, x in [0.07, 0.08], 2 cm wide, as tall as a part's plate
 SOLENOID_FACE_HALF = (0.005, 0.015, 0.01)  # m: magnet="force": the contact face, as wide as SimTwo's 30 mm solenoid
 WHEEL_FRICTION = (1.0, 0.005, 0.0001)
-PART_FRICTION = (0.4, 0.005, 0.0001)
+# SimTwo's parts (RobotFactoryPro2022/scene.xml 83-105 loads PartBlue.xml for all four, P33a/SimTwo at 90afa72):
+# the body and the plate have no <surface>, so ODE's default mu 0.95 (Viewer.pas 4239) against walls, ribs, the
+# robot and other parts; only four feet (spheres of radius 5 mm at the body's lower corners) touch the floor,
+# surface mu 'leg_mu' 0.01 (PartBlue.xml 10, 27-53; PartRed/PartGreen.xml say 0.02 but the scene does not load
+# them); the feet come first in ODE's simple space (they move, the field does not), so nearCallback takes their
+# mu (Viewer.pas 418-436). Mass: the body's 0.2 kg plus the plate shell's 0.01 kg (PartBlue.xml 18, 57; shell
+# masses are added to the body, Viewer.pas 3411-3457).
+PART_FRICTION = (0.95, 0.005, 0.0001)
+PART_FOOT_FRICTION = (0.01, 0.005, 0.0001)
+PART_PLATE_MASS = 0.01  # kg, added to the rules' part mass (field.part.mass, 0.2 kg = SimTwo's body)
 WALL_FRICTION = (0.3, 0.005, 0.0001)
 # floor, wheel and caster contacts: stiff (the robot sinks ~5 um, so camera and wheel radius are exact)
 # yet stable at the 1 ms step (time constant 4 ms, critically damped)
@@ -479,18 +488,30 @@ def _add_part(spec, world, field: Field, pid: int, letter: str, x: float, y: flo
     body = world.add_body(name=f"part_{pid}", pos=[x, y, 0.0], quat=yaw_quat(facing))
     body.add_freejoint(name=f"part_{pid}_free")
     h = p.height
-    body.mass = p.mass
+    mass = p.mass + PART_PLATE_MASS
+    body.mass = mass
     body.ipos = [0, 0, h / 2]
     body.iquat = [1.0, 0.0, 0.0, 0.0]
-    body.inertia = _box_inertia(p.mass, (p.depth, p.width, h))
+    body.inertia = _box_inertia(mass, (p.depth, p.width, h))
     body.explicitinertial = True
-    # collision: one box from the floor to the top, plate included
+    # collision: one box from the feet to the top, plate included (walls, ribs, robots, parts: SimTwo's mu 0.95)
+    fh = p.feet_height
     g = body.add_geom(name=f"part_{pid}_collision", type=mujoco.mjtGeom.mjGEOM_BOX,
-                      size=[(p.depth + PLATE_THICKNESS) / 2, p.width / 2, h / 2],
-                      pos=[PLATE_THICKNESS / 2, 0, h / 2])
-    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING | B_FLOOR, G_HIDDEN
+                      size=[(p.depth + PLATE_THICKNESS) / 2, p.width / 2, (h - fh) / 2],
+                      pos=[PLATE_THICKNESS / 2, 0, fh + (h - fh) / 2])
+    g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_HIDDEN
     g.friction = list(PART_FRICTION)
     g.rgba = [0, 0, 0, 0]
+    # the floor touches only SimTwo's four feet: spheres of radius feet_height at the body's lower corners,
+    # with their own friction (priority: theirs, not the larger of the pair)
+    for i, (sx, sy) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
+        g = body.add_geom(name=f"part_{pid}_foot_contact{i}", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                          size=[fh, 0, 0], pos=[sx * (p.depth / 2 - fh), sy * (p.width / 2 - fh), fh])
+        g.contype, g.conaffinity, g.group = 0, B_FLOOR, G_HIDDEN
+        g.friction = list(PART_FOOT_FRICTION)
+        g.condim = 3
+        g.priority = 2
+        g.rgba = [0, 0, 0, 0]
     # what it looks like: body on four feet, plate in front, tag on top -- in a jointless child body that
     # never collides, so the broad phase skips all of them at once (measured: 2-3 us per physics step)
     look = body.add_body(name=f"part_{pid}_look")

@@ -1,0 +1,112 @@
+"""The carry envelope: which drives keep a part on the stand-in's electromagnet (SimTwo's force by default).
+
+A robot at the origin heading +x holds a part whose plate touches its magnet; each trial drives a ramped
+profile (turn on the spot, arc forwards or backwards, straight) and reports whether the part was lost
+(``Simulator.held`` went None) and how far it slid sideways on the magnet's face (m). Plain Python on the
+bare stand-in (no ROS). ``python -m robotatfactory.agent.envelope`` prints the table docs/agent.md quotes.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+TOUCH = 0.08 + 0.002 + 0.03  # m: base_link to the centre of a part whose plate touches the magnet
+
+
+@dataclass(frozen=True)
+class Trial:
+    kind: str  # "spin", "arc", "straight"
+    v: float  # m/s (negative: backwards)
+    w: float  # rad/s
+    a: float  # m/s^2
+    alpha: float  # rad/s^2
+    turn: float = math.pi / 2  # rad turned (spin, arc) at the target rates
+    hold: int = 0  # straight: cycles at speed
+
+
+def ramp(v0, w0, v1, w1, a, alpha, dt=0.04):
+    out, v, w = [], v0, w0
+    while abs(v - v1) > 1e-9 or abs(w - w1) > 1e-9:
+        v += max(-a * dt, min(a * dt, v1 - v))
+        w += max(-alpha * dt, min(alpha * dt, w1 - w))
+        out.append((v, w))
+    return out
+
+
+def profile(t: Trial, dt=0.04):
+    if t.kind == "straight":
+        return ramp(0, 0, t.v, 0, t.a, t.alpha) + [(t.v, 0.0)] * t.hold + ramp(t.v, 0, 0, 0, t.a, t.alpha)
+    up = ramp(0, 0, t.v, t.w, t.a, t.alpha)
+    down = ramp(t.v, t.w, 0, 0, t.a, t.alpha)
+    turned = sum(abs(w) for _, w in up + down) * dt
+    n = max(0, int(round((t.turn - turned) / max(abs(t.w) * dt, 1e-9))))
+    return up + [(t.v, t.w)] * n + down
+
+
+def run(field, robot, t: Trial, magnet: str = "force", settle: int = 5) -> tuple[bool, float]:
+    """(held to the end, largest sideways slide on the face in m)."""
+    from ..sim import PartPlacement, SimConfig, Simulator
+    from ..simtwo import Command
+
+    part = PartPlacement("R", TOUCH + 0.002, 0.0, math.pi)
+    sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, competition=False, magnet=magnet,
+                                            start_pose=(0.0, 0.0, 0.0), extra_parts=(part,)))
+    try:
+        for _ in range(settle):
+            sim.step_cycle(Command(0.0, 0.0, True))
+        pid = sim.parts.ids[0]
+        worst, held = 0.0, sim.held is not None
+        for v, w in profile(t) + [(0.0, 0.0)] * 5:
+            sim.step_cycle(Command(v, w, True))
+            x, y, th = sim.pose
+            px, py, _ = sim.part_pose(pid)
+            lat = -math.sin(th) * (px - x) + math.cos(th) * (py - y)
+            worst = max(worst, abs(lat))
+            held = held and sim.held is not None
+        return held, worst
+    finally:
+        sim.close()
+
+
+def default_trials() -> list[Trial]:
+    out = []
+    for w in (0.5, 1.0, 1.5, 2.0, 2.5, 3.0):
+        for alpha in (2.0, 4.0, 6.0, 11.85):
+            out.append(Trial("spin", 0.0, w, 0.8, alpha, turn=math.pi))
+    for v in (0.2, 0.3, 0.4, -0.2, -0.3):
+        for r in (0.1, 0.15, 0.2, 0.3, 0.5):
+            w = abs(v) / r
+            if w > 4.0:
+                continue
+            out.append(Trial("arc", v, w, 0.8, 11.85))
+    for a in (0.8, 2.0, 4.0):
+        out.append(Trial("straight", 0.4, 0.0, a, 11.85, hold=15))
+        out.append(Trial("straight", -0.4, 0.0, a, 11.85, hold=15))
+    return out
+
+
+def main(argv=None) -> int:
+    import argparse
+
+    from ..field import load_field
+    from ..robot import load_robot
+
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--magnet", default="force")
+    ap.add_argument("--kind", default=None, help="only spin / arc / straight")
+    args = ap.parse_args(argv)
+    field, robot = load_field(), load_robot()
+    print(f"magnet={args.magnet}")
+    print("kind      v m/s  w rad/s  a  alpha  radius  held  slide mm")
+    for t in default_trials():
+        if args.kind and t.kind != args.kind:
+            continue
+        held, slide = run(field, robot, t, args.magnet)
+        rad = abs(t.v / t.w) if t.w else float("inf")
+        print(f"{t.kind:8s} {t.v:6.2f} {t.w:7.2f} {t.a:4.1f} {t.alpha:6.2f} {rad:6.2f}  {'yes' if held else 'LOST':4s}"
+              f" {slide * 1000:6.1f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
