@@ -72,6 +72,14 @@ WHEEL_FRICTION = (1.0, 0.005, 0.0001)
 # masses are added to the body, Viewer.pas 3411-3457).
 PART_FRICTION = (0.95, 0.005, 0.0001)
 PART_FOOT_FRICTION = (0.01, 0.005, 0.0001)
+# MuJoCo's pyramidal friction cones (this scene's) with mu 0.01 at the feet made the solver throw held parts off
+# the magnet (pyramid edges almost parallel to the normal: contact force spikes of 100+ N in one step, parts
+# lost in straight driving and slow turns, measured with agent/envelope.py). A foot friction below this is
+# therefore a frictionless floor contact plus the same friction as the part's free joint's frictionloss,
+# mu m g = 0.021 (N on the translations: a sliding part decelerates at mu g, measured 0.098 m/s^2, 5.1 cm from
+# 0.1 m/s; N m on the rotations, where the feet's would be ~0.001 N m: more yaw resistance than SimTwo's, still
+# a third of what the magnet's face can hold)
+PART_FOOT_FRICTIONLESS_BELOW = 0.015
 PART_PLATE_MASS = 0.01  # kg, added to the rules' part mass (field.part.mass, 0.2 kg = SimTwo's body)
 WALL_FRICTION = (0.3, 0.005, 0.0001)
 # floor, wheel and caster contacts: stiff (the robot sinks ~5 um, so camera and wheel radius are exact)
@@ -486,8 +494,10 @@ def _add_part(spec, world, field: Field, pid: int, letter: str, x: float, y: flo
 
     p = field.part
     body = world.add_body(name=f"part_{pid}", pos=[x, y, 0.0], quat=yaw_quat(facing))
-    body.add_freejoint(name=f"part_{pid}_free")
+    j = body.add_freejoint(name=f"part_{pid}_free")
     h = p.height
+    if PART_FOOT_FRICTION[0] < PART_FOOT_FRICTIONLESS_BELOW:  # the feet's friction as the joint's instead
+        j.frictionloss = PART_FOOT_FRICTION[0] * (p.mass + PART_PLATE_MASS) * 9.81
     mass = p.mass + PART_PLATE_MASS
     body.mass = mass
     body.ipos = [0, 0, h / 2]
@@ -502,16 +512,18 @@ def _add_part(spec, world, field: Field, pid: int, letter: str, x: float, y: flo
     g.contype, g.conaffinity, g.group = B_MOVING, B_WALL | B_MOVING, G_HIDDEN
     g.friction = list(PART_FRICTION)
     g.rgba = [0, 0, 0, 0]
-    # the floor touches only SimTwo's four feet: spheres of radius feet_height at the body's lower corners,
-    # with their own friction (priority: theirs, not the larger of the pair)
-    for i, (sx, sy) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
-        g = body.add_geom(name=f"part_{pid}_foot_contact{i}", type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                          size=[fh, 0, 0], pos=[sx * (p.depth / 2 - fh), sy * (p.width / 2 - fh), fh])
-        g.contype, g.conaffinity, g.group = 0, B_FLOOR, G_HIDDEN
-        g.friction = list(PART_FOOT_FRICTION)
-        g.condim = 3
-        g.priority = 2
-        g.rgba = [0, 0, 0, 0]
+    # the floor touches only SimTwo's four feet (PartBlue.xml: spheres of radius 5 mm at the body's lower
+    # corners, mu 0.01): a sole as wide and deep as the body and as tall as the feet, whose box-plane contacts
+    # are at its four corners, with the feet's friction (priority: theirs, not the larger of the pair).
+    # (Four sphere geoms instead, mu 0.01: the solver threw a part off the magnet with a 100+ N spike at 0.6 rad/s.)
+    g = body.add_geom(name=f"part_{pid}_feet", type=mujoco.mjtGeom.mjGEOM_BOX,
+                      size=[p.depth / 2, p.width / 2, fh / 2], pos=[0, 0, fh / 2])
+    g.contype, g.conaffinity, g.group = 0, B_FLOOR, G_HIDDEN
+    g.friction = list(PART_FOOT_FRICTION)
+    g.priority = 2
+    if PART_FOOT_FRICTION[0] < PART_FOOT_FRICTIONLESS_BELOW:
+        g.condim = 1  # frictionless here, the friction is the joint's: see PART_FOOT_FRICTIONLESS_BELOW
+    g.rgba = [0, 0, 0, 0]
     # what it looks like: body on four feet, plate in front, tag on top -- in a jointless child body that
     # never collides, so the broad phase skips all of them at once (measured: 2-3 us per physics step)
     look = body.add_body(name=f"part_{pid}_look")
