@@ -95,11 +95,14 @@ class RoundAgent:
     carry_radius: float = 0.3
     carry_a_lat: float = 0.2  # m/s^2 on those arcs (the part slides sideways on the magnet's face)
     # carrying on SimTwo's force magnet with the default legs (turns on the spot allowed): gentler limits while
-    # a part is on the magnet (0 = the normal limits); the carry envelope is in docs/agent.md
-    carry_w_max: float = 1.0  # rad/s
-    carry_alpha_max: float = 4.0  # rad/s^2
-    carry_v_max: float = 0.3  # m/s
-    carry_v_back: float = 0.2  # m/s backing out of a slot with the part
+    # a part is on the magnet (0 = the normal limits). The part slides sideways on the magnet's face the more the
+    # faster it turns (~9 mm at 1.5 rad/s) and its corner then sweeps beyond the planned turning circle: rounds
+    # 1-3 x 4 seeds, w 1.5 rad/s at the maximum in every run, 1.75-2 rad/s or the normal 3 lost parts in most
+    # (docs/agent.md, "The carry envelope")
+    carry_w_max: float = 1.5  # rad/s
+    carry_alpha_max: float = 6.0  # rad/s^2 (11.85: one part lost in 12 runs)
+    carry_v_max: float = 0.4  # m/s
+    carry_v_back: float = 0.25  # m/s backing out of a slot with the part
     carry_inflate: float = 0.015  # m around the loaded outline (the part swings on the face)  # paths with arcs, the last leg along the slot's normal (False: stop at every corner)
     events: list = field(default_factory=list)
     counters: AgentCounters = field(default_factory=AgentCounters)
