@@ -20,9 +20,8 @@ def args(**kw):
 
 
 def test_round_1_one_seed_scores_the_maximum_and_writes_its_figure(tmp_path):
-    # the weld magnet: under SimTwo's force (the simulator's default) the agent loses parts on turns on the
-    # spot (docs/simulator.md, "The electromagnet"; docs/agent.md)
-    res = competition.run(args(rounds="1", seeds=1, jobs=1, sim=["magnet=weld"]), tmp_path)
+    # the simulator's default magnet: SimTwo's force (docs/simulator.md, "The electromagnet"; docs/agent.md)
+    res = competition.run(args(rounds="1", seeds=1, jobs=1), tmp_path)
     assert res["mode"] == "bare_truth" and "ground truth" in res["pose_source"]
     assert all(k.startswith("bare_truth_") for k in res if k.endswith("_target_met"))
     assert res["bare_truth_r1_s0_points"] == res["bare_truth_r1_s0_max_points"] == 4
