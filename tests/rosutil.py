@@ -75,7 +75,7 @@ ros_master = ros_graph  # the ROS 1 name, kept for the tests that use it
 
 def test_node(name: str = "raf_test"):
     """The middleware node of this process against :func:`graph` (made once). ROS 1: ``rospy.init_node``;
-    ROS 2: ``rclpy.init`` and a node spun by a multi-threaded executor in a background thread, destroyed (and
+    ROS 2: ``rclpy.init`` and a node spun by the nodes' executor (mw.ros2.make_executor) in a background thread, destroyed (and
     rclpy shut down) at exit."""
     global _NODE, _SPIN
     graph()
@@ -109,9 +109,13 @@ def _spin_ros2(node) -> None:
     raises InvalidHandle out of ``spin_once`` when a test destroys a subscription or publisher while the
     executor collects it: counted in RACES, spinning goes on. Any other error (a callback of a node under
     test raised) goes into SPIN_ERRORS, which conftest turns into a failure of the test it happened in."""
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
 
-    ex = MultiThreadedExecutor(num_threads=4, context=node.node.context)
+    from robotatfactory.ros.mw.ros2 import make_executor
+
+    # the nodes' own executor (events by default): a multi-threaded one in this process burned enough of the
+    # interpreter to starve the FakeSim threads beside it under load (14 datagrams a second instead of 25)
+    ex = make_executor(node.node.context)
     node.executor = ex
     ex.add_node(node.node)
     while node.ok():

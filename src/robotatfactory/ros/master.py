@@ -41,7 +41,30 @@ def stop_process(proc: subprocess.Popen, sig=signal.SIGINT, timeout: float = 10.
         return proc.wait(5)
 
 
-class PrivateMaster:
+class _PrivateGraph:
+    """What both kinds of private graph share: a private home folder (logs) removed by ``cleanup``, and use as
+    a context manager. Subclasses define ``start``, ``stop``, ``env`` and ``use_in_this_process``."""
+
+    home: Path
+
+    def start(self):
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    def cleanup(self) -> None:
+        self.stop()
+        shutil.rmtree(self.home, ignore_errors=True)
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.cleanup()
+
+
+class PrivateMaster(_PrivateGraph):
     """``roscore -p PORT`` in its own process group with a private ROS_HOME (logs); ``env()`` for children."""
 
     def __init__(self, port: int | None = None):
@@ -102,15 +125,6 @@ class PrivateMaster:
             stop_process(self.proc, signal.SIGINT)
         self.proc = None
 
-    def cleanup(self) -> None:
-        self.stop()
-        shutil.rmtree(self.home, ignore_errors=True)
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *exc):
-        self.cleanup()
 
 
 def ensure_master(start_private: bool, who: str) -> "PrivateMaster | None":
@@ -132,7 +146,7 @@ def ensure_master(start_private: bool, who: str) -> "PrivateMaster | None":
     return master
 
 
-class PrivateDomain:
+class PrivateDomain(_PrivateGraph):
     """ROS 2's counterpart of :class:`PrivateMaster`: a ROS domain id of its own (ROS 2 has no master;
     nodes find each other by discovery, which a private ``ROS_DOMAIN_ID`` and the LOCALHOST discovery range
     keep to this run). The id is reserved with a lock file, so parallel runs on one machine never share one."""
@@ -180,15 +194,6 @@ class PrivateDomain:
             self._lock.close()
             self._lock = None
 
-    def cleanup(self) -> None:
-        self.stop()
-        shutil.rmtree(self.home, ignore_errors=True)
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *exc):
-        self.cleanup()
 
 
 def private_graph(middleware: str | None = None) -> "PrivateMaster | PrivateDomain":
