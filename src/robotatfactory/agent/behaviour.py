@@ -100,6 +100,7 @@ class RoundAgent:
     # 1-3 x 4 seeds, w 1.5 rad/s at the maximum in every run, 1.75-2 rad/s or the normal 3 lost parts in most
     # (docs/agent.md, "The carry envelope")
     carry_w_max: float = 1.5  # rad/s
+    carry_w_spin: float = 0.0  # rad/s turning on the spot with a part (0: carry_w_max)
     carry_alpha_max: float = 6.0  # rad/s^2 (11.85: one part lost in 12 runs)
     carry_v_max: float = 0.4  # m/s
     carry_v_back: float = 0.25  # m/s backing out of a slot with the part
@@ -118,7 +119,7 @@ class RoundAgent:
         self.delays = DelayEstimator(lanes_of(f))
         self.follower = PathFollower(self.limits, self.dt)
         cl = {k: v for k, v in (("w_max", self.carry_w_max), ("alpha_max", self.carry_alpha_max),
-                                ("v_max", self.carry_v_max)) if v > 0}
+                                ("v_max", self.carry_v_max), ("w_spin_max", self.carry_w_spin)) if v > 0}
         self.carry_limits = replace(self.limits, **cl)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
                              DockSettings(v_dock=self.v_dock, v_place=self.v_place,

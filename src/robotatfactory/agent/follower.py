@@ -56,6 +56,7 @@ class DriveLimits:
     spin_slack: float = 0.15
     max_off_path: float = 0.1  # m: farther from the path the follower stops and says so (off_path)
     ff_lead: float = 2.0  # control cycles the curvature feed-forward reads ahead (the wheels' response delay)
+    w_spin_max: float = 0.0  # rad/s: turns on the spot at most this (0: w_max); driving on arcs keeps w_max
 
     @classmethod
     def from_robot(cls, robot, fraction: float = 0.45, a_max: float = 0.8, **kw) -> DriveLimits:
@@ -311,5 +312,6 @@ class PathFollower:
         if drive:  # a correction on top of the feed-forward
             return math.copysign(min(L.w_max, L.k_drive * abs(err)), err)
         # braking-distance limited so an in-place turn stops on the heading
-        cap = min(L.w_max, math.sqrt(2 * L.alpha_max * abs(err)), L.k_heading * abs(err) + 0.05)
+        w_max = min(L.w_max, L.w_spin_max) if L.w_spin_max > 0 else L.w_max
+        cap = min(w_max, math.sqrt(2 * L.alpha_max * abs(err)), L.k_heading * abs(err) + 0.05)
         return math.copysign(cap, err) if abs(err) > 1e-4 else 0.0

@@ -55,7 +55,7 @@ for _m in MODES:
         TARGETS[f"{_m}_r{_r}_parts_pushed"] = "== 0"
 AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
                   "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock", "v_place",
-                  "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin")
+                  "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin", "carry_w_spin")
 DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "k_drive", "a_lat", "v_wheel", "slow_distance", "lookahead", "heading_tolerance", "w_max",
                   "alpha_max", "v_final")
 
