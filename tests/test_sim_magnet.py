@@ -131,7 +131,8 @@ def test_releases_the_part_when_switched_off(field, robot):
 def test_holds_a_part_in_straight_driving_at_carrying_speeds(field, robot):
     """0.4 m/s forwards and backwards, accelerating at the agent's 0.8 m/s^2 and with unramped steps from and to
     rest: the part never leaves the magnet's face (measured: no lateral slide at all). (A step straight from
-    +0.4 to -0.4 m/s does lose it: the robot pitches ~8 deg nose down and the ray dips below the plate.)"""
+    +0.4 to -0.4 m/s lost it with the earlier part-floor friction 0.4: the robot pitched ~8 deg nose down and
+    the ray dipped below the plate; with SimTwo's part feet it holds.)"""
     sim = make(field, robot, gap=0.002)
     for _ in range(5):
         sim.step_cycle(Command(0.0, 0.0, True))
