@@ -68,3 +68,27 @@ def test_the_full_stack_mode_names_itself_and_claims_nothing_it_does_not_measure
     assert res["full_stack_r1_last_score_median_target_met"] is False
     with pytest.raises(ConfigError):  # the node takes no drive settings: refused before anything starts
         competition.run(args(stack="full", rounds="1", seeds=1, drive=["a_max=0.5"]), None)
+
+
+REPORT = """t=  129.84s rtf  1.00x | sent 3246 cmd 3244 | score 3/4 (outgoing 3, last at 40.2 s)
+raf sim: duration at t = 130.00 s of simulation in 130.00 s (real-time factor 1.00)
+Round 1, incoming BBBB: run started at t = 3.00 s, report at t = 130.00 s, 473.0 s left
+     40.24     3  blue   outgoing warehouse slot 3               +1
+  total: 3 of 4 points; 3 part(s) in the outgoing warehouse; time of the last score 40.24 s
+"""
+
+
+def test_the_full_stack_reads_raf_sims_final_report_or_its_last_status_line(tmp_path):
+    assert competition.parse_sim_report(REPORT) == (3, 4, 40.24, True)
+    # stopped before its report: the last status line still gives the score (one decimal of time)
+    head = REPORT.split("raf sim:")[0]
+    assert competition.parse_sim_report(head) == (3, 4, 40.2, True)
+    p, mx, t, found = competition.parse_sim_report("t= 1.0s | score 0/4 (outgoing 0)\n")
+    assert (p, mx, found) == (0, 4, True) and t != t
+    p, mx, t, found = competition.parse_sim_report("nothing here\n")
+    assert (p, mx, found) == (0, -1, False)
+    log = tmp_path / "sim.log"
+    log.write_text(head)
+    assert not competition.wait_for_report(log, limit=0.3, poll=0.1)
+    log.write_text(REPORT)
+    assert competition.wait_for_report(log, limit=0.3, poll=0.1)

@@ -35,6 +35,7 @@ every run's events.
 from __future__ import annotations
 
 import math
+import re
 import statistics
 import sys
 import time
@@ -286,12 +287,44 @@ def _relative_error(prev, now) -> tuple[float, float, float]:
     return math.hypot(ro[0] - rt[0], ro[1] - rt[1]), abs(dth), math.hypot(rt[0], rt[1])
 
 
+_REPORT = re.compile(r"total: (\d+) of (\d+) points(?:[^\n]*?time of the last score ([\d.]+) s)?")
+_STATUS = re.compile(r"score (\d+)/(\d+) \([^)]*?(?:last at ([\d.]+) s)?\)")
+
+
+def parse_sim_report(text: str) -> tuple[int, int, float, bool]:
+    """``raf sim``'s score from its log: ``(points, max_points, last_score_s, found)``.
+
+    The final report's ``total: P of M points ...; time of the last score T s`` when it is there (the last
+    one), else the last periodic status line's ``score P/M (..., last at T s)`` (a run stopped before its
+    report, or a report still unwritten), else ``(0, -1, nan, False)``. T is nan when nothing scored."""
+    for rx in (_REPORT, _STATUS):
+        m = rx.findall(text)
+        if m:
+            p, mx, t = m[-1]
+            return int(p), int(mx), float(t) if t else math.nan, True
+    return 0, -1, math.nan, False
+
+
+def wait_for_report(log: Path, limit: float = 10.0, poll: float = 0.2) -> bool:
+    """Wait up to ``limit`` s until ``log`` holds ``raf sim``'s final report (``total: ... points``): its
+    process may have exited with the last lines still on their way to the file. True when found."""
+    end = time.monotonic() + limit
+    while True:
+        try:
+            if _REPORT.search(log.read_text(errors="replace")):
+                return True
+        except OSError:
+            pass
+        if time.monotonic() >= end:
+            return False
+        time.sleep(poll)
+
+
 def play_full_stack(round_no: int, seed: int, out_dir: Path | None, timeout: float = 400.0) -> dict:
     """One round over the whole stack, each in its own process on private ports and a private roscore:
     ``raf sim`` (realtime, SimTwo-like defaults, camera and LIDAR), ``raf bridge``, ``raf localize`` and
     ``raf agent`` (the EKF's ``pose`` only). The score is ``raf sim``'s final report; the agent's log gives
     picks and failures. Not measured yet here: pose error against ground truth, collisions, pushes."""
-    import re
     import subprocess
     import tempfile
 
@@ -327,15 +360,15 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, timeout: flo
             try:
                 sim.wait(timeout)
             except subprocess.TimeoutExpired:
-                pass
+                stop_process(sim)  # SIGINT first: raf sim writes its final report on the way out
+            wait_for_report(log_dir / "sim.log")
         finally:
             for _, p, f in reversed(procs):
                 stop_process(p)
                 f.close()
     text = (log_dir / "sim.log").read_text(errors="replace")
     agent_log = (log_dir / "agent.log").read_text(errors="replace")
-    m = re.findall(r"total: (\d+) of (\d+) points.*?time of the last score ([\d.]+) s", text)
-    points, max_points, last = (int(m[-1][0]), int(m[-1][1]), float(m[-1][2])) if m else (0, -1, math.nan)
+    points, max_points, last, m = parse_sim_report(text)
     notes = sorted(set(re.findall(r"note: (.*)", text)))
     picks = len(re.findall(r": picked ", agent_log))
     pick_fail = len(re.findall(r"pick at .* failed", agent_log))
