@@ -104,6 +104,13 @@ class RoundAgent:
     carry_alpha_max: float = 6.0  # rad/s^2 (11.85: one part lost in 12 runs)
     carry_v_max: float = 0.4  # m/s
     carry_v_back: float = 0.25  # m/s backing out of a slot with the part
+    # a late, noisy pose while carrying: turns against the last fast turn held to this (rad/s) for 0.4 s, and
+    # driving heading errors within carry_deadband (rad) ignored (DriveLimits.w_reverse_max, heading_deadband)
+    carry_w_reverse: float = 0.0
+    carry_deadband: float = 0.02  # clean pose: rounds 1-3 x 4 seeds unchanged; late+noisy+predicted r3 2/4 -> 3/4
+    carry_k_drive: float = 0.0  # 1/s steering gain while carrying (0: the normal k_drive)
+    place_alpha_max: float = 0.0  # rad/s^2 steering the place approach (0: carry_alpha_max)
+    dock_slack: float = 0.0  # s: DockSettings.approach_slack (a creeping, jammed approach is blocked; 0 = off)
     # m kept clear around the carrying turning circle (0.02 for the part's slide: outgoing 4 then has no approach
     # pose, round 2 0 of 6 seeds at the maximum)
     carry_margin: float = 0.01
@@ -119,15 +126,18 @@ class RoundAgent:
         self.delays = DelayEstimator(lanes_of(f))
         self.follower = PathFollower(self.limits, self.dt)
         cl = {k: v for k, v in (("w_max", self.carry_w_max), ("alpha_max", self.carry_alpha_max),
-                                ("v_max", self.carry_v_max), ("w_spin_max", self.carry_w_spin)) if v > 0}
+                                ("v_max", self.carry_v_max), ("w_spin_max", self.carry_w_spin),
+                                ("w_reverse_max", self.carry_w_reverse), ("heading_deadband", self.carry_deadband),
+                                ("k_drive", self.carry_k_drive)) if v > 0}
         self.carry_limits = replace(self.limits, **cl)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
-                             DockSettings(v_dock=self.v_dock, v_place=self.v_place,
+                             DockSettings(v_dock=self.v_dock, v_place=self.v_place, approach_slack=self.dock_slack,
                                           v_back_carrying=self.carry_v_back or DockSettings.v_back))
         # the place approach steers with a part on the magnet: no faster turning than carrying allows
         dl = self.docker
         dl.place_limits = replace(dl.place_limits, w_max=min(dl.place_limits.w_max, self.carry_limits.w_max),
-                                  alpha_max=min(dl.place_limits.alpha_max, self.carry_limits.alpha_max))
+                                  alpha_max=self.place_alpha_max or min(dl.place_limits.alpha_max,
+                                                                        self.carry_limits.alpha_max))
         self.fp_empty = robot_footprint(r)
         self.fp_carry = carrying_footprint(r, f.part)
         self.d_dock = dock_distance(r, f.part)

@@ -57,6 +57,12 @@ class DriveLimits:
     max_off_path: float = 0.1  # m: farther from the path the follower stops and says so (off_path)
     ff_lead: float = 2.0  # control cycles the curvature feed-forward reads ahead (the wheels' response delay)
     w_spin_max: float = 0.0  # rad/s: turns on the spot at most this (0: w_max); driving on arcs keeps w_max
+    # rad/s: a turn against the direction of the last turn faster than this is held to this until the robot has
+    # turned no faster for ``reverse_hold`` s (0: off). Carrying on a late, noisy pose the heading corrections
+    # reverse the turn, and a reversal after a part has slid along the magnet's face pivots it off (docs/agent.md)
+    w_reverse_max: float = 0.0
+    reverse_hold: float = 0.4  # s
+    heading_deadband: float = 0.0  # rad: driving, heading errors within this are no error (noise); beyond, less this
 
     @classmethod
     def from_robot(cls, robot, fraction: float = 0.45, a_max: float = 0.8, **kw) -> DriveLimits:
@@ -106,6 +112,8 @@ class PathFollower:
         self._i = 0
         self._dist = 0.0
         self._prof: list[np.ndarray] = []
+        self._turn_dir = 0.0  # sign of the last turn faster than w_reverse_max (0: none recently)
+        self._slow_time = 0.0  # s turned no faster than w_reverse_max since then
 
     @property
     def points(self) -> np.ndarray:
@@ -281,6 +289,10 @@ class PathFollower:
                 w_t = self._turn_rate(herr)
         if passed_end:
             v_t, w_t = self.v, self.w  # hand over at speed: the caller's next manoeuvre continues
+        if self.phase in ("turn", "final_turn") and self.v == 0.0:
+            w_t = self._limit_reversal(w_t)  # on the spot only: a path's S-bends reverse the turn on purpose
+        else:
+            self._turn_dir = 0.0
         # acceleration limits
         dv, dw = L.a_max * self.dt, L.alpha_max * self.dt
         self.v += max(-dv, min(dv, v_t - self.v))
@@ -307,8 +319,26 @@ class PathFollower:
         ss = np.linspace(c - window / 2, c + window / 2, 7)
         return float(np.mean(np.interp(ss, p.s, p.kappa)))
 
+    def _limit_reversal(self, w_t: float) -> float:
+        """``w_t`` held to ``w_reverse_max`` against the last fast turn's direction (see DriveLimits)."""
+        L = self.limits
+        cap = L.w_reverse_max
+        if cap <= 0.0:
+            return w_t
+        if abs(self.w) > cap:
+            self._turn_dir, self._slow_time = math.copysign(1.0, self.w), 0.0
+        elif self._turn_dir != 0.0:
+            self._slow_time += self.dt
+            if self._slow_time >= L.reverse_hold:
+                self._turn_dir = 0.0
+        if self._turn_dir != 0.0 and w_t * self._turn_dir < 0.0 and abs(w_t) > cap:
+            return math.copysign(cap, w_t)
+        return w_t
+
     def _turn_rate(self, err: float, drive: bool = False) -> float:
         L = self.limits
+        if drive and L.heading_deadband > 0.0:
+            err = math.copysign(max(0.0, abs(err) - L.heading_deadband), err)
         if drive:  # a correction on top of the feed-forward
             return math.copysign(min(L.w_max, L.k_drive * abs(err)), err)
         # braking-distance limited so an in-place turn stops on the heading

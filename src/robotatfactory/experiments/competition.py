@@ -56,7 +56,9 @@ for _m in MODES:
         TARGETS[f"{_m}_r{_r}_parts_pushed"] = "== 0"
 AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
                   "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock", "v_place",
-                  "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin", "carry_w_spin")
+                  "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin", "carry_w_spin",
+                  "carry_w_reverse", "carry_deadband", "carry_k_drive", "dock_slack",
+                  "place_alpha_max")
 DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "k_drive", "a_lat", "v_wheel", "slow_distance", "lookahead", "heading_tolerance", "w_max",
                   "alpha_max", "v_final")
 
@@ -85,6 +87,9 @@ def add_arguments(parser) -> None:
                              "every cycle, e.g. 0.003,0.02 (default 0,0)")
     parser.add_argument("--pose-delay", type=int, default=0, metavar="CYCLES",
                         help="bare_truth: the agent's pose this many control cycles late (default 0)")
+    parser.add_argument("--pose-predict", action="store_true",
+                        help="bare_truth: bring the late pose forward by its delay at odometry's speeds, as raf agent "
+                             "does (agent/predict.py; default: the late pose as it is)")
     parser.add_argument("--agent", metavar="NAME=VALUE", action="append", default=[],
                         help="a RoundAgent setting (repeatable; one of " + ", ".join(AGENT_SETTINGS)
                              + "; smooth=0: stop and turn at every corner, the earlier behaviour; carry_arcs=0: turn on the spot "
@@ -148,12 +153,13 @@ def parse_drive(items) -> dict:
 def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | None = None,
                field_name: str | None = None, record_path: bool = False, agent_options: dict | None = None,
                sim_options: dict | None = None, pose_noise: tuple[float, float] = (0.0, 0.0),
-               pose_delay: int = 0) -> dict:
+               pose_delay: int = 0, pose_predict: bool = False) -> dict:
     """One round on the bare stand-in with ground truth as the agent's pose; a flat dict of the run's
     figures (plus ``path`` [(t, x, y)] and ``events`` [(t, text, x, y)] when ``record_path``)."""
     from ..agent.behaviour import RoundAgent
     from ..agent.client import FactoryClient
     from ..agent.follower import DriveLimits
+    from ..agent.predict import extrapolate
     from ..agent.footprint import carrying_footprint, robot_footprint
     from ..agent.obstacles import FieldObstacles
     from ..competition import FactoryServer
@@ -186,12 +192,16 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     rng = __import__("random").Random(seed * 7919 + round_no)
     late = []
 
+    twist = [0.0, 0.0]  # odometry's latest body speeds (m/s, rad/s)
+
     def pose_in(p):
         late.append(tuple(p))
         q = late.pop(0) if len(late) > pose_delay else late[0]
         if pose_noise[0] or pose_noise[1]:
             q = (q[0] + rng.gauss(0.0, pose_noise[0]), q[1] + rng.gauss(0.0, pose_noise[0]),
                  q[2] + rng.gauss(0.0, pose_noise[1]))
+        if pose_predict and pose_delay:  # what `raf agent` does: forward to now at odometry's speeds
+            q = extrapolate(q, twist[0], twist[1], pose_delay * robot.control_period)
         return q
 
     split: dict[str, float] = {}  # s per agent activity (RoundAgent.activity)
@@ -215,6 +225,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                 frame = sim.step_cycle(Command(c.v, c.w, c.magnet))
                 contact = frame.contact
                 o = odo.update(frame.enc_total[0], frame.enc_total[1], sim.time)
+                twist[0], twist[1] = o.v, o.w
                 if sim.seq % 25 == 0:
                     now = ((o.x, o.y, o.theta), sim.pose)
                     if prev is not None:
@@ -382,9 +393,10 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, timeout: flo
 
 
 def _job(spec):
-    round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay = spec
+    round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay, *rest = spec
     try:
-        return play_round(round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay)
+        return play_round(round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay,
+                          *rest)
     except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
         return {"round": round_no, "seed": seed, "error": f"{type(e).__name__}: {e}", "max_score": False,
                 "points": 0, "max_points": -1, "last_score_s": math.nan, "notes": [], "false_start": False,
@@ -569,7 +581,7 @@ def run(args, out_dir: Path | None) -> dict:
     if delay < 0:
         raise ConfigError("--pose-delay must be >= 0")
     specs = [(r, s, float(args.limit), drive, field_name, out_dir is not None and s == first, agent_options,
-              sim_options, noise, delay)
+              sim_options, noise, delay, bool(getattr(args, "pose_predict", False)))
              for r in rounds for s in range(first, first + args.seeds)]
     t0 = time.perf_counter()
     jobs = max(1, int(args.jobs))
@@ -595,6 +607,7 @@ def run(args, out_dir: Path | None) -> dict:
     out["sim_settings"] = json.dumps(sim_options) if sim_options else "defaults"
     out["pose_noise_m_rad"] = ",".join(f"{x:g}" for x in noise)
     out["pose_delay_cycles"] = delay
+    out["pose_predicted"] = bool(getattr(args, "pose_predict", False)) and delay > 0
     out["wall_s"] = round(wall, 1)
     out["jobs"] = jobs
     if out_dir is not None:
