@@ -107,7 +107,7 @@ class RoundAgent:
     # a late, noisy pose while carrying: turns against the last fast turn held to this (rad/s) for 0.4 s, and
     # driving heading errors within carry_deadband (rad) ignored (DriveLimits.w_reverse_max, heading_deadband)
     carry_w_reverse: float = 0.0
-    carry_deadband: float = 0.02  # clean pose: rounds 1-3 x 4 seeds unchanged; late+noisy+predicted r3 2/4 -> 3/4
+    carry_deadband: float = 0.0  # 0.02 measured: no gain (late, noisy, predicted pose, rounds 2-3 x 10: 15/20 vs 17/20 without)
     carry_k_drive: float = 0.0  # 1/s steering gain while carrying (0: the normal k_drive)
     place_alpha_max: float = 0.0  # rad/s^2 steering the place approach (0: carry_alpha_max)
     dock_slack: float = 0.0  # s: DockSettings.approach_slack (a creeping, jammed approach is blocked; 0 = off)
