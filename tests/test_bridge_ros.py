@@ -129,8 +129,11 @@ def test_every_topic_arrives_with_types_frames_and_stamps(rig):
     info = m["/camera/camera_info"][-1]
     assert camera_matrices(info)[1] == [226.8, 0, 319.5, 0, 226.8, 239.5, 0, 0, 1]
     assert info.header.frame_id == "camera_optical"
+    # camera_info carries its image's stamp. Not asserted for the very last image: its camera_info is published
+    # right after it and may not have arrived when the collectors closed (and on ROS 2 both are best effort)
     infos = {stamp_ns(i.header.stamp) for i in m["/camera/camera_info"]}
-    assert stamp_ns(img[-1].header.stamp) in infos  # camera_info carries the image's stamp
+    matched = infos & {stamp_ns(im.header.stamp) for im in img}
+    assert len(matched) >= len(img) // 2, (len(matched), len(img))
     arr = m["/field/markers"][0]
     ns = {mk.ns for mk in arr.markers}
     assert {"floor", "walls", "slots", "aruco", "aruco_ids"} <= ns
