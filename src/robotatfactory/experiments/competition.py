@@ -29,7 +29,8 @@ NAME=VALUE`` (RoundAgent settings), ``--drive NAME=VALUE`` (DriveLimits), ``--po
 ``RoundAgent.activity`` and where parts were pushed.
 
 Runs go in parallel over ``--jobs`` processes (default 2: the machine's cores). With ``--out DIR``: a
-top-view figure of the first seed's run per round (path, pick and place events) and ``runs.json`` with
+top-view figure of the first seed's run per round (path, pick and place events), an animated top view
+(``round3_seed{S}_{mode}.gif``, _competition_gif.py) of the first round-3 seed's run and ``runs.json`` with
 every run's events.
 """
 from __future__ import annotations
@@ -181,7 +182,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     moved_early = touched = pushed = off_floor = 0
     hits = []
     pushes = []  # (t, x, y, mm moved, the agent's activity)
-    path, events = [], []
+    path, events, frames = [], [], []
     n_events = 0
     part_ids = list(sim.parts.qadr) if hasattr(sim.parts, "qadr") else []
     last_xy = {}
@@ -241,6 +242,10 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                         hits.append((round(sim.time, 2), round(x, 3), round(y, 3), "wall" if hit_wall else "floor"))
                     if record_path:
                         path.append((round(sim.time, 3), round(x, 4), round(y, 4)))
+                        # for the animated picture (_competition_gif): pose with heading, held part, parts
+                        frames.append((round(sim.time, 2), round(x, 4), round(y, 4), round(sim.pose[2], 3),
+                                       sim.held, [(pid, *(round(v, 3) for v in sim.part_pose(pid)))
+                                                  for pid in part_ids]))
                     for pid in part_ids:
                         px, py, _ = sim.part_pose(pid)
                         if pid in last_xy and sim.held != pid:
@@ -276,7 +281,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
         out["odometry_heading_error_max_per_s_rad"] = max((s[1] for s in slip), default=0.0)
         out["time_split"] = {k: round(v, 2) for k, v in sorted(split.items())}
         if record_path:
-            out["path"], out["events"] = path, events
+            out["path"], out["events"], out["frames"] = path, events, frames
         return out
     finally:
         server.stop()
@@ -614,5 +619,12 @@ def run(args, out_dir: Path | None) -> dict:
         for r in runs:
             if r.get("path"):
                 figure(r, out_dir / f"round{r['round']}_seed{r['seed']}_{mode}.png", mode, field_name)
+        gif_runs = [r for r in runs if r.get("round") == 3 and r.get("frames")]
+        if gif_runs:  # the animated picture of the first round-3 seed (_competition_gif.py)
+            from ._competition_gif import write_gif
+            r = gif_runs[0]
+            write_gif(r, out_dir / f"round3_seed{r['seed']}_{mode}.gif", mode, field_name)
+        for r in runs:
+            r.pop("frames", None)  # bulky; runs.json keeps path and events
         (out_dir / "runs.json").write_text(json.dumps(runs, indent=1, default=str))
     return out
