@@ -31,21 +31,8 @@ DEB_PACKAGES=(
   graphviz
 )
 
-SUDO=""
-if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
-
-missing=()
-for p in "${DEB_PACKAGES[@]}"; do
-  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-    missing+=("$p")
-  fi
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "[bootstrap] installing Debian packages: ${missing[*]}"
-  export DEBIAN_FRONTEND=noninteractive
-  $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
-fi
+. scripts/debs.sh
+install_debs bootstrap "${DEB_PACKAGES[@]}"
 
 if [ ! -x .venv/bin/python ]; then
   echo "[bootstrap] creating .venv (with Debian's ROS Python visible)"

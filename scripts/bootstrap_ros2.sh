@@ -43,21 +43,8 @@ pip_install() {  # quiet; drops only the warnings about pip.conf index folders t
 
 # --- Debian packages ------------------------------------------------------------------------------
 DEB_PACKAGES=(cmake g++ ninja-build python3-dev python3-venv)
-SUDO=""
-if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
-missing=()
-for p in "${DEB_PACKAGES[@]}"; do
-  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-    missing+=("$p")
-  fi
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  t=$(now)
-  log "installing Debian packages: ${missing[*]}"
-  $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
-  log "Debian packages installed ($(since "$t"))"
-fi
+. scripts/debs.sh
+install_debs bootstrap-ros2 "${DEB_PACKAGES[@]}"
 
 # --- the venv (no system site-packages) ------------------------------------------------------------
 if [ -f "$VENV/pyvenv.cfg" ] && grep -qi '^include-system-site-packages *= *true' "$VENV/pyvenv.cfg"; then
