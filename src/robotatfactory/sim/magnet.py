@@ -37,7 +37,7 @@ for the next step. Units: metres, newtons, seconds.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -63,10 +63,9 @@ class MagnetParams:
 
     @classmethod
     def from_spec(cls, em: dict) -> "MagnetParams":
-        return cls(x=float(em["x"]), beam=float(em["beam"]), ray_behind_face=float(em.get("ray_behind_face", 0.005)),
-                   fmax=float(em.get("fmax", 10.0)), k2=float(em.get("k2", 0.5)),
-                   vin_on=float(em.get("vin_on", 1.0)), period=float(em.get("period", 0.01)),
-                   mu=float(em.get("mu", 0.1)))
+        """From the robot file's ``electromagnet`` section (``x`` and ``beam`` required; the rest default as
+        above, the defaults written once)."""
+        return cls(**{f.name: float(em[f.name]) for f in fields(cls) if f.name in em or f.name in ("x", "beam")})
 
     def force(self, vin: float, dist: float) -> float:
         """SimTwo's magnitude (N) at ray distance ``dist`` (m): ``0.5 Vin Fmax / (1 + max(0, dist) k2)^2``."""
