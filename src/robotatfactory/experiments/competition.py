@@ -97,37 +97,46 @@ def add_arguments(parser) -> None:
                              "with a part too)")
 
 
-def parse_agent(items) -> dict:
-    """``--agent NAME=VALUE`` items: RoundAgent settings (numbers; ``smooth`` 0 or 1)."""
+def _name_values(items, option: str, allowed, what: str) -> list[tuple[str, str, str]]:
+    """``NAME=VALUE`` items of ``option`` as (item, name, value); a name not in ``allowed`` is an error."""
     from ..errors import ConfigError
 
-    out = {}
+    out = []
     for item in items or ():
         name, sep, value = item.partition("=")
         name = name.strip()
-        if not sep or name not in AGENT_SETTINGS:
-            raise ConfigError(f"--agent {item!r}: expected NAME=VALUE with NAME one of {', '.join(AGENT_SETTINGS)}")
-        try:
-            out[name] = bool(int(value)) if name in ("smooth", "carry_arcs") else float(value)
-        except ValueError:
-            raise ConfigError(f"--agent {item!r}: {value!r} is not a number") from None
+        if not sep or name not in allowed:
+            raise ConfigError(f"{option} {item!r}: expected NAME=VALUE with NAME {what}")
+        out.append((item, name, value))
     return out
+
+
+def _number(option: str, item: str, value: str, convert=float):
+    from ..errors import ConfigError
+
+    try:
+        return convert(value)
+    except ValueError:
+        raise ConfigError(f"{option} {item!r}: {value!r} is not a number") from None
+
+
+def parse_agent(items) -> dict:
+    """``--agent NAME=VALUE`` items: RoundAgent settings (numbers; ``smooth`` 0 or 1)."""
+    return {name: (bool(_number("--agent", item, value, int)) if name in ("smooth", "carry_arcs")
+                   else _number("--agent", item, value))
+            for item, name, value in _name_values(items, "--agent", AGENT_SETTINGS,
+                                                  "one of " + ", ".join(AGENT_SETTINGS))}
 
 
 def parse_sim(items) -> dict:
     """``--sim NAME=VALUE`` items: SimConfig fields for the bare stand-in (a number where it parses as one)."""
     import dataclasses
 
-    from ..errors import ConfigError
     from ..sim import SimConfig
 
-    names = {f.name for f in dataclasses.fields(SimConfig)}
+    names = {f.name for f in dataclasses.fields(SimConfig)} - {"camera", "lidar", "round_no", "seed", "start_after"}
     out = {}
-    for item in items or ():
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if not sep or name not in names or name in ("camera", "lidar", "round_no", "seed", "start_after"):
-            raise ConfigError(f"--sim {item!r}: expected NAME=VALUE with NAME a SimConfig field the run does not set")
+    for _item, name, value in _name_values(items, "--sim", names, "a SimConfig field the run does not set"):
         try:
             out[name] = int(value) if value.strip().lstrip("-").isdigit() else float(value)
         except ValueError:
@@ -136,19 +145,9 @@ def parse_sim(items) -> dict:
 
 
 def parse_drive(items) -> dict:
-    from ..errors import ConfigError
-
-    out = {}
-    for item in items or ():
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if not sep or name not in DRIVE_SETTINGS:
-            raise ConfigError(f"--drive {item!r}: expected NAME=VALUE with NAME one of {', '.join(DRIVE_SETTINGS)}")
-        try:
-            out[name] = float(value)
-        except ValueError:
-            raise ConfigError(f"--drive {item!r}: {value!r} is not a number") from None
-    return out
+    return {name: _number("--drive", item, value)
+            for item, name, value in _name_values(items, "--drive", DRIVE_SETTINGS,
+                                                  "one of " + ", ".join(DRIVE_SETTINGS))}
 
 
 def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | None = None,
@@ -292,14 +291,11 @@ def _relative_error(prev, now) -> tuple[float, float, float]:
     """Odometry against the truth over one interval: the position (m) and heading (rad) error of the
     odometry's motion expressed in its own start frame, and the truth's distance (m). Wheel slip (SimTwo's
     PID has no ramp: harsh acceleration slips the tyres) shows here; ground truth as the pose hides it."""
-    def rel(a, b):
-        dx, dy = b[0] - a[0], b[1] - a[1]
-        c, s = math.cos(a[2]), math.sin(a[2])
-        return c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))
+    from ..localization.geometry import between2, wrap_angle
 
     (o0, t0), (o1, t1) = prev, now
-    ro, rt = rel(o0, o1), rel(t0, t1)
-    dth = math.atan2(math.sin(ro[2] - rt[2]), math.cos(ro[2] - rt[2]))
+    ro, rt = between2(o0, o1), between2(t0, t1)
+    dth = wrap_angle(ro[2] - rt[2])
     return math.hypot(ro[0] - rt[0], ro[1] - rt[1]), abs(dth), math.hypot(rt[0], rt[1])
 
 
