@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass, replace
 
 from .follower import DriveLimits, PathFollower
-from .footprint import HOLD_GAP, PLATE_THICKNESS, pose_in_front
+from .footprint import HOLD_GAP, PLATE_THICKNESS, pose_in_front, wrap
 from .recovery import StuckDetector
 
 
@@ -130,7 +130,7 @@ class Docker:
         carrying = mode == "place"  # a part on the magnet: steer while driving, never turn on the spot
         self.follower.start([start, target[:2]], final_heading=None, no_spin=carrying)
         self.follower.v = max(0.0, min(float(v0), self.follower.limits.v_max))
-        aligned = abs(math.remainder(pose[2] - target[2], 2 * math.pi)) < 0.1
+        aligned = abs(wrap(pose[2] - target[2])) < 0.1
         self.follower.phase = "drive" if aligned or carrying else "turn"  # turning: it brakes, then turns in place
         self.phase = "approach"
         v_nom = max(self.follower.limits.v_max, 1e-3)

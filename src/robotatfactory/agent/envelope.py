@@ -10,7 +10,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-TOUCH = 0.08 + 0.002 + 0.03  # m: base_link to the centre of a part whose plate touches the magnet
+
+def touch_distance(robot, part) -> float:
+    """base_link to the centre of a part whose plate touches the magnet (m)."""
+    from .footprint import dock_distance
+
+    return dock_distance(robot, part, gap=0.0)
 
 
 @dataclass(frozen=True)
@@ -35,9 +40,9 @@ def ramp(v0, w0, v1, w1, a, alpha, dt=0.04):
 
 def profile(t: Trial, dt=0.04):
     if t.kind == "straight":
-        return ramp(0, 0, t.v, 0, t.a, t.alpha) + [(t.v, 0.0)] * t.hold + ramp(t.v, 0, 0, 0, t.a, t.alpha)
-    up = ramp(0, 0, t.v, t.w, t.a, t.alpha)
-    down = ramp(t.v, t.w, 0, 0, t.a, t.alpha)
+        return ramp(0, 0, t.v, 0, t.a, t.alpha, dt) + [(t.v, 0.0)] * t.hold + ramp(t.v, 0, 0, 0, t.a, t.alpha, dt)
+    up = ramp(0, 0, t.v, t.w, t.a, t.alpha, dt)
+    down = ramp(t.v, t.w, 0, 0, t.a, t.alpha, dt)
     turned = sum(abs(w) for _, w in up + down) * dt
     n = max(0, int(round((t.turn - turned) / max(abs(t.w) * dt, 1e-9))))
     return up + [(t.v, t.w)] * n + down
@@ -48,7 +53,7 @@ def run(field, robot, t: Trial, magnet: str = "force", settle: int = 5) -> tuple
     from ..sim import PartPlacement, SimConfig, Simulator
     from ..simtwo import Command
 
-    part = PartPlacement("R", TOUCH + 0.002, 0.0, math.pi)
+    part = PartPlacement("R", touch_distance(robot, field.part) + 0.002, 0.0, math.pi)
     sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, competition=False, magnet=magnet,
                                             start_pose=(0.0, 0.0, 0.0), extra_parts=(part,)))
     try:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .footprint import Footprint, pose_in_front
+from .footprint import Footprint, pose_in_front, wrap
 from .obstacles import FieldObstacles
 from .smooth import RADII, SmoothPath, smooth_path
 
@@ -224,7 +224,7 @@ class PathPlanner:
         def turn(a, b, c) -> float:
             h1 = math.atan2(b[1] - a[1], b[0] - a[0])
             h2 = math.atan2(c[1] - b[1], c[0] - b[0])
-            return abs(math.remainder(h2 - h1, 2 * math.pi))
+            return abs(wrap(h2 - h1))
 
         best = None
         for d in distances:

@@ -19,6 +19,8 @@ from typing import Callable
 
 import numpy as np
 
+from .footprint import wrap
+
 RADII = (0.6, 0.45, 0.35, 0.27, 0.2, 0.15, 0.11, 0.08, 0.06, 0.045, 0.035)  # m, tried largest first
 
 
@@ -47,7 +49,7 @@ class Piece:
         ds = self.s[i + 1] - self.s[i]
         u = 0.0 if ds <= 0 else (s - self.s[i]) / ds
         x, y = self.xy[i] + u * (self.xy[i + 1] - self.xy[i])
-        dpsi = math.remainder(float(self.psi[i + 1] - self.psi[i]), 2 * math.pi)
+        dpsi = wrap(float(self.psi[i + 1] - self.psi[i]))
         return float(x), float(y), float(self.psi[i] + u * dpsi), float(self.kappa[i] + u * (self.kappa[i + 1] - self.kappa[i]))
 
 
@@ -87,7 +89,7 @@ def fillet(corner, h_in: float, h_out: float, r: float, ds: float):
     """The arc of radius ``r`` tangent to the line into ``corner`` (heading ``h_in``) and the line out
     (``h_out``): its samples (xy, psi, kappa) from the tangent point on the way in to the one on the way
     out, and the tangent length (m from the corner)."""
-    phi = math.remainder(h_out - h_in, 2 * math.pi)
+    phi = wrap(h_out - h_in)
     t = r * math.tan(abs(phi) / 2)
     side = 1.0 if phi > 0 else -1.0  # left turn: the centre lies to the left of the way in
     p0 = np.asarray(corner, float) - t * np.array([math.cos(h_in), math.sin(h_in)])
@@ -124,7 +126,7 @@ def smooth_path(points, arc_clear: Callable[[np.ndarray, np.ndarray], bool] | No
     arcs: list = [None] * (n + 1)
     used_in = [0.0] * n  # tangent length taken from each segment's start
     for k in range(1, n):
-        phi = math.remainder(hd[k] - hd[k - 1], 2 * math.pi)
+        phi = wrap(hd[k] - hd[k - 1])
         if abs(phi) < 1e-4:
             continue
         room_in = seg[k - 1] - used_in[k - 1]
@@ -177,7 +179,7 @@ def smooth_path(points, arc_clear: Callable[[np.ndarray, np.ndarray], bool] | No
                 add(xy, psi, kap)
                 start = xy[-1]
             else:
-                phi = math.remainder(hd[k + 1] - hd[k], 2 * math.pi)
+                phi = wrap(hd[k + 1] - hd[k])
                 if abs(phi) > min_turn:  # a stop: a new piece starts at the corner
                     close()
                 start = np.asarray(pts[k + 1])
