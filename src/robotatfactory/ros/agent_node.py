@@ -17,7 +17,6 @@ seconds (the agent then brakes to a stop). Bad messages are counted and skipped.
 """
 from __future__ import annotations
 
-import inspect
 import math
 import threading
 import time
@@ -70,8 +69,6 @@ class AgentNode:
         self.lock = threading.RLock()
         self.pose: tuple[float, float, float] | None = None
         self.pose_cov: np.ndarray | None = None  # 3x3 (x, y, theta) of the latest pose
-        # the agent core takes the pose's uncertainty where its step() has the argument
-        self._step_uncertainty = "uncertainty" in inspect.signature(self.agent.step).parameters
         self.pose_stamp = -math.inf
         self.odom_stamp = -math.inf
         self.contact = False
@@ -166,10 +163,7 @@ class AgentNode:
                 if fresh and self.pose is not None else None
             if pose is None:
                 self.counts["stale_cycles"] += 1
-            if self._step_uncertainty:
-                cmd = self.agent.step(now, pose, self.contact, uncertainty=self.pose_cov if pose is not None else None)
-            else:
-                cmd = self.agent.step(now, pose, self.contact)
+            cmd = self.agent.step(now, pose, self.contact, uncertainty=self.pose_cov if pose is not None else None)
             self.counts["cycles"] += 1
             events = self.agent.events[self._events_logged:]
             self._events_logged = len(self.agent.events)

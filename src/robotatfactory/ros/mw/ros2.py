@@ -111,6 +111,7 @@ class Ros2Node(Node):
         self._static: dict = {}
         self._keep: list = []
         self.executor = None  # made by spin() (make_executor) unless set before
+        self.callback_errors = 0  # callbacks that raised (logged, the node goes on)
 
     @property
     def name(self) -> str:
@@ -237,9 +238,15 @@ class Ros2Node(Node):
         ex.add_node(self.node)
         try:
             while self.ok():
-                ex.spin_once(timeout_sec=0.1)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
+                try:
+                    ex.spin_once(timeout_sec=0.1)
+                except (KeyboardInterrupt, ExternalShutdownException):
+                    break
+                except Exception as e:  # noqa: BLE001 - a callback's error must not end the node (as in rospy)
+                    if type(e).__name__ == "InvalidHandle":  # an entity destroyed while the executor held it
+                        continue
+                    self.callback_errors += 1
+                    throttled(self.node.get_logger().error, 5.0, f"a callback failed (node goes on): {e!r}")
         finally:
             self._shutdown.set()
 
