@@ -167,15 +167,10 @@ def children(pid: int) -> list[int]:
     return out
 
 
-def _wait(pred, timeout: float, what: str, check=None) -> float:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout:
-        if pred():
-            return time.monotonic() - t0
-        if check is not None:
-            check()
-        time.sleep(0.02)
-    raise RuntimeError(f"timed out after {timeout:.0f} s waiting for {what}")
+def _wait(pred, timeout: float, what: str, check=None) -> None:
+    from ..ros.processes import wait_until
+
+    wait_until(pred, timeout, what, check, period=0.02)
 
 
 # ------------------------------------------------------------------------------------------------ the proxy
