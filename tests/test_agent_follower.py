@@ -23,22 +23,30 @@ def polyline_distance(p, pts):
     return best
 
 
-def test_rules_on_a_kinematic_robot(robot):
-    lim = DriveLimits.from_robot(robot)
-    assert lim.v_max == pytest.approx(0.4) and lim.alpha_max == pytest.approx(lim.a_max / (robot.track / 2))
-    dt = robot.control_period
-    f = PathFollower(lim, dt)
-    x, y, th = 0.0, 0.0, math.pi  # facing away from the path
-    f.start([(0.0, 0.0), (0.6, 0.0), (0.6, 0.3)], final_heading=math.pi / 2)
-    outs = []
-    for _ in range(1000):
+def drive_kinematic(f: PathFollower, pose, dt: float, steps: int = 1000):
+    """Run the follower on an ideal unicycle from ``pose`` until done: (outputs, poses after each step)."""
+    x, y, th = pose
+    outs, poses = [], []
+    for _ in range(steps):
         o = f.step((x, y, th))
         outs.append(o)
         x += o.v * math.cos(th) * dt
         y += o.v * math.sin(th) * dt
         th = wrap(th + o.w * dt)
+        poses.append((x, y, th))
         if o.done:
             break
+    return outs, poses
+
+
+def test_rules_on_a_kinematic_robot(robot):
+    lim = DriveLimits.from_robot(robot)
+    assert lim.v_max == pytest.approx(0.4) and lim.alpha_max == pytest.approx(lim.a_max / (robot.track / 2))
+    dt = robot.control_period
+    f = PathFollower(lim, dt)
+    f.start([(0.0, 0.0), (0.6, 0.0), (0.6, 0.3)], final_heading=math.pi / 2)
+    outs, poses = drive_kinematic(f, (0.0, 0.0, math.pi), dt)  # facing away from the path
+    x, y, th = poses[-1]
     assert outs[-1].done and math.hypot(x - 0.6, y - 0.3) < 0.01 and abs(wrap(th - math.pi / 2)) < 0.02
     v = np.array([o.v for o in outs])
     w = np.array([o.w for o in outs])
@@ -127,17 +135,9 @@ def test_a_rounded_corner_is_driven_through_without_stopping(robot):
     assert len(sp.pieces) == 1  # no stop: the corner is an arc
     f = PathFollower(lim, dt)
     f.start(sp)
-    x, y, th = 0.0, 0.0, 0.0
-    outs, worst = [], 0.0
-    for _ in range(1000):
-        o = f.step((x, y, th))
-        outs.append(o)
-        x += o.v * math.cos(th) * dt
-        y += o.v * math.sin(th) * dt
-        th = wrap(th + o.w * dt)
-        worst = max(worst, float(np.min(np.hypot(sp.points[:, 0] - x, sp.points[:, 1] - y))))
-        if o.done:
-            break
+    outs, poses = drive_kinematic(f, (0.0, 0.0, 0.0), dt)
+    x, y, th = poses[-1]
+    worst = max(float(np.min(np.hypot(sp.points[:, 0] - px, sp.points[:, 1] - py))) for px, py, _ in poses)
     assert outs[-1].done and math.hypot(x - 0.8, y - 0.8) < 0.01
     on_arc = [o for o in outs if 0.75 * math.pi / 2 > abs(wrap(o.heading_error)) and 0.3 < o.remaining < 0.9]
     v = np.array([o.v for o in outs])

@@ -59,12 +59,21 @@ def test_a_carry_from_a_warehouse_slot_backs_out_straight_and_turns_only_on_forw
             assert not ob.collides(fc, (float(x), float(y), float(th)))
 
 
-def test_no_path_is_reported(field, robot):
+def test_a_search_over_its_expansion_budget_is_reported(field, robot):
     fc = carrying_footprint(robot, field.part)
     ob = FieldObstacles(field, [])
     cp = CarryPlanner(ob, fc, radius=0.2, max_expansions=50)
     with pytest.raises(NoCarryPath):
         cp.plan((-0.7, -0.4, 0.0), (0.7, 0.35, math.pi), )
+
+
+def test_a_goal_inside_a_wall_has_no_path(field, robot):
+    fc = carrying_footprint(robot, field.part)
+    ob = FieldObstacles(field, [])
+    box = field.boxes[0]
+    cp = CarryPlanner(ob, fc, radius=0.2)
+    with pytest.raises(NoCarryPath):
+        cp.plan((-0.7, -0.4, 0.0), (float(box.center[0]), float(box.center[1]), 0.0))
 
 
 def test_the_follower_drives_a_carry_path_without_turning_on_the_spot(field, robot):

@@ -23,8 +23,8 @@ def test_bench_bridge_measures_on_the_middleware(middleware, tmp_path):
     # camera frames (best effort on ROS 2, 921,600 bytes each) mostly arrive: before data/fastdds.xml's shared
     # memory segment ROS 2 lost 39 of 43
     assert res["camera_frames_measured"] >= 10
-    assert res["camera_frames_lost_with_control"] <= res["camera_frames_measured"]
-    assert res["camera_max_frames_per_s"] > 0
+    assert res["camera_frames_lost_with_control"] <= res["camera_frames_measured"] // 4
+    assert res["camera_max_frames_per_s"] >= 20  # the flood through the bridge at least at the offered 20/s
 
 
 def test_speed_experiment_runs_on_the_middleware(middleware, tmp_path):
