@@ -502,10 +502,12 @@ class RoundAgent:
         self.follower.v = self.follower.w = 0.0  # the docker drives from here (at the speed it arrived with)
         if self.mode == "to_pick":
             self.docker.start_pick(slot, pose, self._retreat(carrying=True), v0=v0)
+            self._event(self.t, f"docking to pick the {self.task.part.label} part at {self.target}")
             self.mode = "pick"
             self._mode_t0 = self.t
         else:
             self.docker.start_place(slot, pose, self._retreat(carrying=False), v0=v0)
+            self._event(self.t, f"docking to place the {self.carrying.label} part in {self.target}")
             self._released_t = None
             self.mode = "place"
             self._mode_t0 = self.t
