@@ -120,6 +120,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--status-every", type=float, default=1.0, metavar="S",
                    help="print a status line every S wall seconds (default 1.0; 0 = never)")
     g.add_argument("--quiet", action="store_true", help="no status lines (warnings and the final score still)")
+    g.add_argument("--trace", default=None, metavar="FILE.jsonl",
+                   help="write the ground truth cycle by cycle (robot pose, parts, held part, command, contact, "
+                        "encoders) as JSON Lines for measuring afterwards (sim/trace.py); never sent to the robot")
+    g.add_argument("--end-after-max", type=float, default=None, metavar="S",
+                   help="end the run S simulated seconds after it reached the round's maximum score (the final "
+                        "report as at --duration); default: run on")
     g.add_argument("--snapshot", default=None, metavar="FILE.png", help="render an overview of the scene and exit")
     g.add_argument("--snapshot-camera", choices=("overview", "top", "robot_camera"), default="overview",
                    help="the view --snapshot renders (default overview)")
@@ -196,11 +202,15 @@ def run(args) -> int:
         command_timeout=args.command_timeout or None,
         control_port=None if args.no_control or n > 1 else (args.control_port if args.control_port is not None
                                                              else control_port_for(args.port)),
-        start_paused=args.paused, control_optional=args.control_port is None)
+        start_paused=args.paused, control_optional=args.control_port is None,
+        trace=args.trace, end_after_max=args.end_after_max)
     from ..sim.runner import SimRunner
 
     sim = Simulator(field, robot, config)
     if n > 1:
+        if args.trace or args.end_after_max is not None:
+            sim.close()
+            raise ConfigError("--trace and --end-after-max run with one robot only")
         return _run_several(field, sim, runner_config)
     runner = SimRunner(sim, runner_config)
     old = {s: signal.signal(s, runner.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -78,6 +78,8 @@ class RunnerConfig:
     control_port: int | None = None  # the control channel's UDP port on host (sim/control.py); None: none
     start_paused: bool = False  # start paused (the control channel's step/resume run it)
     control_optional: bool = False  # True: a control port that cannot be bound is a warning, not an error
+    trace: str | None = None  # write the ground-truth trace here (sim/trace.py); None: none
+    end_after_max: float | None = None  # simulation s after the maximum score was reached: end the run
 
     def __post_init__(self):
         if self.mode not in MODES:
@@ -91,6 +93,8 @@ class RunnerConfig:
                               "seconds")
         if not (self.takeover_after >= 0 and math.isfinite(self.takeover_after)):
             raise ConfigError(f"--takeover-after {self.takeover_after}: must be >= 0 seconds")
+        if self.end_after_max is not None and not (self.end_after_max >= 0 and math.isfinite(self.end_after_max)):
+            raise ConfigError(f"--end-after-max {self.end_after_max}: must be >= 0 simulation seconds")
         if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
             raise ConfigError(f"--duration {self.duration}: must be a positive number of simulation seconds")
         for name, port in (("--port", self.port), ("--bridge port", self.bridge[1]),
@@ -237,6 +241,8 @@ class SimRunner:
         self.control = SimControl(self)  # reset/pause/step/... requests (sim/control.py)
         self.control.paused = self.config.start_paused
         self._ctl_sock: socket.socket | None = None
+        self._trace = None  # sim/trace.py TraceWriter while open with --trace
+        self._max_at: float | None = None  # simulation time the maximum score was first seen
 
     # ------------------------------------------------------------------------------------------ setup
     def open(self) -> "SimRunner":
@@ -280,6 +286,10 @@ class SimRunner:
                 sim = self.sim
                 self.server = FactoryServer(sim.factory, host=c.server_host, port=c.server_port,
                                             clock=lambda: sim.time).start()
+            if c.trace:
+                from .trace import TraceWriter
+
+                self._trace = TraceWriter(c.trace, self.sim)
         except Exception:
             self.close()
             raise
@@ -297,6 +307,9 @@ class SimRunner:
         return self._ctl_sock.getsockname()[:2] if self._ctl_sock is not None else None
 
     def close(self) -> None:
+        if self._trace is not None:
+            self._trace.close()
+            self._trace = None
         if self._ctl_sock is not None:
             self._ctl_sock.close()
             self._ctl_sock = None
@@ -546,6 +559,18 @@ class SimRunner:
             self._rlog.warn("tx", f"sensor frame {frame.seq} not sent to {self.config.bridge[0]}:"
                                   f"{self.config.bridge[1]}: {e}")
 
+    def _max_reached(self, sim, after: float) -> bool:
+        """True once the run has had its maximum score for ``after`` simulation seconds (checked once per
+        simulated second, and every cycle once reached)."""
+        if self._max_at is None:
+            if sim.referee is None or sim.seq % 25:
+                return False
+            rep = sim.referee.report(sim.time)
+            if not rep.started or rep.points < rep.max_points:
+                return False
+            self._max_at = sim.time
+        return sim.time - self._max_at >= after - 1e-9
+
     def report(self):
         sim = self.sim
         return sim.referee.report(sim.time) if sim.referee is not None else None
@@ -585,6 +610,11 @@ class SimRunner:
                 self._check_command_age()
                 frame = sim.step_cycle(self.command)
                 self.counters.cycles += 1
+                if self._trace is not None:
+                    self._trace.cycle(sim, frame, self.command)
+                if c.end_after_max is not None and self._max_reached(sim, c.end_after_max):
+                    reason = "maximum score"
+                    break
                 self._publish(sim.take_frames())
                 self._pace(sim.time)  # realtime: the SensorFrame at its own time, after the cycle's frames
                 self._send(frame)
