@@ -159,15 +159,12 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     from ..agent.behaviour import RoundAgent
     from ..agent.client import FactoryClient
     from ..agent.follower import DriveLimits
-    from ..agent.predict import extrapolate
-    from ..agent.footprint import carrying_footprint, robot_footprint
-    from ..agent.obstacles import FieldObstacles
     from ..competition import FactoryServer
     from ..field import load_field
-    from ..localization.odometry import DiffDriveOdometry
     from ..robot import load_robot
     from ..sim import SimConfig, Simulator
     from ..simtwo import Command
+    from ._competition_observe import RunObserver
 
     field = load_field(field_name) if field_name else load_field()
     robot = load_robot()
@@ -176,37 +173,11 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, round_no=round_no, seed=seed,
                                             start_after=1.0, **(sim_options or {})))
     server = FactoryServer(sim.factory, port=0, clock=lambda: sim.time).start()
-    walls = FieldObstacles(field, [])
-    fp, fc = robot_footprint(robot), carrying_footprint(robot, field.part)
-    moved_early = touched = pushed = off_floor = 0
-    hits = []
-    pushes = []  # (t, x, y, mm moved, the agent's activity)
-    path, events, frames = [], [], []
-    n_events = 0
-    part_ids = list(sim.parts.qadr) if hasattr(sim.parts, "qadr") else []
-    last_xy = {}
-    odo = DiffDriveOdometry(robot)
-    odo.reset(baseline=(0, 0), t=0.0)
-    # the pose the agent gets: ground truth, optionally with white noise (m, rad) and late by whole cycles (a
-    # stand-in for the EKF's error and the transport; docs/agent.md measured 0.6 mm median, 8.6 mm 95th pct.)
-    rng = __import__("random").Random(seed * 7919 + round_no)
-    late = []
-
-    twist = [0.0, 0.0]  # odometry's latest body speeds (m/s, rad/s)
-
-    def pose_in(p):
-        late.append(tuple(p))
-        q = late.pop(0) if len(late) > pose_delay else late[0]
-        if pose_noise[0] or pose_noise[1]:
-            q = (q[0] + rng.gauss(0.0, pose_noise[0]), q[1] + rng.gauss(0.0, pose_noise[0]),
-                 q[2] + rng.gauss(0.0, pose_noise[1]))
-        if pose_predict and pose_delay:  # what `raf agent` does: forward to now at odometry's speeds
-            q = extrapolate(q, twist[0], twist[1], pose_delay * robot.control_period)
-        return q
-
-    split: dict[str, float] = {}  # s per agent activity (RoundAgent.activity)
-    slip = []  # per second: |odometry's relative motion - the truth's| (m, rad) and the truth's length (m)
-    prev = None
+    obs = RunObserver(field, robot, record_path)
+    pose_in = _PoseChannel(robot, pose_noise, pose_delay, pose_predict, seed * 7919 + round_no)
+    moved_early = 0
+    events = []
+    part_ids = list(sim.parts.ids)
     try:
         with FactoryClient(*server.address, timeout=0.5) as client:
             client.wait_pong()
@@ -217,48 +188,16 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
                     st = client.poll_state()
                     if st is not None:
                         agent.on_state(st, sim.time)
-                c = agent.step(sim.time, pose_in(sim.pose), contact)
-                act = agent.activity
-                split[act] = split.get(act, 0.0) + robot.control_period
+                c = agent.step(sim.time, pose_in(sim.pose, obs.twist), contact)
                 if not sim.factory.started and (c.v or c.w or c.magnet):
                     moved_early += 1
                 frame = sim.step_cycle(Command(c.v, c.w, c.magnet))
                 contact = frame.contact
-                o = odo.update(frame.enc_total[0], frame.enc_total[1], sim.time)
-                twist[0], twist[1] = o.v, o.w
-                if sim.seq % 25 == 0:
-                    now = ((o.x, o.y, o.theta), sim.pose)
-                    if prev is not None:
-                        slip.append(_relative_error(prev, now) + (round(sim.time, 2),))
-                    prev = now
-                if sim.seq % 5 == 0:
-                    x, y, _ = sim.pose
-                    outline = fc if sim.held is not None else fp
-                    if walls.collides(outline, sim.pose):  # a wall, a rib or beyond the floor's allowance
-                        touched += 1
-                        hit_wall = walls.collides(outline, sim.pose, ignore_floor=True)
-                        off_floor += not hit_wall
-                        hits.append((round(sim.time, 2), round(x, 3), round(y, 3), "wall" if hit_wall else "floor"))
-                    if record_path:
-                        path.append((round(sim.time, 3), round(x, 4), round(y, 4)))
-                        # for the animated picture (_competition_gif): pose with heading, held part, parts
-                        frames.append((round(sim.time, 2), round(x, 4), round(y, 4), round(sim.pose[2], 3),
-                                       sim.held, [(pid, *(round(v, 3) for v in sim.part_pose(pid)))
-                                                  for pid in part_ids]))
-                    for pid in part_ids:
-                        px, py, _ = sim.part_pose(pid)
-                        if pid in last_xy and sim.held != pid:
-                            d = math.hypot(px - last_xy[pid][0], py - last_xy[pid][1])
-                            if 0.002 < d < 0.05 and last_xy[pid][2] != "held":
-                                pushed += 1
-                                pushes.append((round(sim.time, 2), round(px, 3), round(py, 3), round(1000 * d, 1),
-                                               agent.activity))
-                        last_xy[pid] = (px, py, "held" if sim.held == pid else "")
-                while n_events < len(agent.events):
-                    t, text = agent.events[n_events]
-                    n_events += 1
-                    if record_path:
-                        events.append((round(t, 2), text, round(sim.pose[0], 4), round(sim.pose[1], 4)))
+                obs.cycle(sim.time, sim.seq, sim.pose, sim.held, frame.enc_total,
+                          lambda: {pid: sim.part_pose(pid) for pid in part_ids}, agent.activity)
+                if record_path:
+                    events.extend((round(t, 2), text, round(sim.pose[0], 4), round(sim.pose[1], 4))
+                                  for t, text in agent.events[len(events):])
         rep = sim.referee.report(sim.time)
         cnt = agent.counters
         out = {
@@ -268,35 +207,43 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
             "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
             "picks_attempted": cnt.picks + cnt.pick_failures, "pick_failures": cnt.pick_failures,
             "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
-            "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "collision_checks_hit": touched,
-            "off_floor_checks": off_floor, "collision_hits": hits,
-            "parts_pushed": pushed, "pushes": pushes, "agent_done": agent.mode == "done", "sim_s": sim.time,
-            "wall_s": time.perf_counter() - wall0,
+            "no_path": cnt.no_path, "moved_before_start_cycles": moved_early,
+            "agent_done": agent.mode == "done", "sim_s": sim.time, "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
-        moved = sum(s[2] for s in slip)
-        out["odometry_error_per_m"] = sum(s[0] for s in slip) / moved if moved > 0 else 0.0
-        out["odometry_error_max_per_s_m"] = max((s[0] for s in slip), default=0.0)
-        out["odometry_heading_error_max_per_s_rad"] = max((s[1] for s in slip), default=0.0)
-        out["time_split"] = {k: round(v, 2) for k, v in sorted(split.items())}
+        out.update(obs.figures())
         if record_path:
-            out["path"], out["events"], out["frames"] = path, events, frames
+            out["events"] = events
         return out
     finally:
         server.stop()
         sim.close()
 
 
-def _relative_error(prev, now) -> tuple[float, float, float]:
-    """Odometry against the truth over one interval: the position (m) and heading (rad) error of the
-    odometry's motion expressed in its own start frame, and the truth's distance (m). Wheel slip (SimTwo's
-    PID has no ramp: harsh acceleration slips the tyres) shows here; ground truth as the pose hides it."""
-    from ..localization.geometry import between2, wrap_angle
+class _PoseChannel:
+    """The pose the bare agent gets: ground truth, optionally with white noise (m, rad) and late by whole
+    cycles (a stand-in for the EKF's error and the transport), optionally brought forward by the delay at
+    odometry's speeds as ``raf agent`` does."""
 
-    (o0, t0), (o1, t1) = prev, now
-    ro, rt = between2(o0, o1), between2(t0, t1)
-    dth = wrap_angle(ro[2] - rt[2])
-    return math.hypot(ro[0] - rt[0], ro[1] - rt[1]), abs(dth), math.hypot(rt[0], rt[1])
+    def __init__(self, robot, noise: tuple[float, float], delay: int, predict: bool, seed: int):
+        import random
+
+        self.period = robot.control_period
+        self.noise, self.delay, self.predict = noise, delay, predict
+        self.rng = random.Random(seed)
+        self.late: list[tuple] = []
+
+    def __call__(self, pose, twist) -> tuple:
+        from ..agent.predict import extrapolate
+
+        self.late.append(tuple(pose))
+        q = self.late.pop(0) if len(self.late) > self.delay else self.late[0]
+        if self.noise[0] or self.noise[1]:
+            g = self.rng.gauss
+            q = (q[0] + g(0.0, self.noise[0]), q[1] + g(0.0, self.noise[0]), q[2] + g(0.0, self.noise[1]))
+        if self.predict and self.delay:
+            q = extrapolate(q, twist[0], twist[1], self.delay * self.period)
+        return q
 
 
 _REPORT = re.compile(r"total: (\d+) of (\d+) points(?:[^\n]*?time of the last score ([\d.]+) s)?")

@@ -1,0 +1,108 @@
+"""What ``raf experiment competition`` measures from the ground truth of a run, cycle by cycle, the same in
+both modes: fed from the in-process simulator (bare_truth) or from ``raf sim --trace`` (full_stack).
+
+Per run: collision checks that hit (the robot's outline, carrying or not, against walls and ribs or beyond the
+floor's 2 cm overhang allowance, every 5 cycles), parts pushed (a part not on the magnet moving 2 mm - 5 cm
+within 5 cycles: a push, not a machine's teleport), the wheel odometry's error against the truth over each
+second per metre driven, the time split per agent activity (when the caller knows it), and for the figures the
+path and the animation frames.
+"""
+from __future__ import annotations
+
+import math
+
+CHECK_EVERY = 5  # cycles between collision and push checks (and path samples)
+SLIP_EVERY = 25  # cycles per odometry-slip interval (1 s)
+
+
+class RunObserver:
+    """Feed :meth:`cycle` after every control cycle; :meth:`figures` gives the run's keys."""
+
+    def __init__(self, field, robot, record_path: bool = False):
+        from ..agent.footprint import carrying_footprint, robot_footprint
+        from ..agent.obstacles import FieldObstacles
+        from ..localization.odometry import DiffDriveOdometry
+
+        self.walls = FieldObstacles(field, [])
+        self.fp, self.fc = robot_footprint(robot), carrying_footprint(robot, field.part)
+        self.period = robot.control_period
+        self.record_path = record_path
+        self.touched = self.off_floor = self.pushed = 0
+        self.hits: list[tuple] = []  # (t, x, y, "wall" | "floor")
+        self.pushes: list[tuple] = []  # (t, x, y, mm moved, activity)
+        self.path: list[tuple] = []
+        self.frames: list[tuple] = []
+        self.split: dict[str, float] = {}
+        self._last_xy: dict[int, tuple] = {}
+        self._odo = DiffDriveOdometry(robot)
+        self._odo_started = False
+        self._prev = None
+        self.slip: list[tuple] = []  # per second: (position error m, heading error rad, truth's length m, t)
+        self.twist = (0.0, 0.0)  # odometry's latest body speeds (m/s, rad/s)
+
+    def cycle(self, t: float, seq: int, pose, held: int | None, enc, parts, activity: str | None = None) -> None:
+        """One control cycle's truth: time, cycle number, robot pose, the held part's id, the encoder totals,
+        the parts' poses (``{id: (x, y, theta)}`` or a callable giving it, read every 5 cycles only) and the
+        agent's activity (None: unknown)."""
+        if activity is not None:
+            self.split[activity] = self.split.get(activity, 0.0) + self.period
+        if not self._odo_started:
+            self._odo.reset(baseline=tuple(enc), t=t)
+            self._odo_started = True
+        else:
+            o = self._odo.update(enc[0], enc[1], t)
+            self.twist = (o.v, o.w)
+            if seq % SLIP_EVERY == 0:
+                now = ((o.x, o.y, o.theta), tuple(pose))
+                if self._prev is not None:
+                    self.slip.append(relative_error(self._prev, now) + (round(t, 2),))
+                self._prev = now
+        if seq % CHECK_EVERY:
+            return
+        x, y, th = pose
+        outline = self.fc if held is not None else self.fp
+        if self.walls.collides(outline, pose):  # a wall, a rib or beyond the floor's allowance
+            self.touched += 1
+            hit_wall = self.walls.collides(outline, pose, ignore_floor=True)
+            self.off_floor += not hit_wall
+            self.hits.append((round(t, 2), round(x, 3), round(y, 3), "wall" if hit_wall else "floor"))
+        parts = parts() if callable(parts) else parts
+        if self.record_path:
+            self.path.append((round(t, 3), round(x, 4), round(y, 4)))
+            # for the animated picture (_competition_gif): pose with heading, held part, parts
+            self.frames.append((round(t, 2), round(x, 4), round(y, 4), round(th, 3), held,
+                                [(pid, *(round(v, 3) for v in p)) for pid, p in sorted(parts.items())]))
+        for pid, (px, py, _) in parts.items():
+            last = self._last_xy.get(pid)
+            if last is not None and held != pid:
+                d = math.hypot(px - last[0], py - last[1])
+                if 0.002 < d < 0.05 and last[2] != "held":
+                    self.pushed += 1
+                    self.pushes.append((round(t, 2), round(px, 3), round(py, 3), round(1000 * d, 1), activity))
+            self._last_xy[pid] = (px, py, "held" if held == pid else "")
+
+    def figures(self) -> dict:
+        """The run's keys (see the module docstring); ``path`` and ``frames`` when recording."""
+        moved = sum(s[2] for s in self.slip)
+        out = {"collision_checks_hit": self.touched, "off_floor_checks": self.off_floor, "collision_hits": self.hits,
+               "parts_pushed": self.pushed, "pushes": self.pushes,
+               "odometry_error_per_m": sum(s[0] for s in self.slip) / moved if moved > 0 else 0.0,
+               "odometry_error_max_per_s_m": max((s[0] for s in self.slip), default=0.0),
+               "odometry_heading_error_max_per_s_rad": max((s[1] for s in self.slip), default=0.0)}
+        if self.split:
+            out["time_split"] = {k: round(v, 2) for k, v in sorted(self.split.items())}
+        if self.record_path:
+            out["path"], out["frames"] = self.path, self.frames
+        return out
+
+
+def relative_error(prev, now) -> tuple[float, float, float]:
+    """Odometry against the truth over one interval: the position (m) and heading (rad) error of the
+    odometry's motion expressed in its own start frame, and the truth's distance (m). Wheel slip (SimTwo's
+    PID has no ramp: harsh acceleration slips the tyres) shows here; ground truth as the pose hides it."""
+    from ..localization.geometry import between2, wrap_angle
+
+    (o0, t0), (o1, t1) = prev, now
+    ro, rt = between2(o0, o1), between2(t0, t1)
+    dth = wrap_angle(ro[2] - rt[2])
+    return math.hypot(ro[0] - rt[0], ro[1] - rt[1]), abs(dth), math.hypot(rt[0], rt[1])
