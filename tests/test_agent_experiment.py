@@ -21,7 +21,7 @@ def args(**kw):
 
 def test_round_1_one_seed_scores_the_maximum_and_writes_its_figure(tmp_path):
     # the simulator's default magnet: SimTwo's force (docs/simulator.md, "The electromagnet"; docs/agent.md)
-    res = competition.run(args(rounds="1", seeds=1, jobs=1), tmp_path)
+    res = competition.run(args(mode="bare_truth", rounds="1", seeds=1, jobs=1), tmp_path)
     assert res["mode"] == "bare_truth" and "ground truth" in res["pose_source"]
     assert all(k.startswith("bare_truth_") for k in res if k.endswith("_target_met"))
     assert res["bare_truth_r1_s0_points"] == res["bare_truth_r1_s0_max_points"] == 4
@@ -56,16 +56,21 @@ def test_bad_options_are_config_errors():
     assert competition.parse_drive(["k_heading=8"]) == {"k_heading": 8.0}
 
 
-def test_the_full_stack_mode_names_itself_and_claims_nothing_it_does_not_measure():
-    """The whole-stack run takes minutes (realtime), so only its summary is tested here."""
+def test_the_full_stack_mode_names_itself_and_reports_the_pose_error_against_its_target():
+    """A whole-stack run takes a minute or more (realtime): its summary alone here, a real run below."""
     r = {"round": 1, "seed": 0, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 84.3, "notes": [],
-         "false_start": False, "picks_attempted": 4, "pick_failures": 0, "timeouts": 0, "collision_checks_hit": 0,
-         "parts_pushed": 0, "wall_s": 1.0, "logs": "x"}
-    res = competition.summarize("full_stack", [r])
+         "false_start": False, "picks_attempted": 4, "pick_failures": 0, "timeouts": 0, "collision_checks_hit": 2,
+         "collision_hits": [(5.0, 0.1, 0.2, "wall"), (6.0, 0.1, 0.2, "wall")], "parts_pushed": 0, "wall_s": 1.0,
+         "logs": "x", "pose_error_docking_max_m": 0.012, "pose_error_median_m": 0.001}
+    res = competition.summarize("full_stack", [r, dict(r, seed=1, pose_error_docking_max_m=0.025)])
     assert res["mode"] == "full_stack" and "EKF" in res["pose_source"]
-    assert not any("collision" in k or "pushed" in k for k in res)  # not measured on the whole stack yet
     assert res["full_stack_r1_last_score_median_s"] == 84.3
     assert res["full_stack_r1_last_score_median_target_met"] is False
+    assert res["full_stack_r1_collisions"] == 4 and res["full_stack_r1_parts_pushed_target_met"] is True
+    assert res["full_stack_r1_pose_error_docking_max_m"] == 0.025
+    assert res["full_stack_r1_pose_error_docking_max_target_met"] is False  # 2.5 cm > 2 cm in one run
+    res = competition.summarize("full_stack", [r, dict(r, seed=1, pose_error_docking_max_m=float("nan"))])
+    assert res["full_stack_r1_pose_error_docking_max_target_met"] is False  # a run without the measure fails it
     with pytest.raises(ConfigError):  # the node takes no drive settings: refused before anything starts
         competition.run(args(stack="full", rounds="1", seeds=1, drive=["a_max=0.5"]), None)
 

@@ -28,6 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"factory-state server UDP port (default {SERVER_UDP_PORT})")
     parser.add_argument("--max-input-age", type=float, default=0.5,
                         help="seconds after which pose/odom count as stale (the robot stops)")
+    parser.add_argument("--command-latency", type=float, default=0.08, metavar="S",
+                        help="seconds from publishing cmd_vel to the simulator's cycle that runs it: the pose is "
+                             "predicted that far ahead through the commands in flight (default 0.08: SimTwo's and "
+                             "raf sim's two cycles; 0: no prediction beyond now)")
     add_node_arguments(parser, "raf_agent")
 
 
@@ -37,11 +41,13 @@ def run(args) -> int:
 
     if not args.max_input_age > 0:
         raise ConfigError(f"--max-input-age must be > 0 s, got {args.max_input_age}")
+    if not 0 <= args.command_latency <= 1:
+        raise ConfigError(f"--command-latency must be 0..1 s, got {args.command_latency}")
     from ..ros.agent_node import AgentNodeConfig
 
     cfg = AgentNodeConfig(field=getattr(args, "field", DEFAULT_FIELD), robot=args.robot,
                           server_host=args.server_host, server_port=args.server_port,
-                          max_input_age=args.max_input_age)
+                          max_input_age=args.max_input_age, command_latency=args.command_latency)
     if getattr(args, "print_params", False):
         print(cfg)
         return 0

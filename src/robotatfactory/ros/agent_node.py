@@ -32,7 +32,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..agent.behaviour import RoundAgent
 from ..agent.client import FactoryClient, ServerReplyError, ServerTimeout
 from ..agent.footprint import pose_in_front
-from ..agent.predict import extrapolate
+from ..agent.predict import InFlight, extrapolate
 from ..agent.tasks import Move, Wait, plan_round
 from ..field import load_field
 from ..robot import load_robot
@@ -54,6 +54,7 @@ class AgentNodeConfig:
     server_port: int = SERVER_UDP_PORT
     max_input_age: float = 0.5
     map_frame: str = "map"
+    command_latency: float = 0.08  # s from publishing cmd_vel to the cycle that runs it (agent/predict.py)
 
 
 class AgentNode:
@@ -73,6 +74,7 @@ class AgentNode:
         self.odom_stamp = -math.inf
         self.contact = False
         self.twist = (0.0, 0.0)  # (v m/s, w rad/s) from the latest odometry
+        self.in_flight = InFlight(cfg.command_latency, self.robot.control_period)  # commands sent, not yet run
         self.counts = {"bad_pose": 0, "stale_cycles": 0, "server_errors": 0, "cycles": 0}
         self._stale_at_diag = 0  # stale_cycles at the last diagnostics report
         self._events_logged = 0
@@ -158,13 +160,16 @@ class AgentNode:
         now = self.node.now_s()
         with self.lock:
             fresh = (now - self.pose_stamp <= self.cfg.max_input_age and now - self.odom_stamp <= self.cfg.max_input_age)
-            # the estimate brought forward to now with the measured speeds (the EKF's stamp is older)
-            pose = extrapolate(self.pose, *self.twist, min(now - self.pose_stamp, self.cfg.max_input_age)) \
+            # the estimate brought forward to now with the measured speeds (the EKF's stamp is older), then
+            # through the commands in flight: the pose when this cycle's command will start to act
+            pose = self.in_flight.ahead(extrapolate(self.pose, *self.twist, min(now - self.pose_stamp,
+                                                                                self.cfg.max_input_age)), now) \
                 if fresh and self.pose is not None else None
             if pose is None:
                 self.counts["stale_cycles"] += 1
             cmd = self.agent.step(now, pose, self.contact, uncertainty=self.pose_cov if pose is not None else None)
             self.counts["cycles"] += 1
+            self.in_flight.sent(now, float(cmd.v), float(cmd.w))
             events = self.agent.events[self._events_logged:]
             self._events_logged = len(self.agent.events)
             path = self.agent.path
@@ -333,6 +338,8 @@ def config_from_params(p: dict) -> AgentNodeConfig:
         raise ConfigError(f"server_port must be 1..65535, got {cfg.server_port!r}")
     if not (isinstance(cfg.max_input_age, (int, float)) and cfg.max_input_age > 0):
         raise ConfigError(f"max_input_age must be > 0 s, got {cfg.max_input_age!r}")
+    if not (isinstance(cfg.command_latency, (int, float)) and 0 <= cfg.command_latency <= 1):
+        raise ConfigError(f"command_latency must be 0..1 s, got {cfg.command_latency!r}")
     return cfg
 
 
@@ -356,8 +363,10 @@ _DESCRIPTIONS = {
     "server_port": "factory-state server UDP port",
     "max_input_age": "s after which pose/odom count as stale (the robot stops)",
     "map_frame": "frame of agent/path and agent/markers",
+    "command_latency": "s from publishing cmd_vel to the simulator's cycle that runs it (the pose is predicted "
+                       "that far ahead; 0.08 on SimTwo and raf sim)",
 }
-_RANGES = {"server_port": (1, 65535), "max_input_age": (1e-3, 1e9)}
+_RANGES = {"server_port": (1, 65535), "max_input_age": (1e-3, 1e9), "command_latency": (0.0, 1.0)}
 
 
 def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
@@ -368,8 +377,9 @@ def node_params(node: Node, given: dict | None = None) -> dict:
     """The node's parameters (ROS 2: declared with their defaults, descriptions and ranges)."""
     d = default_params()
     d.update(given or {})
-    if isinstance(d.get("max_input_age"), int) and not isinstance(d["max_input_age"], bool):
-        d["max_input_age"] = float(d["max_input_age"])
+    for k, v in default_params().items():  # a whole number given for a real-valued setting (ROS 2 types them)
+        if isinstance(v, float) and isinstance(d.get(k), int) and not isinstance(d[k], bool):
+            d[k] = float(d[k])
     return node.params(d, describe_param)
 
 

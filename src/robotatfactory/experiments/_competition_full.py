@@ -1,0 +1,258 @@
+"""One round of ``raf experiment competition`` over the whole stack (mode ``full_stack``).
+
+Each run is its own private graph (a roscore on a free port, or a free ROS 2 domain: the middleware of the
+interpreter, ``raf --middleware ros2 experiment competition`` for ROS 2) and its own ports:
+``raf sim`` (realtime, SimTwo-like defaults, camera and LIDAR, ``--trace`` and ``--end-after-max``),
+``raf bridge``, ``raf localize``, ``raf agent`` (the EKF's ``pose`` only) and ``raf record`` (the ``pose``
+topic the agent gets, for measuring). Nothing of the robot's side sees the ground truth: the experiment
+reads the simulator's trace after the run.
+
+Measured per run: the score, maximum and last-delivery time (``raf sim``'s final report), rule notes,
+picks and places from the agent's log, collisions, pushes and odometry slip from the trace
+(:class:`._competition_observe.RunObserver`, as in bare_truth), and **the pose error**: the agent's
+``pose`` input against the ground truth at the pose's stamp, over the whole run and while it picks or
+places (from the agent's ``docking to ...`` event to the pick's or place's outcome): the issue's target
+is at most 2 cm then.
+"""
+from __future__ import annotations
+
+import math
+import re
+import socket
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+FULL_DURATION = {1: 130.0, 2: 190.0, 3: 230.0}  # simulated s of one run at most (raf sim --duration)
+START_AFTER = 3.0  # simulated s before the run starts (the agent's nodes are up by then)
+END_AFTER_MAX = 1.0  # simulated s the maximum score must stand before raf sim ends the run
+DONE_GRACE = 3.0  # wall s after the agent logged "task: done" before raf sim is stopped
+
+_EVENT = re.compile(r"raf agent: t = ([\d.]+) s: (.*)$", re.M)
+_DOCK_END = re.compile(r"^(picked |placed |pick at |place at |timeout: )")
+
+
+def agent_events(text: str) -> list[tuple[float, str]]:
+    """(t, text) of every event in ``raf agent``'s log, in order."""
+    return [(float(t), e.strip()) for t, e in _EVENT.findall(text)]
+
+
+def dock_windows(events: list[tuple[float, str]]) -> list[tuple[float, float, str]]:
+    """(t0, t1, what) while the agent picks or places: from its ``docking to ...`` event to the next event
+    that ends the docking (picked, placed, failed, timeout); an unfinished one ends at inf."""
+    out = []
+    for i, (t0, text) in enumerate(events):
+        if not text.startswith("docking to "):
+            continue
+        t1 = next((t for t, e in events[i + 1:] if _DOCK_END.match(e) or e.startswith("docking to ")), math.inf)
+        out.append((t0, t1, text[len("docking to "):]))
+    return out
+
+
+def pose_errors(poses: list[tuple[float, float, float, float]], trace) -> list[tuple[float, float, float]]:
+    """(stamp, position error m, heading error rad) of each pose ``(stamp, x, y, theta)`` against the
+    trace's ground truth at that stamp (poses outside the trace are left out)."""
+    out = []
+    for t, x, y, th in poses:
+        g = trace.pose_at(t)
+        if g is not None:
+            out.append((t, math.hypot(x - g[0], y - g[1]), abs(math.remainder(th - g[2], 2 * math.pi))))
+    return out
+
+
+def read_poses(bag_path: Path, topic: str = "pose") -> list[tuple[float, float, float, float]]:
+    """(stamp s, x, y, yaw) of every PoseWithCovarianceStamped on ``topic`` in the bag."""
+    from ..ros.bags import find_topic, open_bag
+
+    out = []
+    with open_bag(bag_path) as bag:
+        names = find_topic(bag.topics, topic)
+        for _topic, _t, m in bag.messages(names):
+            st = m.header.stamp
+            ns = getattr(st, "nanosec", None)
+            stamp = st.sec + (ns if ns is not None else st.nsec) * 1e-9
+            p, q = m.pose.pose.position, m.pose.pose.orientation
+            yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+            out.append((stamp, p.x, p.y, yaw))
+    out.sort()
+    return out
+
+
+def read_commands(bag_path: Path, topic: str = "cmd_vel") -> list[tuple[float, float, float]]:
+    """(bag time s, v, w) of every Twist on ``topic``: bag time is the recorder's clock (simulation time)
+    when the command was seen on the wire."""
+    from ..ros.bags import find_topic, open_bag
+
+    with open_bag(bag_path) as bag:
+        names = find_topic(bag.topics, topic)
+        return [(t * 1e-9, m.linear.x, m.angular.z) for _topic, t, m in bag.messages(names)]
+
+
+def command_delays(commands: list[tuple[float, float, float]], trace) -> list[float]:
+    """Seconds from each command's publication (its bag time) to the start of the first control cycle that
+    ran it (the trace's ``cmd``): the loop's command latency. Commands never run (replaced before the next
+    reply) and repeated values are left out."""
+    import bisect
+
+    rec, times = trace.records, trace.times
+    period = float(trace.head.get("control_period", 0.04))
+    out, prev = [], None
+    for t, v, w in commands:
+        key = (round(v, 4), round(w, 4))
+        if key == prev:
+            continue
+        prev = key
+        i = bisect.bisect_left(times, t)
+        for r in rec[i:i + 4]:  # it runs within a few cycles or never
+            if (round(r.cmd[0], 4), round(r.cmd[1], 4)) == key:
+                out.append(r.t - period - t)
+                break
+    return out
+
+
+def _udp_port() -> int:
+    from ..ros.master import free_port
+
+    return free_port(socket.SOCK_DGRAM)
+
+
+def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path: bool = False,
+                    field_name: str | None = None) -> dict:
+    """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
+    :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``)."""
+    from ..ros.master import private_graph
+    from ..ros.mw import name as middleware
+    from ..ros.processes import Procs
+    from .competition import wait_for_report
+
+    mw = middleware()
+    log_dir = Path(out_dir) / f"full_r{round_no}_s{seed}" if out_dir else Path(tempfile.mkdtemp(prefix="raf-comp-"))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    trace_path = log_dir / "trace.jsonl"
+    bag_path = log_dir / ("pose.bag" if mw == "ros1" else "pose_bag")
+    sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), _udp_port()
+    field_args = ["--field", field_name] if field_name else []
+    wall0 = time.perf_counter()
+    graph = private_graph(mw).start()
+    procs = Procs(log_dir, watch=("bridge", "localize", "agent", "record"))
+    try:
+        env = graph.env()
+        procs.raf("bridge", *field_args, "bridge", "--port", str(bridge_port), "--camera",
+                  f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", env=env)
+        procs.raf("localize", *field_args, "localize", env=env)
+        procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
+                  *(["--format", "bag"] if mw == "ros1" else []), env=env)
+        procs.raf("agent", *field_args, "agent", "--server-port", str(server_port), env=env)
+        _wait_logged(procs, "agent", "running", 60.0)
+        sim = procs.raf("sim", *field_args, "sim", "--round", str(round_no), "--seed", str(seed),
+                        "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
+                        "--port", str(sim_port), "--bridge", f"127.0.0.1:{bridge_port}", "--camera-bind",
+                        f"tcp://127.0.0.1:{cam_port}", "--server-port", str(server_port), "--no-control",
+                        "--trace", str(trace_path), "--end-after-max", str(END_AFTER_MAX), "--status-every", "5",
+                        env=env, may_exit=True)
+        limit = time.monotonic() + FULL_DURATION[round_no] * 1.5 + 60.0
+        done_at = None
+        while sim.poll() is None and time.monotonic() < limit:
+            procs.check()
+            if done_at is None and "task: done" in _read(log_dir / "agent.log"):
+                done_at = time.monotonic()  # the agent has nothing left to do: no need to wait out the round
+            if done_at is not None and time.monotonic() - done_at > DONE_GRACE:
+                break
+            time.sleep(0.5)
+        procs.stop("sim")  # SIGINT: raf sim writes its final report on the way out
+        wait_for_report(log_dir / "sim.log")
+        procs.stop("record")  # closes the bag
+    finally:
+        procs.stop_all()
+        graph.cleanup()
+    return analyse(round_no, seed, log_dir, trace_path, bag_path, record_path, field_name,
+                   wall_s=time.perf_counter() - wall0, middleware=mw)
+
+
+def _read(path: Path) -> str:
+    try:
+        return path.read_text(errors="replace")
+    except OSError:
+        return ""
+
+
+def _wait_logged(procs, name: str, text: str, timeout: float) -> None:
+    from ..ros.processes import wait_until
+
+    wait_until(lambda: text in _read(procs.log_dir / f"{name}.log"), timeout, f"{name} to log {text!r}", procs.check)
+
+
+def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path: Path, record_path: bool,
+            field_name: str | None, wall_s: float, middleware: str) -> dict:
+    """The run's figures from its logs, trace and bag (separate from running it, so a kept run's
+    directory can be analysed again)."""
+    from ..field import load_field
+    from ..robot import load_robot
+    from ..sim.trace import read_trace
+    from ._competition_observe import RunObserver
+    from .competition import notes_of, parse_sim_report
+
+    text = _read(log_dir / "sim.log")
+    agent_log = _read(log_dir / "agent.log")
+    points, max_points, last, found = parse_sim_report(text)
+    notes = notes_of(text)
+    events = agent_events(agent_log)
+    out = {"round": round_no, "seed": seed, "points": points, "max_points": max_points,
+           "max_score": found and points == max_points, "last_score_s": last, "notes": notes,
+           "false_start": any("false start" in n.lower() for n in notes),
+           "picks_attempted": sum(e.startswith(("picked ", "pick at ")) for _, e in events),
+           "pick_failures": sum(bool(re.match(r"pick at .* failed", e)) for _, e in events),
+           "places": sum(e.startswith("placed ") for _, e in events),
+           "place_failures": sum(bool(re.match(r"place at .* failed", e)) for _, e in events),
+           "timeouts": sum(e.startswith("timeout: ") for _, e in events), "no_path": 0,
+           "agent_done": any(e == "task: done" for _, e in events), "wall_s": wall_s, "logs": str(log_dir),
+           "middleware": middleware}
+    field, robot = (load_field(field_name) if field_name else load_field()), load_robot()
+    try:
+        trace = read_trace(trace_path)
+    except (OSError, ValueError) as e:
+        out["error"] = f"no ground-truth trace: {e}"
+        return out
+    obs = RunObserver(field, robot, record_path)
+    for r in trace.records:
+        obs.cycle(r.t, r.seq, r.pose, r.held, r.enc, r.parts)
+    out.update(obs.figures())
+    out["sim_s"] = trace.records[-1].t if trace.records else 0.0
+    if record_path:
+        out["events"] = [(round(t, 2), e, *(round(v, 4) for v in (trace.pose_at(t) or (math.nan,) * 3)[:2]))
+                         for t, e in events]
+    try:
+        poses = read_poses(bag_path)
+    except Exception as e:  # noqa: BLE001 - a missing or unreadable bag is a run without the measure, said so
+        out["pose_error_note"] = f"no pose recording: {type(e).__name__}: {e}"
+        poses = []
+    try:
+        delays = command_delays(read_commands(bag_path), trace)
+    except Exception:  # noqa: BLE001 - as for the poses
+        delays = []
+    out["command_delay_median_s"] = statistics.median(delays) if delays else math.nan
+    out["command_delay_p95_s"] = _percentile(delays, 95)
+    errs = pose_errors(poses, trace)
+    windows = dock_windows(events)
+    docking = [e for e in errs if any(t0 <= e[0] <= t1 for t0, t1, _ in windows)]
+    out["pose_samples"] = len(errs)
+    out["pose_samples_docking"] = len(docking)
+    for key, sel in (("pose_error", errs), ("pose_error_docking", docking)):
+        pos = [e[1] for e in sel]
+        out[f"{key}_median_m"] = statistics.median(pos) if pos else math.nan
+        out[f"{key}_max_m"] = max(pos) if pos else math.nan
+        out[f"{key}_heading_max_rad"] = max((e[2] for e in sel), default=math.nan)
+    out["pose_error_p95_m"] = _percentile([e[1] for e in errs], 95)
+    worst = max(docking, key=lambda e: e[1], default=None)
+    if worst is not None:
+        out["pose_error_docking_worst_at_s"] = round(worst[0], 2)
+        out["pose_error_docking_worst_in"] = next(w for t0, t1, w in windows if t0 <= worst[0] <= t1)
+    return out
+
+
+def _percentile(values: list[float], q: float) -> float:
+    if not values:
+        return math.nan
+    v = sorted(values)
+    return v[min(len(v) - 1, int(round(q / 100 * (len(v) - 1))))]
