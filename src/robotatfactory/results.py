@@ -40,7 +40,12 @@ def print_table(title: str, results: Mapping, targets: Mapping[str, str] | None 
         print(f"{k:<{w0}}  {v:>{w1}}  {t}")
 
 
+MAX_SHOWN = 72  # characters of a string value the table shows (the JSON keeps it whole)
+
+
 def _fmt(v) -> str:
+    if isinstance(v, str) and len(v) > MAX_SHOWN:
+        return f"{v[:MAX_SHOWN - 20]}... ({len(v)} chars)"
     if isinstance(v, bool) or v is None or isinstance(v, str):
         return str(v)
     if isinstance(v, int):
