@@ -47,6 +47,12 @@ class DockSettings:
     # the agent retries): a place jammed between ribs on a late, noisy pose crept ~4 mm/s for 11 s, slower
     # than the stuck check sees, pushing parts (0: no limit but the agent's 20 s)
     approach_slack: float = 0.0
+    # rad: a pick approach starting farther off the slot's heading than this brakes and turns on the spot first (an
+    # approach arriving on an arc 2.4 cm from the dock pose 0.08 rad off took the part turned into a rib's end)
+    pick_align: float = 0.04
+    # s the contact switch may take after backing out to show the outcome (part along / part left): it lags
+    # the predicted pose by the loop's latency (80 ms on SimTwo and raf sim)
+    confirm: float = 0.2
     compensate_offset: bool = True  # place with the robot as far off the slot's normal as it was at the pick  # the magnet on during the pick approach: it takes the plate within its beam
 
 
@@ -57,7 +63,7 @@ class DockOutput:
     v: float
     w: float
     magnet: bool
-    phase: str  # approach, grip, release, back, done, failed
+    phase: str  # approach, grip, release, back, confirm, done, failed
     done: bool = False
     failed: str | None = None  # no_contact, part_lost, still_held, blocked, timeout
 
@@ -72,8 +78,10 @@ class Docker:
         self.magnet_x = float(magnet_x)
         self.part = part
         self.approach_limits = replace(limits, v_max=settings.v_dock, v_final=settings.v_dock, slow_distance=0.0,
-                                       position_tolerance=0.002, lookahead=settings.lookahead)
-        self.place_limits = replace(self.approach_limits, v_max=settings.v_place, v_final=settings.v_place)
+                                       position_tolerance=0.002, lookahead=settings.lookahead,
+                                       heading_tolerance=min(limits.heading_tolerance, 2 * settings.pick_align))
+        self.place_limits = replace(self.approach_limits, v_max=settings.v_place, v_final=settings.v_place,
+                                    heading_tolerance=limits.heading_tolerance)
         self.back_limits = replace(limits, v_max=settings.v_back, v_final=settings.v_back, slow_distance=0.0,
                                    position_tolerance=0.003)
         self.follower = PathFollower(self.approach_limits, dt)
@@ -130,7 +138,7 @@ class Docker:
         carrying = mode == "place"  # a part on the magnet: steer while driving, never turn on the spot
         self.follower.start([start, target[:2]], final_heading=None, no_spin=carrying)
         self.follower.v = max(0.0, min(float(v0), self.follower.limits.v_max))
-        aligned = abs(wrap(pose[2] - target[2])) < 0.1
+        aligned = abs(wrap(pose[2] - target[2])) < (self.settings.pick_align if mode == "pick" else 0.1)
         self.follower.phase = "drive" if aligned or carrying else "turn"  # turning: it brakes, then turns in place
         self.phase = "approach"
         v_nom = max(self.follower.limits.v_max, 1e-3)
@@ -204,12 +212,20 @@ class Docker:
             if out.done:
                 if self._failing:
                     return self._fail(self._failing)
-                if self.mode == "pick" and not contact:
-                    return self._fail("part_lost")
-                if self.mode == "place" and contact:
-                    return self._fail("still_held")
+                self.phase, self._wait = "confirm", 0.0
+            else:
+                return self._out(out.v, out.w)
+        if self.phase == "confirm":
+            # the contact switch as the outcome; it may lag the pose: the pose is where the robot will be when
+            # its command acts (raf agent predicts through the commands in flight), the switch where it was
+            held = contact if self.mode == "pick" else not contact
+            if held:
                 self.phase = "done"
                 return self._out(0.0, 0.0, done=True)
+            out = self.follower.step(pose)
+            self._wait += self.dt
+            if self._wait > self.settings.confirm + 1e-9:
+                return self._fail("part_lost" if self.mode == "pick" else "still_held")
             return self._out(out.v, out.w)
         return self._out(0.0, 0.0, done=self.phase == "done")
 
