@@ -59,6 +59,20 @@ class AgentCounters:
     replans_off_path: int = 0  # legs planned again because the robot was far off its path
 
 
+@dataclass(frozen=True)
+class LegPlan:
+    """A planned leg: the planner's polyline ``path``, what the follower drives (``smooth``: a SmoothPath, or the
+    polyline without smoothing), the approach pose ``goal`` (x, y, theta) it ends at, whether it arrives along
+    the slot's normal (``aligned``: the docking follows on at ``end_speed`` m/s) and the slot."""
+
+    path: Path
+    smooth: object
+    goal: tuple
+    aligned: bool
+    end_speed: float
+    slot: object
+
+
 @dataclass
 class RoundAgent:
     """See the module docstring. ``retries``: docking attempts per pick before re-deciding."""
@@ -80,6 +94,9 @@ class RoundAgent:
     place_standoff: float = 0.05  # m: a place's leg ends this much farther out (the docker settles on the normal)
     place_min_radius: float = 0.08
     pick_straight: float = 0.015
+    # m: a pick's leg ends this much farther out where it can arrive along the normal there (0: at the approach
+    # pose, 1-2.5 cm from the dock pose: an arc's end left up to 0.08 rad of heading at the contact)
+    pick_standoff: float = 0.0
     pick_min_radius: float = 0.045
     min_radius: float = 0.045
     uncertainty_limit: float = 0.03  # m (position std) above which it stops to re-localize (with a std input)
@@ -89,6 +106,15 @@ class RoundAgent:
     block_memory: float = 20.0  # s a blocked spot stays an obstacle
     lost_cycles: int = 5  # cycles without contact while carrying = the part was lost
     smooth: bool = True
+    # a carried part goes to the free destination (of the best rank) the leg reaches soonest, by a kinematic run
+    # of the follower on each planned leg (False: the nearest to the part's source, the earlier choice)
+    choose_by_time: bool = True
+    # a blue part from elsewhere than a machine output leaves the outgoing slots nearest machine B's outputs to
+    # the parts still to come from there (TaskPolicy.reserved_outgoing)
+    reserve_outgoing: bool = True
+    # m, carrying: the straight line onto the slot's normal may pass where only the exact outline grown by this is
+    # clear (not the whole turning circle: the robot turns only at its ends); 0: the turning circle everywhere
+    join_inflate: float = 0.015
     # carrying: forward arcs of at least carry_radius m and straight reversing only, never a turn on the spot
     # (SimTwo's magnet loses the part on the spot; the stand-in's default since 22 Nov 2026)
     carry_arcs: bool = False
@@ -108,6 +134,11 @@ class RoundAgent:
     # driving heading errors within carry_deadband (rad) ignored (DriveLimits.w_reverse_max, heading_deadband)
     carry_w_reverse: float = 0.0
     carry_deadband: float = 0.0  # 0.02 measured: no gain (late, noisy, predicted pose, rounds 2-3 x 10: 15/20 vs 17/20 without)
+    # a turn on the spot with a part of more than carry_long_spin rad runs at carry_w_long_spin rad/s (0: off;
+    # DriveLimits.long_spin): after ~146 deg at 1.5 rad/s (machine B's outputs to outgoing 1-2) the part had slid
+    # ~10 mm and the arc back the other way pivoted it off
+    carry_long_spin: float = 2.4
+    carry_w_long_spin: float = 1.1
     carry_k_drive: float = 0.0  # 1/s steering gain while carrying (0: the normal k_drive)
     place_alpha_max: float = 0.0  # rad/s^2 steering the place approach (0: carry_alpha_max)
     dock_slack: float = 0.0  # s: DockSettings.approach_slack (a creeping, jammed approach is blocked; 0 = off)
@@ -128,7 +159,8 @@ class RoundAgent:
         cl = {k: v for k, v in (("w_max", self.carry_w_max), ("alpha_max", self.carry_alpha_max),
                                 ("v_max", self.carry_v_max), ("w_spin_max", self.carry_w_spin),
                                 ("w_reverse_max", self.carry_w_reverse), ("heading_deadband", self.carry_deadband),
-                                ("k_drive", self.carry_k_drive)) if v > 0}
+                                ("k_drive", self.carry_k_drive), ("long_spin", self.carry_long_spin),
+                                ("w_long_spin", self.carry_w_long_spin)) if v > 0}
         self.carry_limits = replace(self.limits, **cl)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
                              DockSettings(v_dock=self.v_dock, v_place=self.v_place, approach_slack=self.dock_slack,
@@ -288,7 +320,7 @@ class RoundAgent:
                 return  # hold the part until a destination is free (re-polled every state_period)
             self.target = dest[0]
             self._leg_replans = 0
-            self._go("to_place", pose)
+            self._go_fastest("to_place", pose, dest)
             return
         ready = {ln.input: self.delays.expected_ready(ln.input) for ln in self.delays.lanes}
         avoid = {ref for ref, n in self.failures.items() if n >= self.give_up_after}
@@ -379,53 +411,130 @@ class RoundAgent:
         self.follower.stop()
         self.mode, self.need_state_after = "decide", self.t
 
+    def _plan_leg(self, mode: str, pose, target: SlotRef, carrying: bool):
+        """The leg to ``target``'s approach pose from ``pose`` as :meth:`_go` would drive it (no side effects):
+        a :class:`LegPlan`. Raises NoPath."""
+        fp = self.fp_carry if carrying else self.fp_empty
+        slot = self.field.slot(target.zone, target.number)
+        pl = PathPlanner(self._obstacles(), margin=0.01 if not carrying else self.carry_margin)
+        goal = pl.approach_pose(slot, self.d_dock, fp)
+        goals = [goal]
+        standoff = self.place_standoff if carrying else self.pick_standoff
+        if standoff > 0:  # room to settle on the normal first
+            g2 = (goal[0] - standoff * math.cos(goal[2]), goal[1] - standoff * math.sin(goal[2]), goal[2])
+            if pl.is_free(g2[:2], fp):
+                goals = [g2, goal]
+        join = self.join_inflate if carrying else 0.0
+        if self.smooth:  # the last leg along the slot's normal: docking follows on at speed
+            for g in goals:  # the leg ending farther out if it can arrive along the normal there
+                path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
+                if aligned:
+                    break
+            goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
+            if not aligned and len(goals) > 1:
+                path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp, join_inflate=join)
+            sp = pl.smooth(path, fp, final_straight=(self.place_straight if carrying else self.pick_straight)
+                           if aligned else 0.0, min_radius=self.min_radius,
+                           final_min_radius=self.place_min_radius if carrying else self.pick_min_radius)
+            end_speed = self.docker.entry_speed("pick" if mode == "to_pick" else "place") if aligned else 0.0
+        else:
+            goal = goals[0]
+            path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
+            sp, end_speed = path.points, 0.0
+        return LegPlan(path, sp, goal, aligned, end_speed, slot)
+
     def _go(self, mode: str, pose) -> None:
-        fp = self.fp_carry if self.carrying is not None else self.fp_empty
-        slot = self.field.slot(self.target.zone, self.target.number)
-        pl = PathPlanner(self._obstacles(), margin=0.01 if self.carrying is None else self.carry_margin)
-        self.follower.limits = self.limits if self.carrying is None else self.carry_limits
-        if self.carrying is not None and self.carry_arcs and self._go_carrying(mode, pose, pl, slot):
-            return
+        carrying = self.carrying is not None
+        self.follower.limits = self.limits if not carrying else self.carry_limits
+        if carrying and self.carry_arcs:
+            slot = self.field.slot(self.target.zone, self.target.number)
+            pl = PathPlanner(self._obstacles(), margin=self.carry_margin)
+            if self._go_carrying(mode, pose, pl, slot):
+                return
         try:
-            goal = pl.approach_pose(slot, self.d_dock, fp)
-            goals = [goal]
-            if self.carrying is not None and self.place_standoff > 0:  # room to settle on the normal first
-                g2 = (goal[0] - self.place_standoff * math.cos(goal[2]),
-                      goal[1] - self.place_standoff * math.sin(goal[2]), goal[2])
-                if pl.is_free(g2[:2], fp):
-                    goals = [g2, goal]
-            if self.smooth:  # the last leg along the slot's normal: docking follows on at speed
-                for g in goals:  # the leg ending farther out if it can arrive along the normal there
-                    path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp)
-                    if aligned:
-                        break
-                goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
-                if not aligned and len(goals) > 1:
-                    path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp)
-            else:
-                goal = goals[0]
-                path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
+            leg = self._plan_leg(mode, pose, self.target, carrying)
         except NoPath as e:
             self.counters.no_path += 1
             self._event(self.t, f"no path to {self.target}: {e}")
             self.mode, self.need_state_after = "decide", self.t + self.state_period
             return
+        self._start_leg(mode, leg)
+
+    def _go_fastest(self, mode: str, pose, dest: list) -> None:
+        """Start the leg to the destination of ``dest`` (best first) that takes the least time among those of
+        the best rank (:meth:`TaskPolicy.destination_class`; every outgoing slot is of one rank), by
+        :meth:`_leg_time`; with ``choose_by_time`` off, to ``self.target`` (or ``dest[0]``)."""
+        carrying = self.carrying is not None
+        if not self.choose_by_time or (carrying and self.carry_arcs) or len(dest) < 2:
+            if self.target not in dest:
+                self.target = dest[0]
+            self._go(mode, pose)
+            return
+        if carrying and self.reserve_outgoing and self.carrying is PartType.BLUE and isinstance(self.task, Move):
+            if self.policy.is_output(self.task.source):  # the slots it reaches turning one way only
+                near = self.policy.outgoing_near_outputs(self.state)[:2]
+                dest = [d for d in dest if d in near] or dest
+            else:  # leave those to the parts still to come out of the machines
+                keep = set(self.policy.reserved_outgoing(self.state, self.task.source))
+                dest = [d for d in dest if d not in keep] or dest
+        best_class = min(self.policy.destination_class(self.state, d) for d in dest)
+        best = None
+        for d in dest:
+            if self.policy.destination_class(self.state, d) != best_class:
+                continue
+            try:
+                leg = self._plan_leg(mode, pose, d, carrying)
+            except NoPath:
+                continue
+            cost = self._leg_time(leg, pose, carrying)
+            if best is None or cost < best[0] - 1e-6:
+                best = (cost, d, leg)
+        if best is None:  # no path to any: the usual failure handling
+            self.target = dest[0]
+            self._go(mode, pose)
+            return
+        self.target = best[1]
+        self._start_leg(mode, best[2])
+
+    def _start_leg(self, mode: str, leg) -> None:
+        path = leg.path
         self.path = path
+        self.follower.limits = self.limits if self.carrying is None else self.carry_limits
         if self.smooth:
-            carrying = self.carrying is not None  # the part enters between ribs: settled on the normal first
-            sp = pl.smooth(path, fp, final_straight=(self.place_straight if carrying else self.pick_straight)
-                           if aligned else 0.0, min_radius=self.min_radius,
-                           final_min_radius=self.place_min_radius if carrying else self.pick_min_radius)
-            end_speed = self.docker.entry_speed("pick" if mode == "to_pick" else "place") if aligned else 0.0
-            self.follower.start(sp, final_heading=None if end_speed > 0 else goal[2], end_speed=end_speed)
+            self.follower.start(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2],
+                                end_speed=leg.end_speed)
         else:
-            self.follower.start(path.points, final_heading=goal[2])
+            self.follower.start(leg.smooth, final_heading=leg.goal[2])
         self.mode = mode
         self._mode_t0 = self.t
         self.stuck.reset()
         self._no_contact = 0
         lim = self.limits  # generous: three times the straight-line time, plus every turn and 10 s
         self._budget = 10.0 + 3.0 * path.length / lim.v_max + len(path.points) * math.pi / lim.w_max * 2
+
+    def _leg_time(self, leg, pose, carrying: bool, limit: float = 40.0) -> float:
+        """Seconds the leg ``leg`` would take from ``pose`` (a kinematic run of the follower with the limits
+        it would drive with, the robot starting at rest), plus the docking approach from its end to the dock
+        or place pose at the docking speed."""
+        f = PathFollower(self.carry_limits if carrying else self.limits, self.dt)
+        if self.smooth:
+            f.start(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2], end_speed=leg.end_speed)
+        else:
+            f.start(leg.smooth, final_heading=leg.goal[2])
+        x, y, th = (float(v) for v in pose[:3])
+        t, dt = 0.0, self.dt
+        while t < limit:
+            o = f.step((x, y, th))
+            if o.done:
+                break
+            x += o.v * math.cos(th) * dt
+            y += o.v * math.sin(th) * dt
+            th += o.w * dt
+            t += dt
+        slot = leg.slot
+        d_end = math.hypot(leg.goal[0] - slot.xy[0], leg.goal[1] - slot.xy[1]) - self.d_dock
+        v = self.docker.entry_speed("place" if carrying else "pick")
+        return t + max(d_end, 0.0) / v
 
     def _go_carrying(self, mode: str, pose, pl: PathPlanner, slot) -> bool:
         """The leg to a place on arcs only (:mod:`.hybrid`): to a point on the slot's normal, then straight to
@@ -520,13 +629,13 @@ class RoundAgent:
             self.state = self.state.with_slot(self.task.source, None)  # expected until the server says
             self.target = self.task.target
             dest = self._usable(self.policy.destinations(self.state.with_slot(self.task.source, None), self.carrying))
-            if self.target not in dest:  # the planned place was taken meanwhile
+            if not self.choose_by_time and self.target not in dest:  # the planned place was taken meanwhile
                 self.target = dest[0] if dest else None
-            if self.target is None:
+            if not dest:
                 self.mode, self.need_state_after = "decide", self.t
                 return
             self._leg_replans = 0
-            self._go("to_place", pose)
+            self._go_fastest("to_place", pose, dest)
             return
         self.counters.places += 1
         self._event(self.t, f"placed the {self.carrying.label} part in {self.target}")

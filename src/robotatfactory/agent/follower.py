@@ -63,6 +63,11 @@ class DriveLimits:
     w_reverse_max: float = 0.0
     reverse_hold: float = 0.4  # s
     heading_deadband: float = 0.0  # rad: driving, heading errors within this are no error (noise); beyond, less this
+    # a turn on the spot of more than long_spin rad (0: off) runs at most w_long_spin rad/s throughout: carrying on
+    # SimTwo's magnet the part slides along the face the farther and the faster the robot turns, and a turn back
+    # the other way after a long fast one pivots it off (docs/agent.md, "The carry envelope")
+    long_spin: float = 0.0
+    w_long_spin: float = 0.0
 
     @classmethod
     def from_robot(cls, robot, fraction: float = 0.45, a_max: float = 0.8, **kw) -> DriveLimits:
@@ -114,6 +119,8 @@ class PathFollower:
         self._prof: list[np.ndarray] = []
         self._turn_dir = 0.0  # sign of the last turn faster than w_reverse_max (0: none recently)
         self._slow_time = 0.0  # s turned no faster than w_reverse_max since then
+        self._spin_cap = math.inf  # rad/s for the turn on the spot under way (long_spin)
+        self._spinning = False
 
     @property
     def points(self) -> np.ndarray:
@@ -136,6 +143,7 @@ class PathFollower:
         self.no_spin = bool(no_spin)
         self.k = 0
         self._s, self._i = 0.0, 0
+        self._spinning = False
         self._prof = [self._profile(p, last=(j == len(path.pieces) - 1)) for j, p in enumerate(path.pieces)]
         total = path.length
         if total <= 1e-9:
@@ -291,8 +299,14 @@ class PathFollower:
             v_t, w_t = self.v, self.w  # hand over at speed: the caller's next manoeuvre continues
         if self.phase in ("turn", "final_turn") and self.v == 0.0:
             w_t = self._limit_reversal(w_t)  # on the spot only: a path's S-bends reverse the turn on purpose
+            if not self._spinning:  # a turn on the spot begins: how far it goes sets its rate
+                self._spinning = True
+                long = L.long_spin > 0 and L.w_long_spin > 0 and abs(herr) > L.long_spin
+                self._spin_cap = L.w_long_spin if long else math.inf
+            w_t = max(-self._spin_cap, min(self._spin_cap, w_t))
         else:
             self._turn_dir = 0.0
+            self._spinning = False
         # acceleration limits
         dv, dw = L.a_max * self.dt, L.alpha_max * self.dt
         self.v += max(-dv, min(dv, v_t - self.v))

@@ -206,13 +206,15 @@ class PathPlanner:
                            radii=tuple(r for r in RADII if r >= min_radius))
 
     def plan_to_pose(self, start, goal, footprint: Footprint, distances=(0.3, 0.24, 0.19, 0.15, 0.12, 0.09, 0.06),
-                     turn_cost: float = 0.08, max_turn: float = 2.0) -> tuple[Path, bool]:
+                     turn_cost: float = 0.08, max_turn: float = 2.0, join_inflate: float = 0.0) -> tuple[Path, bool]:
         """A path from ``start`` (x, y) to the approach pose ``goal`` (x, y, theta facing the slot) whose last
         leg runs along the slot's normal from a point ``d`` m behind ``goal`` (one of ``distances`` whose
         turning circle and line to ``goal`` are clear), so the robot arrives aligned and docking follows on
         without a turn. One A* search to ``goal``; the normal's point is joined to the latest point of that
         path that sees it, the choice the shortest (plus ``turn_cost`` m per radian of corner; no corner of more
-        than ``max_turn`` rad at the normal's point, a hairpin). Returns the
+        than ``max_turn`` rad at the normal's point, a hairpin). ``join_inflate`` > 0 (m): the straight line to the
+        normal's point may also be one along which only the exact outline, grown by that much and heading along
+        it, is clear (the robot turns only at its ends, whose turning circles are clear). Returns the
         path and whether it ends along the normal (False: the plain path to ``goal``; turn there)."""
         need = self.required(footprint)
         path = self.plan(start, goal[:2], footprint)
@@ -234,7 +236,8 @@ class PathPlanner:
                 continue
             for i in range(len(pts) - 2, -1, -1):
                 r = need if i > 0 else need - self.margin  # the start may sit inside the margin
-                if math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) < 1e-6 or ob.segment_clear(pts[i], pre, r):
+                if math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) < 1e-6 or ob.segment_clear(pts[i], pre, r) or (
+                        join_inflate > 0 and self.straight_clear(pts[i], pre, footprint, join_inflate)):
                     if math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) > 1e-6 and \
                             turn(pts[i], pre, goal[:2]) > max_turn:
                         continue  # a hairpin at the normal's point (two stops): worse than a final turn

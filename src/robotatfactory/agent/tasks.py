@@ -75,9 +75,11 @@ Task = Move | Wait | Done
 class TaskPolicy:
     """The decisions above for one field. ``slot_xy`` maps a SlotRef to its centre (m, field frame)."""
 
-    def __init__(self, lanes: list[LaneRef], slot_xy: dict[SlotRef, tuple[float, float]]):
+    def __init__(self, lanes: list[LaneRef], slot_xy: dict[SlotRef, tuple[float, float]],
+                 slot_facing: dict[SlotRef, float] | None = None):
         self.lanes = lanes
         self.slot_xy = slot_xy
+        self.slot_facing = slot_facing or {}  # rad, the heading of a slot's plate (towards the robot)
         self._lane_of = {ln.input: ln for ln in lanes} | {ln.output: ln for ln in lanes}
         self._outputs = {ln.output for ln in lanes}
 
@@ -85,7 +87,8 @@ class TaskPolicy:
     def for_field(cls, field) -> TaskPolicy:
         from .delay import lanes_of
 
-        return cls(lanes_of(field), {SlotRef(s.zone, s.number): tuple(s.xy) for s in field.slots})
+        return cls(lanes_of(field), {SlotRef(s.zone, s.number): tuple(s.xy) for s in field.slots},
+                   {SlotRef(s.zone, s.number): float(s.facing) for s in field.slots})
 
     # -------------------------------------------------------------------------------------- queries
     def is_settled(self, ref: SlotRef, part: PartType) -> bool:
@@ -113,6 +116,48 @@ class TaskPolicy:
             blocked = state.at(ln.output) is not None
             ranked.append(((blocked, self._dist(ln.input, near) if near else 0.0, ln.input.number), ln.input))
         return [r for _, r in sorted(ranked)]
+
+    def destination_class(self, state: FactoryState, ref: SlotRef) -> int:
+        """The rank of a free destination that :meth:`destinations` sorts by before distance: 1 for a machine
+        input whose lane output is occupied (the machine would wait), else 0."""
+        lane = self._lane_of.get(ref)
+        return int(lane is not None and state.at(lane.output) is not None)
+
+    def is_output(self, ref: SlotRef | None) -> bool:
+        return ref in self._outputs
+
+    def outgoing_near_outputs(self, state: FactoryState, ahead: float = 0.26) -> list[SlotRef]:
+        """The free outgoing slots, nearest first to where the robot stands after taking a part from one of the
+        machine outputs that give blue parts (``ahead`` m out along their facing, averaged): from there it
+        reaches the first ones with turns one way only, while to the far ones it turns back the other way after
+        its first turn on the spot, when the carried part has slid along the magnet's face (SimTwo's force
+        magnet), and the part may pivot off it (lost in 5 of 10 runs on a late, noisy pose, docs/agent.md)."""
+        final_outputs = [ln.output for ln in self.lanes if ln.machine == MACHINE_OF[PartType.GREEN]]
+        free = [SlotRef("outgoing", k) for k in range(1, 5) if state.outgoing[k - 1] is None]
+        if not final_outputs:
+            return free
+        pts = [(self.slot_xy[o][0] + ahead * math.cos(self.slot_facing.get(o, 0.0)),
+                self.slot_xy[o][1] + ahead * math.sin(self.slot_facing.get(o, 0.0))) for o in final_outputs]
+        mx = sum(p[0] for p in pts) / len(pts)
+        my = sum(p[1] for p in pts) / len(pts)
+        return sorted(free, key=lambda r: (self._dist(r, (mx, my)), r.number))
+
+    def reserved_outgoing(self, state: FactoryState, source: SlotRef | None = None) -> list[SlotRef]:
+        """Free outgoing slots to keep for the blue parts that will still come out of machine outputs, when a
+        blue part from ``source`` (not a machine output) is to be placed: as many as there are such parts
+        (every red or green part, every blue one at a machine output, the one at ``source`` not counted) of
+        :meth:`outgoing_near_outputs`."""
+        if source in self._outputs:
+            return []
+        n = 0
+        for zone in ZONES:
+            for k, part in enumerate(state.zone(zone), start=1):
+                ref = SlotRef(zone, k)
+                if part is None or ref == source:
+                    continue
+                if part is not PartType.BLUE or ref in self._outputs:
+                    n += 1
+        return self.outgoing_near_outputs(state)[:n] if n else []
 
     def candidates(self, state: FactoryState, avoid: frozenset[SlotRef] | set[SlotRef] = frozenset()) -> list[Move]:
         """Every part that should move and has a free destination, in picking order."""
