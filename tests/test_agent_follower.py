@@ -191,3 +191,22 @@ def test_a_turn_against_the_last_fast_turn_is_held_slow_for_a_while(robot):
     f2.start([(0.0, 0.0)], final_heading=0.0)
     f2.w = 1.5
     assert min(f2.step((0.0, 0.0, 0.5)).w for _ in range(slowed + hold)) < -0.5
+
+
+def test_a_long_turn_on_the_spot_runs_at_the_long_spin_rate(robot):
+    """DriveLimits.long_spin: a turn on the spot of more than long_spin rad runs at most w_long_spin throughout
+    (carrying: the part slides less); a shorter one at the normal rate; both end on the heading."""
+    dt = robot.control_period
+    lim = DriveLimits.from_robot(robot, w_max=1.5, alpha_max=6.0, long_spin=2.4, w_long_spin=1.1)
+    peaks = {}
+    for turn in (2.6, 1.6, -2.6):
+        f = PathFollower(lim, dt)
+        f.start([(0.0, 0.0)], final_heading=turn)
+        outs, poses = drive_kinematic(f, (0.0, 0.0, 0.0), dt)
+        assert outs[-1].done and abs(wrap(poses[-1][2] - turn)) < 0.02
+        peaks[turn] = max(abs(o.w) for o in outs)
+    assert peaks[2.6] <= 1.1 + 1e-9 and peaks[-2.6] <= 1.1 + 1e-9
+    assert peaks[1.6] > 1.4
+    f = PathFollower(DriveLimits.from_robot(robot, w_max=1.5, alpha_max=6.0), dt)  # without it: the normal rate
+    f.start([(0.0, 0.0)], final_heading=2.6)
+    assert max(abs(o.w) for o in drive_kinematic(f, (0.0, 0.0, 0.0), dt)[0]) > 1.4

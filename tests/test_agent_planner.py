@@ -138,3 +138,28 @@ def test_rounded_paths_keep_the_exact_outline_clear(field, robot, src, dst, carr
     assert np.hypot(*(last.xy[-1] - goal[:2])) < 1e-6 and np.all(last.kappa[-3:] == 0)
     if aligned:  # the last leg along the slot's normal: docking follows on without a turn
         assert abs(wrap(last.psi[-1] - goal[2])) < 1e-6
+
+
+def test_the_join_onto_a_slots_normal_may_pass_where_only_the_exact_outline_is_clear(field, robot):
+    """Carrying from machine B's output 2 to outgoing 3: the slot's normal is too near the machine's rib end for
+    the turning circle higher up, so with the circle everywhere the path jogs sideways (two corners, two turns on
+    the spot with the part); with ``join_inflate`` the line onto the normal needs only the exact outline (grown
+    by that much) clear, and the path has no stop. Driving it, the exact outline touches nothing."""
+    fp = carrying_footprint(robot, field.part)
+    ob = FieldObstacles(field, [])
+    pl = PathPlanner(ob, margin=0.01)
+    d = dock_distance(robot, field.part)
+    start = pl.approach_pose(field.slot("machine_B", 2), d, fp)
+    g = pl.approach_pose(field.slot("outgoing", 3), d, fp)
+    goal = (g[0] - 0.05 * math.cos(g[2]), g[1] - 0.05 * math.sin(g[2]), g[2])  # the place's standoff
+    jog, aligned = pl.plan_to_pose(start[:2], goal, fp)
+    assert aligned and pl.smooth(jog, fp, final_straight=0.03, final_min_radius=0.08).stops >= 1
+    path, aligned = pl.plan_to_pose(start[:2], goal, fp, join_inflate=0.015)
+    sp = pl.smooth(path, fp, final_straight=0.03, final_min_radius=0.08)
+    assert aligned and sp.stops == 0 and sp.length < pl.smooth(jog, fp, final_straight=0.03).length
+    for p in path.points[1:-1]:  # it may still turn on the spot at every corner
+        assert ob.clearance_at(*p) >= fp.radius, p
+    for p in sp.pieces:
+        for (x, y), h in zip(p.xy, p.psi):
+            if math.hypot(x - start[0], y - start[1]) > 0.02:
+                assert not ob.collides(fp, (float(x), float(y), float(h))), (x, y, h)

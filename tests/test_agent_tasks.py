@@ -103,3 +103,21 @@ def test_policy_scores_the_maximum_on_the_real_factory(field, policy, round_no, 
     if "R" in setup.letters or "G" in setup.letters:
         # learned: never below the factory's 3 s; above by at most the loop's latency (a 2 s move + a poll)
         assert 3.0 <= est.estimate <= 3.0 + 2.0 + 0.2 + 0.1
+
+
+def test_outgoing_slots_kept_for_the_parts_from_machine_b(policy):
+    """Outgoing 4 and 3 are the nearest to where the robot stands after taking a part from machine B's outputs;
+    a blue part from the incoming warehouse leaves as many of them as parts are still to come from there."""
+    s = FactoryState.from_letters("GXBX", machine_B="GBXX")
+    assert policy.outgoing_near_outputs(s)[:2] == [SlotRef("outgoing", 4), SlotRef("outgoing", 3)]
+    assert policy.is_output(SlotRef("machine_B", 2)) and not policy.is_output(SlotRef("machine_B", 1))
+    # the green parts in incoming 1 and machine B 1, the blue one at output 2: three to come, the blue in incoming
+    # 3 (the source) not counted
+    assert policy.reserved_outgoing(s, SlotRef("incoming", 3)) == policy.outgoing_near_outputs(s)[:3]
+    assert policy.reserved_outgoing(s, SlotRef("machine_B", 2)) == []  # a part from an output keeps nothing
+    assert policy.reserved_outgoing(FactoryState.from_letters("BXBX"), SlotRef("incoming", 1)) == []
+    # an occupied output ranks a lane's input after a free one
+    s = FactoryState.from_letters("GXBX", machine_B="XBXX")
+    assert policy.destination_class(s, SlotRef("machine_B", 1)) == 1
+    assert policy.destination_class(s, SlotRef("machine_B", 3)) == 0
+    assert policy.destination_class(s, SlotRef("outgoing", 1)) == 0
