@@ -22,8 +22,9 @@ from robotatfactory.simtwo import Command, SensorFrame
 # sha256 of SensorFrame datagrams and camera images of the one-robot run below, computed with the code as it
 # was before several robots were added (commit 5b191b7): N = 1 must stay byte-identical. Recomputed (same run,
 # one robot) when the parts got SimTwo's feet, friction and mass (sim/scene.py, issue 11: they settle 0.1 mm
-# differently, so the images differ); it was ea4f1236bf33...c9d0c92.
-ONE_ROBOT_DIGEST = "8f571a435ee76d365a5a9ae88d3a07211517f3c5c15375f76cfed1bfc91edc3c"
+# differently, so the images differ); it was ea4f1236bf33...c9d0c92. Recomputed again when the parts' floor
+# friction became per direction (no roll/pitch resistance, the feet's yaw torque): it was 8f571a435ee7...edc3c.
+ONE_ROBOT_DIGEST = "5187ca31c35aedccbe6785b04a2c0a4fa7ffc0acfb392e506a5951e3d096a4d4"
 
 A = (-0.65, 0.33, 0.0)  # a free stretch of the field (rules2026) along y = 0.33
 B = (-0.15, 0.33, math.pi)

@@ -80,6 +80,19 @@ PART_FOOT_FRICTION = (0.01, 0.005, 0.0001)
 # 0.1 m/s; N m on the rotations, where the feet's would be ~0.001 N m: more yaw resistance than SimTwo's, still
 # a third of what the magnet's face can hold)
 PART_FOOT_FRICTIONLESS_BELOW = 0.015
+PART_FOOT_RADIUS = 0.005  # m: SimTwo's feet, spheres at the body's lower corners (PartBlue.xml 27-53)
+
+
+def part_floor_frictionloss(part) -> tuple[float, float, float, float, float, float]:
+    """The free joint's per-direction friction that stands in for the four feet's floor friction (see
+    PART_FOOT_FRICTIONLESS_BELOW): mu m g (N) on x and y; none on z, roll and pitch (the feet resist none of
+    them in SimTwo); on yaw the torque of four feet at r from the centre, mu m g r (N m, about 1.0e-3). The
+    joint's one value for all six (mu m g on every direction) resisted yaw 21 times harder than SimTwo's feet
+    and tipping too: a part on the magnet, turned with the robot, was dragged round the magnet's face (4 mm/s
+    of slide at 1.5 rad/s) and lost when the turn reversed."""
+    f = PART_FOOT_FRICTION[0] * (part.mass + PART_PLATE_MASS) * 9.81
+    r = math.hypot(part.depth / 2 - PART_FOOT_RADIUS, part.width / 2 - PART_FOOT_RADIUS)
+    return (f, f, 0.0, 0.0, 0.0, f * r)
 PART_PLATE_MASS = 0.01  # kg, added to the rules' part mass (field.part.mass, 0.2 kg = SimTwo's body)
 WALL_FRICTION = (0.3, 0.005, 0.0001)
 # floor, wheel and caster contacts: stiff (the robot sinks ~5 um, so camera and wheel radius are exact)

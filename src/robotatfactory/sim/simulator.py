@@ -85,6 +85,11 @@ class Simulator:
 
         name2id = mujoco.mj_name2id
         self.parts = PartBodies(m, self.info)
+        if sc.PART_FOOT_FRICTION[0] < sc.PART_FOOT_FRICTIONLESS_BELOW:  # the feet's friction, per direction
+            loss = sc.part_floor_frictionloss(field.part)
+            for pid in self.info.parts:
+                a = self.parts.vadr[pid]
+                m.dof_frictionloss[a:a + 6] = loss
         self._plate_geoms = {name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"part_{pid}_plate"): pid for pid in self.info.parts}
         self._part_geoms = {name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"part_{pid}_body"): pid for pid in self.info.parts}
         for pid, letter, *_ in parts:
