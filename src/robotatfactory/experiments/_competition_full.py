@@ -111,6 +111,10 @@ def command_delays(commands: list[tuple[float, float, float]], trace) -> list[fl
     return out
 
 
+class SimStartError(RuntimeError):
+    """``raf sim`` exited at once (e.g. a port taken by another run in between): the run may be retried."""
+
+
 def _udp_port() -> int:
     from ..ros.master import free_port
 
@@ -131,7 +135,10 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     log_dir.mkdir(parents=True, exist_ok=True)
     trace_path = log_dir / "trace.jsonl"
     bag_path = log_dir / ("pose.bag" if mw == "ros1" else "pose_bag")
-    sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), _udp_port()
+    from ..ros.master import free_port
+
+    # (each run's own; a port another run took meanwhile makes raf sim exit at once: SimStartError, retried)
+    sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()
     field_args = ["--field", field_name] if field_name else []
     wall0 = time.perf_counter()
     graph = private_graph(mw).start()
@@ -151,7 +158,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                         f"tcp://127.0.0.1:{cam_port}", "--server-port", str(server_port), "--no-control",
                         "--trace", str(trace_path), "--end-after-max", str(END_AFTER_MAX), "--status-every", "5",
                         env=env, may_exit=True)
-        limit = time.monotonic() + FULL_DURATION[round_no] * 1.5 + 60.0
+        started = time.monotonic()
+        limit = started + FULL_DURATION[round_no] * 1.5 + 60.0
         done_at = None
         while sim.poll() is None and time.monotonic() < limit:
             procs.check()
@@ -160,6 +168,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             if done_at is not None and time.monotonic() - done_at > DONE_GRACE:
                 break
             time.sleep(0.5)
+        if sim.poll() is not None and sim.returncode != 0 and time.monotonic() - started < 20.0:
+            raise SimStartError(f"raf sim could not start (exit code {sim.returncode}): {procs.tail('sim', 3)}")
         procs.stop("sim")  # SIGINT: raf sim writes its final report on the way out
         wait_for_report(log_dir / "sim.log")
         procs.stop("record")  # closes the bag

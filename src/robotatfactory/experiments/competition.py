@@ -320,12 +320,17 @@ def _job(spec):
 
 
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None) -> dict:
-    from ._competition_full import play_full_stack
+    from ._competition_full import SimStartError, play_full_stack
 
-    try:
-        return play_full_stack(round_no, seed, out_dir, record, field_name)
-    except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
-        return _failed(round_no, seed, e)
+    for attempt in range(3):
+        try:
+            return play_full_stack(round_no, seed, out_dir, record, field_name)
+        except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
+            if attempt == 2:
+                return _failed(round_no, seed, e)
+        except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
+            return _failed(round_no, seed, e)
+    raise AssertionError("unreachable")
 
 
 def _failed(round_no: int, seed: int, e: Exception) -> dict:
