@@ -217,13 +217,7 @@ class Collector:
 
 def unsubscribe(sub) -> None:
     """End a subscription made with ``test_node().subscribe``."""
-    node = test_node()
-    if middleware() == "ros2":
-        if sub in node._keep:
-            node._keep.remove(sub)
-        node.node.destroy_subscription(sub)
-    else:
-        sub.unregister()
+    test_node().close(sub)
 
 
 def publisher(topic: str, msg_type, qos: QoS = QoS.CONTROL, depth: int = 1, wait_for: float = 10.0):
@@ -236,10 +230,7 @@ def publisher(topic: str, msg_type, qos: QoS = QoS.CONTROL, depth: int = 1, wait
 
 def unpublish(pub) -> None:
     """End a publisher made with :func:`publisher` / ``test_node().publisher``."""
-    if middleware() == "ros2":
-        test_node().node.destroy_publisher(pub._pub)
-    else:
-        pub._pub.unregister()
+    test_node().close(pub)
 
 
 def wait_for_service(name: str, srv_type=None, timeout: float = 30.0) -> None:

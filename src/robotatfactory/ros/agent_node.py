@@ -108,8 +108,7 @@ class AgentNode:
     def stop(self) -> None:
         running, self._running = self._running, False
         try:
-            if self.timer is not None:
-                self.timer.shutdown() if hasattr(self.timer, "shutdown") else self.timer.cancel()
+            self.node.close(self.timer)
             if running:
                 self.pub_cmd.publish(Twist())
         except Exception:  # noqa: BLE001 - shutting down

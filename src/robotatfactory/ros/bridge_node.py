@@ -107,6 +107,7 @@ class Bridge:
         self._map_odom_sent = False
         self._running = False
         self._threads: list[threading.Thread] = []
+        self._subs: list = []
         self._counters_at_last_diag: dict = {}
         # wall seconds from the kernel receiving a datagram to its reply sent / its odom written
         self.reply_delay: deque = deque(maxlen=2000)
@@ -141,8 +142,8 @@ class Bridge:
         self.pub_contact = node.publisher(t["contact"], Bool, QoS.RELIABLE, 10)
         self.pub_magnet = node.publisher(t["magnet_state"], Bool, QoS.RELIABLE, 10)
         self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, QoS.RELIABLE, 10)
-        node.subscribe(t["cmd_vel"], Twist, self._on_cmd_vel, QoS.CONTROL, 1)
-        node.subscribe(t["magnet"], Bool, self._on_magnet, QoS.CONTROL, 1)
+        self._subs = [node.subscribe(t["cmd_vel"], Twist, self._on_cmd_vel, QoS.CONTROL, 1),
+                      node.subscribe(t["magnet"], Bool, self._on_magnet, QoS.CONTROL, 1)]
         self._send_static()
         if cfg.publish_field:
             from .field_markers import field_marker_array
@@ -182,11 +183,18 @@ class Bridge:
                     time.sleep(0.2)
 
     def stop(self) -> None:
+        """End the threads and leave the graph: the sim/* services, the command subscriptions and (once the
+        threads that publish have ended) the publishers are closed; the node itself is its owner's."""
         self._running = False
         if self.sim_services is not None:
             self.sim_services.shutdown()
+        for s in self._subs:
+            self.node.close(s)
         for th in self._threads:
             th.join(timeout=2.0)
+        for name in ("pub_clock", "pub_odom", "pub_gt", "pub_joints", "pub_scan", "pub_contact", "pub_magnet",
+                     "pub_diag", "pub_markers"):
+            self.node.close(getattr(self, name, None))
         if self.camera is not None:
             self.camera.close()
         if self.sock is not None:

@@ -130,8 +130,7 @@ def record_live(image_topic: str, odom_topic: str | None, duration: float, sink,
     finally:
         done.set()
         for s in subs:
-            if hasattr(s, "unregister"):  # ROS 1 (ROS 2's go with the node)
-                s.unregister()
+            node.close(s)
         node.shutdown("raf calibrate: recording done")
         spinner.join(timeout=5.0)
         if m.NAME == "ros2":  # a ROS 2 process destroys its node and shuts rclpy down before it exits

@@ -109,8 +109,7 @@ class LocalizationNode:
     def stop(self) -> None:
         self._running = False
         for s in getattr(self, "subs", []):
-            if hasattr(s, "unregister"):  # ROS 1 (ROS 2's subscriptions go with the node)
-                s.unregister()
+            self.node.close(s)
 
     def _guard(self, fn):
         """``fn`` as a callback: one message at a time, any exception counted and logged (rate-limited)."""

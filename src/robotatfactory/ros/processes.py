@@ -160,21 +160,9 @@ class ExperimentNode:
         return self.mw.NAME
 
     def drop(self, handle) -> None:
-        """Unsubscribe a subscription or remove a publisher made on this node (either middleware)."""
-        if handle is None:
-            return
-        inner = getattr(handle, "_pub", handle)  # mw's publisher wrapper
-        if hasattr(inner, "unregister"):  # rospy
-            inner.unregister()
-            return
-        rcl = self.node.node
-        try:
-            if hasattr(inner, "topic_name") and inner in getattr(rcl, "publishers", []):
-                rcl.destroy_publisher(inner)
-            else:
-                rcl.destroy_subscription(inner)
-        except Exception:  # noqa: BLE001 - already gone with the node
-            pass
+        """Unsubscribe a subscription or remove a publisher made on this node (either middleware; None and
+        twice do nothing)."""
+        self.node.close(handle)
 
     def wait_for_message(self, topic: str, msg_type, timeout: float, qos=None):
         """One message on ``topic`` (None after ``timeout`` s)."""

@@ -56,9 +56,8 @@ class Recorder:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(2.0)
-        if self.node.middleware == "ros1":
-            for s in self._subs.values():
-                s.unregister()
+        for s in list(self._subs.values()):
+            self.node.close(s)
         self.writer.close()
 
     def subscribed(self) -> list[str]:

@@ -63,9 +63,11 @@ class SimServices:
         return self
 
     def shutdown(self) -> None:
+        """Stop serving: the services leave the graph (a call already being answered still gets its answer
+        when the node is still up)."""
         for s in self.services:
-            if hasattr(s, "shutdown"):  # ROS 1; ROS 2's go with their node
-                s.shutdown()
+            self.bridge.node.close(s)
+        self.services.clear()
 
     def probe(self, log: bool = False) -> str:
         """Which simulator is connected: the stand-in when its control channel answers, else SimTwo."""

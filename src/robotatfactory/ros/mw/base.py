@@ -140,6 +140,12 @@ class Node(ABC):
     def timer(self, period: float, callback: Callable[[], None]):
         """Call ``callback()`` every ``period`` seconds of the node's clock (simulation time under sim time)."""
 
+    @abstractmethod
+    def close(self, handle) -> None:
+        """Stop a subscription, publisher, service server or timer this node made (what :meth:`subscribe`,
+        :meth:`publisher`, :meth:`service`, :meth:`timer` returned, or the middleware's own object): no more
+        callbacks, the graph no longer lists it. ``None``, closing twice or after shutdown do nothing."""
+
     # -- TF --------------------------------------------------------------------------------------------
     @abstractmethod
     def send_tf(self, transforms: list) -> None:

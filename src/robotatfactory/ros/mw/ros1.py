@@ -94,6 +94,21 @@ class Ros1Node(Node):
     def timer(self, period, callback):
         return rospy.Timer(rospy.Duration.from_sec(period), lambda _ev: callback())
 
+    def close(self, handle) -> None:
+        if handle is None:
+            return
+        inner = handle._pub if isinstance(handle, _Pub) else handle
+        if isinstance(inner, (rospy.Timer, rospy.Service)):
+            stop = inner.shutdown
+        elif isinstance(inner, (rospy.Subscriber, rospy.Publisher)):
+            stop = inner.unregister
+        else:
+            raise TypeError(f"close: not a subscription, publisher, service or timer: {handle!r}")
+        try:
+            stop()  # twice: rospy's own flags make the second call do nothing
+        except Exception:  # noqa: BLE001 - already gone with the node (after shutdown)
+            pass
+
     def send_tf(self, transforms) -> None:
         from tf2_msgs.msg import TFMessage
 

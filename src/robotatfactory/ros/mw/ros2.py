@@ -143,6 +143,39 @@ class Ros2Node(Node):
         self._keep.append(t)
         return t
 
+    def close(self, handle) -> None:
+        if handle is None:
+            return
+        from rclpy.client import Client
+        from rclpy.publisher import Publisher as RclPublisher
+        from rclpy.service import Service
+        from rclpy.subscription import Subscription
+        from rclpy.timer import Timer
+
+        inner = handle._pub if isinstance(handle, _Pub) else handle
+        n = self.node
+        if isinstance(inner, Subscription):
+            destroy = n.destroy_subscription
+        elif isinstance(inner, RclPublisher):
+            destroy = n.destroy_publisher
+        elif isinstance(inner, Service):
+            destroy = n.destroy_service
+        elif isinstance(inner, Timer):
+            destroy = n.destroy_timer
+        elif isinstance(inner, Client):
+            destroy = n.destroy_client
+        else:
+            raise TypeError(f"close: not a subscription, publisher, service or timer: {handle!r}")
+        with self._lock:
+            if inner in self._keep:
+                self._keep.remove(inner)
+        try:
+            if isinstance(inner, Timer):
+                inner.cancel()
+            destroy(inner)  # False when it is gone already (closed before, or with the node)
+        except Exception:  # noqa: BLE001 - InvalidHandle: destroyed with the node
+            pass
+
     def send_tf(self, transforms) -> None:
         from tf2_msgs.msg import TFMessage
 

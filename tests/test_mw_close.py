@@ -1,0 +1,174 @@
+"""The node layer's handles and services on each middleware (``[ros1]``: a private roscore; ``[ros2]``: a
+private domain id), on rosutil's test node in this process:
+
+* ``Node.close(handle)`` ends a subscription, publisher, service or timer (twice, ``None``: nothing happens);
+* ``Bridge.stop()`` leaves the graph: the ``sim/*`` services and the command subscriptions are gone;
+"""
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+
+import pytest
+
+from rosutil import (Collector, call_service, free_port, middleware, publisher, ros_graph,  # noqa: F401
+                     service_names, srv_types, test_node, unpublish, wait_for_service, wait_until)
+
+pytestmark = [pytest.mark.ros, pytest.mark.middlewares]
+
+
+def _graph(topic: str) -> tuple[int, int]:
+    """(publishers, subscribers) of ``topic`` as the graph lists them (ROS 1: the master's system state)."""
+    node = test_node()
+    name = node.resolve(topic)
+    if middleware() == "ros2":
+        return node.node.count_publishers(name), node.node.count_subscribers(name)
+    import rosgraph
+
+    pubs, subs, _ = rosgraph.Master("/raf_test_graph").getSystemState()
+    return (sum(len(n) for t, n in pubs if t == name), sum(len(n) for t, n in subs if t == name))
+
+
+def _served(name: str) -> bool:
+    """Whether a server offers the service ``name`` (ROS 2: counted servers; the graph's service list also
+    names a service that only a client asks for, e.g. this test's own client)."""
+    if middleware() == "ros2":
+        return test_node().node.count_services(name) > 0
+    return name in service_names()
+
+
+def test_close_ends_subscription_publisher_service_and_timer(middleware, ros_graph):
+    from std_msgs.msg import String
+
+    node = test_node()
+    # a subscription: closed, it hears nothing more and the publisher loses it
+    pub = node.publisher("/raf_close_test/a", String, depth=10)
+    col = Collector("/raf_close_test/a", String)
+    wait_until(lambda: pub.subscriber_count() > 0, 10, what="the subscription")
+    wait_until(lambda: (pub.publish(String(data="x")), len(col.msgs) > 0)[1], 10, what="a message")
+    node.close(col.sub)
+    node.close(col.sub)  # twice: nothing
+    wait_until(lambda: _graph("/raf_close_test/a")[1] == 0, 10, what="the subscription to leave the graph")
+    n = len(col.msgs)
+    for _ in range(5):
+        pub.publish(String(data="after"))
+        time.sleep(0.05)
+    time.sleep(0.3)
+    assert len(col.msgs) == n and not any(m.data == "after" for m in col.msgs)
+
+    # a publisher: closed, the subscriber sees no publisher
+    pub2 = node.publisher("/raf_close_test/b", String, depth=10)
+    col2 = Collector("/raf_close_test/b", String)
+    wait_until(lambda: col2.publishers() > 0, 10, what="the publisher")
+    node.close(pub2)
+    node.close(pub2)
+    wait_until(lambda: _graph("/raf_close_test/b")[0] == 0, 10, what="the publisher to leave the graph")
+    node.close(col2.sub)
+
+    # a timer: closed, it fires no more
+    ticks = []
+    t = node.timer(0.02, lambda: ticks.append(time.monotonic()))
+    wait_until(lambda: len(ticks) >= 3, 10, what="the timer")
+    node.close(t)
+    time.sleep(0.1)  # a tick already under way may still land
+    n = len(ticks)
+    time.sleep(0.4)
+    assert len(ticks) == n
+    node.close(t)
+
+    # a service: closed, it leaves the graph
+    Trigger = srv_types().Trigger
+    srv = node.service("/raf_close_test/srv", Trigger, lambda req, resp: (setattr(resp, "success", True), resp)[1])
+    wait_for_service("/raf_close_test/srv", Trigger, 10)
+    assert call_service("/raf_close_test/srv", Trigger, 10).success is True
+    node.close(srv)
+    node.close(srv)
+    wait_until(lambda: not _served("/raf_close_test/srv"), 10, what="the service to leave the graph")
+
+    node.close(None)
+    with pytest.raises(TypeError):
+        node.close("not a handle")
+    unpublish(pub)
+
+
+class SlowControl:
+    """A stand-in's control channel that answers ``get_state`` at once and ``step`` after ``delay`` s."""
+
+    def __init__(self, delay: float):
+        self.delay = delay
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.port = self.sock.getsockname()[1]
+        self.step_asked = threading.Event()
+        self.step_answered_at: float | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except (socket.timeout, OSError):
+                continue
+            req = json.loads(data)
+            if req.get("op") == "step":
+                self.step_asked.set()
+                threading.Thread(target=self._answer_step, args=(req, addr), daemon=True).start()
+            else:
+                self._send({"ok": True, "id": req["id"], "paused": True, "time": 0.0, "seq": 0,
+                            "pose": [0.0, 0.0, 0.0]}, addr)
+
+    def _answer_step(self, req, addr) -> None:
+        time.sleep(self.delay)
+        self.step_answered_at = time.monotonic()
+        self._send({"ok": True, "id": req["id"], "seq": 1, "time": 0.04}, addr)
+
+    def _send(self, reply: dict, addr) -> None:
+        try:
+            self.sock.sendto(json.dumps(reply).encode(), addr)
+        except OSError:
+            pass
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+        self.sock.close()
+
+
+def test_bridge_stop_leaves_the_graph(middleware, ros_graph, field):
+    from fakesim import FakeSim
+    from geometry_msgs.msg import Twist
+
+    from robotatfactory.ros.bridge_node import Bridge
+    from robotatfactory.ros.config import load_config
+
+    node = test_node()
+    ctl = SlowControl(delay=3.0)
+    port = free_port(socket.SOCK_DGRAM)
+    bridge = Bridge(load_config({"udp": {"port": port}, "camera": {"enabled": False},
+                                 "simulator": {"control": f"127.0.0.1:{ctl.port}"},
+                                 "watchdog": {"timeout": 2.0}}), node, field=field).start()
+    sim = FakeSim(("127.0.0.1", port), None, lockstep=False, realtime=True).start()
+    pub = None
+    try:
+        wait_until(lambda: len(sim.received) > 5, 15, what="the bridge's replies")
+        wait_for_service("/sim/step", srv_types().StepSimulation, 15)
+        pub = publisher("cmd_vel", Twist, wait_for=10)
+        # Bridge.stop(): the sim/* services and the command subscriptions leave the graph
+        names = [f"/sim/{s}" for s in ("reset", "pause", "resume", "step", "set_robot_pose", "place_part",
+                                       "get_state")]
+        assert all(_served(n) for n in names)
+        bridge.stop()
+        wait_until(lambda: not any(_served(n) for n in names), 15, what="the sim/* services to leave the graph")
+        wait_until(lambda: _graph("cmd_vel")[1] == 0, 15, what="cmd_vel's subscription to leave the graph")
+        bridge.stop()  # twice: nothing
+    finally:
+        bridge.stop()
+        sim.stop()
+        ctl.close()
+        if pub is not None:
+            unpublish(pub)
