@@ -47,9 +47,6 @@ class DockSettings:
     # the agent retries): a place jammed between ribs on a late, noisy pose crept ~4 mm/s for 11 s, slower
     # than the stuck check sees, pushing parts (0: no limit but the agent's 20 s)
     approach_slack: float = 0.0
-    # rad: a pick approach starting farther off the slot's heading than this brakes and turns on the spot first (an
-    # approach arriving on an arc 2.4 cm from the dock pose 0.08 rad off took the part turned into a rib's end)
-    pick_align: float = 0.04
     # s the contact switch may take after backing out to show the outcome (part along / part left): it lags
     # the predicted pose by the loop's latency (80 ms on SimTwo and raf sim)
     confirm: float = 0.2
@@ -78,10 +75,8 @@ class Docker:
         self.magnet_x = float(magnet_x)
         self.part = part
         self.approach_limits = replace(limits, v_max=settings.v_dock, v_final=settings.v_dock, slow_distance=0.0,
-                                       position_tolerance=0.002, lookahead=settings.lookahead,
-                                       heading_tolerance=min(limits.heading_tolerance, 2 * settings.pick_align))
-        self.place_limits = replace(self.approach_limits, v_max=settings.v_place, v_final=settings.v_place,
-                                    heading_tolerance=limits.heading_tolerance)
+                                       position_tolerance=0.002, lookahead=settings.lookahead)
+        self.place_limits = replace(self.approach_limits, v_max=settings.v_place, v_final=settings.v_place)
         self.back_limits = replace(limits, v_max=settings.v_back, v_final=settings.v_back, slow_distance=0.0,
                                    position_tolerance=0.003)
         self.follower = PathFollower(self.approach_limits, dt)
@@ -138,7 +133,7 @@ class Docker:
         carrying = mode == "place"  # a part on the magnet: steer while driving, never turn on the spot
         self.follower.start([start, target[:2]], final_heading=None, no_spin=carrying)
         self.follower.v = max(0.0, min(float(v0), self.follower.limits.v_max))
-        aligned = abs(wrap(pose[2] - target[2])) < (self.settings.pick_align if mode == "pick" else 0.1)
+        aligned = abs(wrap(pose[2] - target[2])) < 0.1
         self.follower.phase = "drive" if aligned or carrying else "turn"  # turning: it brakes, then turns in place
         self.phase = "approach"
         v_nom = max(self.follower.limits.v_max, 1e-3)
