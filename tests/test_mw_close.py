@@ -3,6 +3,9 @@ private domain id), on rosutil's test node in this process:
 
 * ``Node.close(handle)`` ends a subscription, publisher, service or timer (twice, ``None``: nothing happens);
 * ``Bridge.stop()`` leaves the graph: the ``sim/*`` services and the command subscriptions are gone;
+* a ``sim/*`` call that waits for a slow simulator does not hold up ``cmd_vel``: the commands still reach the
+  bridge's replies to the simulator while the call is pending (ROS 2's one-threaded executor answered the
+  call in the callback before: cmd_vel waited for it);
 """
 from __future__ import annotations
 
@@ -139,7 +142,7 @@ class SlowControl:
         self.sock.close()
 
 
-def test_bridge_stop_leaves_the_graph(middleware, ros_graph, field):
+def test_bridge_stop_leaves_the_graph_and_a_slow_sim_call_does_not_hold_up_cmd_vel(middleware, ros_graph, field):
     from fakesim import FakeSim
     from geometry_msgs.msg import Twist
 
@@ -158,6 +161,25 @@ def test_bridge_stop_leaves_the_graph(middleware, ros_graph, field):
         wait_until(lambda: len(sim.received) > 5, 15, what="the bridge's replies")
         wait_for_service("/sim/step", srv_types().StepSimulation, 15)
         pub = publisher("cmd_vel", Twist, wait_for=10)
+        result: list = []
+        caller = threading.Thread(target=lambda: result.append(
+            call_service("/sim/step", srv_types().StepSimulation, 20, steps=1)), daemon=True)
+        caller.start()
+        assert ctl.step_asked.wait(10), "the step request reached the simulator"
+        seen = None
+        tw = Twist()
+        tw.linear.x = 0.3
+        end = time.monotonic() + 10
+        while seen is None and time.monotonic() < end and ctl.step_answered_at is None:
+            pub.publish(tw)
+            time.sleep(0.04)
+            with sim._lock:
+                seen = next((r.t_wall for r in sim.received if abs(r.v - 0.3) < 1e-6), None)
+        answered = ctl.step_answered_at
+        assert seen is not None and (answered is None or seen < answered), \
+            "cmd_vel reached the replies to the simulator only after the slow sim/step call was answered"
+        caller.join(15)
+        assert result and result[0].success, result
         # Bridge.stop(): the sim/* services and the command subscriptions leave the graph
         names = [f"/sim/{s}" for s in ("reset", "pause", "resume", "step", "set_robot_pose", "place_part",
                                        "get_state")]

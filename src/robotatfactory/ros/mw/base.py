@@ -134,7 +134,9 @@ class Node(ABC):
 
     @abstractmethod
     def service(self, name: str, srv_type, handler: Callable[[Any, Any], Any]):
-        """Serve ``name``; ``handler(request, response)`` fills and returns the response."""
+        """Serve ``name``; ``handler(request, response)`` fills and returns the response. Each call runs in a
+        thread of its own (rospy's way; on ROS 2 a worker thread answers it), so a handler that waits never
+        holds up the node's other callbacks."""
 
     @abstractmethod
     def timer(self, period: float, callback: Callable[[], None]):

@@ -5,7 +5,8 @@ thread, events handled as they come. The multi-threaded executor (closest to ros
 subscription) was measured to burn most of a core on the 100 Hz ``/clock`` a sim-time node hears
 (ros2/rclpy#1223, #1378, #1452): the bridge's odom p99 was 242-500 ms beside it, 2.4-2.6 ms with the events
 executor and 4.1 ms with the single-threaded one (docs/benchmarks.md). The bridge's control path runs in its
-own thread, never in a callback; a callback that must wait (a sim/* service) holds up only the others. Parameters are
+own thread, never in a callback; a service call is answered by a worker thread of its own (``Ros2Node.service``),
+so a sim/* service that waits for the simulator does not hold up the node's other callbacks. Parameters are
 declared (name ``udp.port``, the type of the default, a description, a range where one is known) before
 they are read, so ``ros2 param list/describe`` shows every one. Discovery stays on this machine unless
 ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
@@ -15,6 +16,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 from typing import Callable
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -98,6 +100,15 @@ class _Pub(Publisher):
         return self._pub.get_subscription_count()
 
 
+class _Deferred:
+    """A service request taken by the executor, to be answered by a worker thread (Ros2Node.service)."""
+
+    __slots__ = ("request", "response")
+
+    def __init__(self, request, response):
+        self.request, self.response = request, response
+
+
 class Ros2Node(Node):
     middleware = NAME
 
@@ -110,6 +121,7 @@ class Ros2Node(Node):
         self._static_pub = None
         self._static: dict = {}
         self._keep: list = []
+        self._workers: set = set()  # service calls being answered (service())
         self.executor = None  # made by spin() (make_executor) unless set before
         self.callback_errors = 0  # callbacks that raised (logged, the node goes on)
 
@@ -134,7 +146,45 @@ class Ros2Node(Node):
         return sub
 
     def service(self, name, srv_type, handler):
-        srv = self.node.create_service(srv_type, name, handler, callback_group=self.group)
+        """Serve ``name``; each call runs ``handler`` in a worker thread of its own, which sends the answer
+        (as rospy serves each call in a thread): a handler that waits (a ``sim/*`` service waiting up to 3 s
+        for the simulator) does not hold up the node's other callbacks on the one-threaded executor.
+
+        How: the executor calls the service's callback, then ``service.send_response(result, header)``
+        (rclpy's executors and the EventsExecutor alike look the method up on the service object). The
+        callback returns a :class:`_Deferred` request, and this service's ``send_response`` starts the
+        worker for it with the header; the worker sends the handler's response with rclpy's own
+        ``send_response``."""
+        srv = self.node.create_service(srv_type, name, _Deferred, callback_group=self.group)
+        send = srv.send_response  # rclpy's (bound): the worker answers with it
+
+        def work(d: "_Deferred", header) -> None:
+            try:
+                resp = handler(d.request, d.response)
+            except Exception as e:  # noqa: BLE001 - as a callback's error: logged, the node goes on (no answer)
+                self.callback_errors += 1
+                throttled(self.node.get_logger().error, 5.0, f"service {srv.srv_name} failed: {e!r}")
+                return
+            try:
+                send(resp, header)
+            except Exception as e:  # noqa: BLE001 - the service was closed meanwhile, or a wrong response type
+                if type(e).__name__ != "InvalidHandle":
+                    self.callback_errors += 1
+                    throttled(self.node.get_logger().error, 5.0, f"service {srv.srv_name}: answer failed: {e!r}")
+            finally:
+                with self._lock:
+                    self._workers.discard(threading.current_thread())
+
+        def send_response(result, header) -> None:
+            if not isinstance(result, _Deferred):
+                send(result, header)
+                return
+            th = threading.Thread(target=work, args=(result, header), name=f"raf-srv{srv.srv_name}", daemon=True)
+            with self._lock:
+                self._workers.add(th)
+            th.start()
+
+        srv.send_response = send_response
         self._keep.append(srv)
         return srv
 
@@ -285,6 +335,11 @@ class Ros2Node(Node):
 
     def destroy(self) -> None:
         self._shutdown.set()
+        with self._lock:
+            workers = list(self._workers)
+        end = time.monotonic() + 3.5  # service calls being answered (a sim/* call waits up to 3 s)
+        for th in workers:
+            th.join(max(0.0, end - time.monotonic()))
         try:
             if self.executor is not None:
                 self.executor.shutdown(timeout_sec=1.0)
