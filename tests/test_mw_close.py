@@ -6,17 +6,22 @@ private domain id), on rosutil's test node in this process:
 * a ``sim/*`` call that waits for a slow simulator does not hold up ``cmd_vel``: the commands still reach the
   bridge's replies to the simulator while the call is pending (ROS 2's one-threaded executor answered the
   call in the callback before: cmd_vel waited for it);
+* a whole number given where a parameter's default is a real becomes a real (ROS 2 types parameters
+  strictly): overrides, parameter files and the nodes' ``given`` settings, the rule in one place.
 """
 from __future__ import annotations
 
 import json
 import socket
+import subprocess
+import sys
+import textwrap
 import threading
 import time
 
 import pytest
 
-from rosutil import (Collector, call_service, free_port, middleware, publisher, ros_graph,  # noqa: F401
+from rosutil import (ROOT, Collector, call_service, free_port, middleware, publisher, ros_graph,  # noqa: F401
                      service_names, srv_types, test_node, unpublish, wait_for_service, wait_until)
 
 pytestmark = [pytest.mark.ros, pytest.mark.middlewares]
@@ -194,3 +199,76 @@ def test_bridge_stop_leaves_the_graph_and_a_slow_sim_call_does_not_hold_up_cmd_v
         ctl.close()
         if pub is not None:
             unpublish(pub)
+
+
+# ---- whole numbers for reals (ROS 2 types parameters strictly) ------------------------------------------
+
+def test_typed_like_and_typed_tree():
+    from robotatfactory.ros.mw.base import typed_like, typed_tree
+
+    assert typed_like(3, 1.5) == 3.0 and type(typed_like(3, 1.5)) is float
+    assert type(typed_like(3, 2)) is int and typed_like(True, 1.0) is True and typed_like("3", 1.0) == "3"
+    assert [type(v) for v in typed_like([1, 2], [0.5, 0.5])] == [float, float]
+    assert [type(v) for v in typed_like([1, 2], [1, 2])] == [int, int]
+    t = typed_tree({"ekf": {"history_s": 3, "extra": 4}, "new": 5, "name": "x"}, {"ekf": {"history_s": 1.0}})
+    assert t == {"ekf": {"history_s": 3.0, "extra": 4}, "new": 5, "name": "x"}
+    assert type(t["ekf"]["history_s"]) is float and type(t["ekf"]["extra"]) is int and type(t["new"]) is int
+
+
+ROS2_PARAMS = textwrap.dedent("""
+    import json, sys
+    from robotatfactory.ros.mw import ros2
+    from rclpy.parameter import Parameter
+    out = {}
+    # overrides (what raf bridge hands the node) and a parameter file, both with whole numbers for reals
+    n = ros2.init_node("raf_bridge", argv=["x", "--ros-args", "--params-file", sys.argv[1]],
+                       params={"watchdog": {"timeout": 1}, "udp": {"port": 9811}})
+    from robotatfactory.ros.config import default_params, describe_param, load_config
+    got = n.params(default_params(), describe_param)
+    load_config(got)
+    p = n.node.get_parameter("watchdog.timeout")
+    out["bridge"] = [got["watchdog"]["timeout"], type(got["watchdog"]["timeout"]).__name__,
+                     p.type_ == Parameter.Type.DOUBLE, got["stream"]["max_wheel_speed"],
+                     type(got["stream"]["max_wheel_speed"]).__name__, got["udp"]["port"],
+                     type(got["udp"]["port"]).__name__]
+    n.destroy()
+    # the agent's and the localization's given settings
+    from robotatfactory.ros.agent_node import node_params as agent_params
+    n = ros2.init_node("raf_agent", params={"max_input_age": 2})
+    got = agent_params(n, {"max_input_age": 2, "command_latency": 0})
+    out["agent"] = [got["max_input_age"], type(got["max_input_age"]).__name__,
+                    type(got["command_latency"]).__name__,
+                    n.node.get_parameter("max_input_age").type_ == Parameter.Type.DOUBLE]
+    n.destroy()
+    from robotatfactory.ros.localization_node import node_params as loc_params
+    settings = {"ekf": {"history_s": 3}, "node": {"log_period": 7}}
+    n = ros2.init_node("raf_localization", params=settings)
+    got = loc_params(n, settings)
+    out["localization"] = [got["ekf"]["history_s"], type(got["ekf"]["history_s"]).__name__,
+                           got["node"]["log_period"], type(got["node"]["log_period"]).__name__]
+    n.destroy()
+    import rclpy
+    rclpy.try_shutdown()
+    print(json.dumps(out))
+""")
+
+
+def test_whole_numbers_given_for_reals_become_reals_on_ros2(tmp_path):
+    """On rclpy (the ROS 2 interpreter, in a subprocess on a private domain): an override, a parameter file
+    and the agent's / localization's given settings with ``1`` where the default is a real are declared as
+    reals with that value; an integer parameter stays an integer."""
+    import importlib.util
+
+    from robotatfactory.ros.master import PrivateDomain
+
+    py = sys.executable if importlib.util.find_spec("rclpy") else str(ROOT / ".venv-ros2" / "bin" / "python")
+    f = tmp_path / "p.yaml"
+    f.write_text("/**/raf_bridge:\n  ros__parameters:\n    stream:\n      max_wheel_speed: 54\n")
+    with PrivateDomain() as dom:
+        r = subprocess.run([py, "-c", ROS2_PARAMS, str(f)], env=dom.env(), cwd=ROOT, capture_output=True,
+                           text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["bridge"] == [1.0, "float", True, 54.0, "float", 9811, "int"]
+    assert out["agent"] == [2.0, "float", "float", True]
+    assert out["localization"] == [3.0, "float", 7.0, "float"]

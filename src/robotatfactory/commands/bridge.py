@@ -85,12 +85,9 @@ def run(args) -> int:
     from ..ros.cli import run_node
 
     from ..ros.config import default_params, describe_param
-    from ..ros.mw.base import flatten
 
-    # ROS 2 types parameters strictly: a whole number given for a real-valued setting is sent as a real
-    kinds = flatten(default_params(), "/")
-    params = {k: float(v) if isinstance(kinds.get(k), float) and isinstance(v, int) and not isinstance(v, bool)
-              else v for k, v in cfg.flat_params().items()}
+    # ROS 2: a whole number given for a real-valued setting is made a real when the node declares it
+    params = cfg.flat_params()
 
     def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.bridge_node import Bridge

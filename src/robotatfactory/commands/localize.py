@@ -69,9 +69,6 @@ def run(args) -> int:
         print(yaml.safe_dump({k: _plain(getattr(cfg, k)) for k in cfg.__dataclass_fields__}, sort_keys=False), end="")
         return 0
     from ..ros.cli import run_node
-    from ..ros.localization_node import typed_settings
-
-    settings = typed_settings(settings)  # ROS 2: a real parameter stays real (3 -> 3.0)
 
     def make_node(node):
         from ..ros.localization_node import LocalizationNode, node_params

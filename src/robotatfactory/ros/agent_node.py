@@ -374,12 +374,7 @@ def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
 
 def node_params(node: Node, given: dict | None = None) -> dict:
     """The node's parameters (ROS 2: declared with their defaults, descriptions and ranges)."""
-    d = default_params()
-    d.update(given or {})
-    for k, v in default_params().items():  # a whole number given for a real-valued setting (ROS 2 types them)
-        if isinstance(v, float) and isinstance(d.get(k), int) and not isinstance(d[k], bool):
-            d[k] = float(d[k])
-    return node.params(d, describe_param)
+    return node.params(default_params(), describe_param, given)
 
 
 if __name__ == "__main__":

@@ -430,31 +430,10 @@ def describe_param(flat: str) -> tuple[str, tuple[float, float] | None]:
     return _COMMENTS.get(flat, ""), RANGES.get(flat)
 
 
-def typed_settings(settings: dict, defaults: dict | None = None) -> dict:
-    """``settings`` with whole numbers written where a real is expected made reals (``history_s: 3`` ->
-    3.0): ROS 2 parameters keep the type of their default. Other values are left for the validation."""
-    defaults = default_params() if defaults is None else defaults
-    out = {}
-    for k, v in settings.items():
-        d = defaults.get(k) if isinstance(defaults, dict) else None
-        if isinstance(v, dict):
-            out[k] = typed_settings(v, d if isinstance(d, dict) else {})
-        elif isinstance(d, float) and isinstance(v, int) and not isinstance(v, bool):
-            out[k] = float(v)
-        else:
-            out[k] = v
-    return out
-
-
 def node_params(node: Node, settings: dict | None = None) -> dict:
     """The node's parameters as a settings tree: ``default_params()`` (updated with ``settings``: options
     given on the command line that the defaults lack, e.g. ``detector/extra`` keys, are declared too)."""
-    from ..settings import deep_update
-
-    defaults = default_params()
-    if settings:
-        deep_update(defaults, typed_settings(settings, defaults))
-    return node.params(defaults, describe_param)
+    return node.params(default_params(), describe_param, settings)
 
 
 def main(argv: list[str] | None = None) -> int:

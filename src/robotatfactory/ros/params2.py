@@ -29,6 +29,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from .mw.base import typed_like
+
 ROOT = Path(__file__).resolve().parents[3]
 OUT_DIR = ROOT / "config" / "ros2"
 
@@ -66,21 +68,9 @@ NODES = {
 }
 
 
-def typed_like(value, default):
-    """``value`` with the type of ``default`` where ROS 2 would otherwise see another type: whole numbers
-    where a real is the default become reals (also inside lists). Anything else is returned as it is."""
-    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if isinstance(default, (list, tuple)) and isinstance(value, (list, tuple)):
-        if any(isinstance(d, float) for d in default) or any(isinstance(v, float) for v in value):
-            return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
-        return list(value)
-    return value
-
-
 def merged(defaults: dict, values: dict, path: str = "") -> dict:
     """Every leaf of ``defaults``, with the value ``values`` gives where it gives one (typed like the
-    default). A key of ``values`` that the defaults lack is kept too (the node decides whether it knows it:
+    default: :func:`.mw.base.typed_like`). A key of ``values`` that the defaults lack is kept too (the node decides whether it knows it:
     the bridge rejects it, the localization's ``detector/extra`` takes any)."""
     out: dict = {}
     for k, d in defaults.items():

@@ -68,6 +68,34 @@ def flatten(tree: dict, sep: str, prefix: str = "") -> dict:
     return out
 
 
+def typed_like(value, default):
+    """``value`` with the type of ``default`` where ROS 2 would otherwise see another type: a whole number
+    where the default is a real becomes a real (also inside lists: ``[1, 0.5]`` -> ``[1.0, 0.5]``). Anything
+    else is returned as it is (the node's validation judges it). ROS 2 types parameters strictly (a real
+    parameter rejects ``3``); this is the one place of that rule (:meth:`Node.params`, the ROS 2 parameter
+    files of :mod:`..params2`)."""
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(default, (list, tuple)) and isinstance(value, (list, tuple)):
+        if any(isinstance(d, float) for d in default) or any(isinstance(v, float) for v in value):
+            return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
+        return list(value)
+    return value
+
+
+def typed_tree(values: dict, defaults: dict) -> dict:
+    """A nested ``values`` tree with each leaf :func:`typed_like` the same leaf of ``defaults`` (keys the
+    defaults lack are kept as they are)."""
+    out = {}
+    for k, v in values.items():
+        d = defaults.get(k) if isinstance(defaults, dict) else None
+        if isinstance(v, dict):
+            out[k] = typed_tree(v, d if isinstance(d, dict) else {})
+        else:
+            out[k] = typed_like(v, d)
+    return out
+
+
 def unflatten(flat: dict, sep: str) -> dict:
     out: dict = {}
     for key, v in flat.items():
@@ -167,10 +195,14 @@ class Node(ABC):
 
     # -- parameters ------------------------------------------------------------------------------------
     @abstractmethod
-    def params(self, defaults: dict | None = None, describe: Callable[[str], tuple] | None = None) -> dict:
+    def params(self, defaults: dict | None = None, describe: Callable[[str], tuple] | None = None,
+               given: dict | None = None) -> dict:
         """The node's private parameters as a nested dict. ROS 2 declares every leaf of ``defaults`` first
         (``udp.port``; ``describe(flat_name)`` -> (description, (min, max) or None)) so that
-        ``ros2 param describe`` shows them; ROS 1 reads ``~`` as it is."""
+        ``ros2 param describe`` shows them, ``given`` (a nested tree the caller sets, e.g. a command line's
+        settings) merged over the defaults first: a leaf the defaults lack is declared with its given value.
+        A whole number given (in ``given``, an override or a parameter file) where the default is a real
+        becomes a real (:func:`typed_like`). ROS 1 reads ``~`` as it is."""
 
     # -- logging and life --------------------------------------------------------------------------------
     @abstractmethod

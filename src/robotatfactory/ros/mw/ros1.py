@@ -131,7 +131,7 @@ class Ros1Node(Node):
     def now(self):
         return rospy.Time.now()
 
-    def params(self, defaults=None, describe=None) -> dict:
+    def params(self, defaults=None, describe=None, given=None) -> dict:
         p = rospy.get_param("~", {})
         return p if isinstance(p, dict) else {}
 

@@ -13,6 +13,7 @@ they are read, so ``ros2 param list/describe`` shows every one. Discovery stays 
 """
 from __future__ import annotations
 
+import copy
 import os
 import sys
 import threading
@@ -35,7 +36,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from ...errors import ConfigError  # noqa: E402
-from .base import Node, Publisher, QoS, flatten, throttled, unflatten  # noqa: E402
+from .base import Node, Publisher, QoS, flatten, throttled, typed_like, typed_tree, unflatten  # noqa: E402
 
 NAME = "ros2"
 
@@ -248,17 +249,32 @@ class Ros2Node(Node):
     def now(self):
         return self.node.get_clock().now().to_msg()
 
-    def params(self, defaults=None, describe=None) -> dict:
-        """Declare every leaf of ``defaults`` (``udp.port``) and return the values as a nested dict; a
-        parameter given to the node that no default names is an error (as the ROS 1 nodes' ``~`` check)."""
+    def params(self, defaults=None, describe=None, given=None) -> dict:
+        """Declare every leaf of ``defaults`` (``udp.port``; with ``given`` merged over them) and return the
+        values as a nested dict; a parameter given to the node that no default names is an error (as the
+        ROS 1 nodes' ``~`` check). ROS 2 types parameters strictly: a whole number given where the default
+        is a real (in ``given``, an override, a parameter file) is made a real here (base.typed_like), the
+        one place of that rule."""
         from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
         from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
         from rclpy.parameter import Parameter
 
+        if given:
+            from ...settings import deep_update
+
+            defaults = copy.deepcopy(defaults or {})
+            deep_update(defaults, typed_tree(given, defaults))
         flat = flatten(defaults or {}, ".")
+        overrides = getattr(self.node, "_parameter_overrides", {})
         for key, value in flat.items():
             if self.node.has_parameter(key):
                 continue
+            o = overrides.get(key)
+            if o is not None and o.type_ in (Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY):
+                v = o.value if o.type_ == Parameter.Type.INTEGER else list(o.value)
+                typed = typed_like(v, value)
+                if repr(typed) != repr(v):  # 3 -> 3.0, [1, 2] -> [1.0, 2.0]
+                    overrides[key] = Parameter(key, value=typed)
             text, rng = describe(key) if describe else ("", None)
             d = ParameterDescriptor(name=key, description=text or "")
             if isinstance(value, (list, tuple)):
@@ -276,8 +292,7 @@ class Ros2Node(Node):
                 self.node.declare_parameter(key, value, d)
             except InvalidParameterTypeException as e:
                 want = type(value).__name__
-                raise ConfigError(f"parameter {key}: {e} (the default {value!r} is a {want}; write 1.0, not 1, "
-                                  "for a real number)") from None
+                raise ConfigError(f"parameter {key}: {e} (the default {value!r} is a {want})") from None
             except InvalidParameterValueException as e:
                 raise ConfigError(f"parameter {key}: {e}") from None
         unknown = sorted(k for k in getattr(self.node, "_parameter_overrides", {})
