@@ -50,6 +50,7 @@ class AgentCounters:
     places: int = 0
     place_failures: int = 0
     no_path: int = 0
+    escapes: int = 0  # drives to the nearest clear point (the robot too close to something to plan from)
     timeouts: int = 0
     stale_pose_cycles: int = 0
     relocalizations: int = 0  # times it stopped to look at markers (the pose's uncertainty too large)
@@ -83,6 +84,8 @@ class RoundAgent:
     retries: int = 2
     state_period: float = 0.5  # s between server polls (5 requests each)
     give_up_after: int = 3  # failures at one slot before its part is left alone
+    escape_tries: int = 3  # drives to the nearest clear point before a target without a path counts as failed
+    escape_time: float = 4.0  # s an escape drive may take
     dock_timeout: float = 20.0  # s for one docking manoeuvre before it backs out
     # the last leg before docking: at least this much straight line along the slot's normal (m), after an
     # arc no tighter than this (m; else a stop and a turn in place); any arc at least min_radius (m)
@@ -205,6 +208,8 @@ class RoundAgent:
         self._calm = 0  # cycles with the uncertainty back below the limit
         self._leg_replans = 0
         self._no_contact = 0
+        self._no_path: dict = {}  # consecutive legs without a path per target (SlotRef)
+        self._escapes = 0  # escape drives since the last leg that started
 
     # ------------------------------------------------------------------------------------------ inputs
     @property
@@ -215,6 +220,8 @@ class RoundAgent:
         (magnet on/off, standing), ``dock_back`` (backing out), ``relocalize`` (standing, looking at markers), ``done``."""
         if self.mode in ("wait_start", "decide", "done", "relocalize"):
             return self.mode
+        if self.mode == "escape":
+            return "drive"
         if self.mode in ("to_pick", "to_place"):
             ph = self.follower.phase
             return "drive" if ph in ("drive", "done") else ph
@@ -279,6 +286,13 @@ class RoundAgent:
             self._decide(pose)
             if self.mode == "decide" or self.mode == "done":
                 return self._brake()
+        if self.mode == "escape":  # (:meth:`_no_leg`) then decide again from where it got to
+            o = self.follower.step(pose)
+            if o.done or o.off_path or self.t - self._mode_t0 > self.escape_time:
+                self.follower.stop()
+                self.mode, self.need_state_after = "decide", self.t
+                return self._brake()
+            return self._cmd(o.v, o.w)
         if self.mode in ("to_pick", "to_place") and self.t - self._mode_t0 > self._budget:
             if self._leg_replans < self.replans:
                 self._blocked(pose, f"took more than {self._budget:.0f} s")
@@ -461,9 +475,42 @@ class RoundAgent:
         except NoPath as e:
             self.counters.no_path += 1
             self._event(self.t, f"no path to {self.target}: {e}")
-            self.mode, self.need_state_after = "decide", self.t + self.state_period
+            self._no_leg(pose)
             return
+        self._no_path.pop(self.target, None)
+        self._escapes = 0
         self._start_leg(mode, leg)
+
+    def _no_leg(self, pose) -> None:
+        """No path to the target: never a loop of asking again. Where the robot stands too close to
+        something for its outline (pushed into a corner, a slip), it first drives to the nearest clear point
+        (up to ``escape_tries`` times); a target without a path ``give_up_after`` times running is given up
+        (its part left alone, or, carrying, another destination preferred), as a failed pick or place is."""
+        carrying = self.carrying is not None
+        fp = self.fp_carry if carrying else self.fp_empty
+        pl = PathPlanner(self._obstacles(), margin=self.carry_margin if carrying else 0.01)
+        try:
+            point = pl.escape_point(tuple(pose[:2]), fp)
+        except NoPath:
+            point = None
+        if point is not None and self._escapes < self.escape_tries:
+            self._escapes += 1
+            self.counters.escapes += 1
+            self._event(self.t, f"too close to an obstacle at ({pose[0]:.2f}, {pose[1]:.2f}): driving to "
+                                f"({point[0]:.2f}, {point[1]:.2f}) first")
+            behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
+            self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=carrying)
+            self.mode, self._mode_t0 = "escape", self.t
+            return
+        n = self._no_path[self.target] = self._no_path.get(self.target, 0) + 1
+        if n >= self.give_up_after:
+            self._no_path.pop(self.target, None)
+            self._event(self.t, f"no path to {self.target} {n} times: giving it up")
+            if carrying:
+                self.place_failed[self.target] = max(self.place_failed.get(self.target, 0), self.give_up_after)
+            elif isinstance(self.task, Move):
+                self.failures[self.task.source] = max(self.failures.get(self.task.source, 0), self.give_up_after)
+        self.mode, self.need_state_after = "decide", self.t + self.state_period
 
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
         """Start the leg to the destination of ``dest`` (best first) that takes the least time among those of

@@ -95,6 +95,20 @@ class PathPlanner:
                 k += 1
         return pts
 
+    def escape_point(self, xy, footprint: Footprint | float) -> tuple[float, float] | None:
+        """The nearest point whose clearance fits ``footprint`` (no distance limit), None when ``xy`` is free
+        already: where a robot pushed into a corner (farther than :meth:`plan` joins) drives first."""
+        ob = self.obstacles
+        free = ob.clearance >= self.required(footprint)
+        cell = ob.cell(*xy)
+        if free[cell]:
+            return None
+        idx = np.argwhere(free)
+        if len(idx) == 0:
+            raise NoPath("no free cell on the map for this footprint")
+        k = int(np.argmin(np.hypot(idx[:, 0] - cell[0], idx[:, 1] - cell[1])))
+        return tuple(map(float, ob.center(int(idx[k, 0]), int(idx[k, 1]))))
+
     def _nearest_free(self, cell, free: np.ndarray) -> tuple[int, int]:
         if free[cell]:
             return cell
