@@ -144,7 +144,9 @@ class RoundAgent:
     carry_deadband: float = 0.0  # 0.02 measured: no gain (late, noisy, predicted pose, rounds 2-3 x 10: 15/20 vs 17/20 without)
     # a turn on the spot with a part of more than carry_long_spin rad runs at carry_w_long_spin rad/s (0: off;
     # DriveLimits.long_spin): after ~146 deg at 1.5 rad/s (machine B's outputs to outgoing 1-2) the part had slid
-    # ~10 mm and the arc back the other way pivoted it off
+    # ~10 mm and the arc back the other way pivoted it off (round 2 on a late, noisy pose: 4-5 of 10 runs lost a
+    # part without it). Since the stand-in's part feet (dbcc93f) the part creeps less: without it rounds 2-3 are
+    # 1-2 s faster and no part was lost in 60 runs, but one round-3 run jammed a place (59/60; with it 90/90)
     carry_long_spin: float = 2.4
     carry_w_long_spin: float = 1.1
     carry_k_drive: float = 0.0  # 1/s steering gain while carrying (0: the normal k_drive)
