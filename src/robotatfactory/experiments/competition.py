@@ -68,7 +68,8 @@ AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_m
                   "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock", "v_place",
                   "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin", "carry_w_spin",
                   "carry_w_reverse", "carry_deadband", "carry_k_drive", "dock_slack",
-                  "place_alpha_max")
+                  "place_alpha_max", "choose_by_time", "reserve_outgoing", "join_inflate", "join_inflate_empty",
+                  "carry_long_spin", "carry_w_long_spin", "pick_standoff", "escape_tries", "escape_time")
 DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "k_drive", "a_lat", "v_wheel", "slow_distance", "lookahead", "heading_tolerance", "w_max",
                   "alpha_max", "v_final")
 
@@ -132,15 +133,22 @@ def _number(option: str, item: str, value: str, convert=float):
     try:
         return convert(value)
     except ValueError:
-        raise ConfigError(f"{option} {item!r}: {value!r} is not a number") from None
+        raise ConfigError(f"{option} {item!r}: {value!r} is not a {'whole ' if convert is int else ''}number") from None
 
 
 def parse_agent(items) -> dict:
-    """``--agent NAME=VALUE`` items: RoundAgent settings (numbers; ``smooth`` 0 or 1)."""
-    return {name: (bool(_number("--agent", item, value, int)) if name in ("smooth", "carry_arcs")
-                   else _number("--agent", item, value))
-            for item, name, value in _name_values(items, "--agent", AGENT_SETTINGS,
-                                                  "one of " + ", ".join(AGENT_SETTINGS))}
+    """``--agent NAME=VALUE`` items: RoundAgent settings, typed as the setting's default (a switch: 0 or 1)."""
+    from dataclasses import fields
+
+    from ..agent.behaviour import RoundAgent
+
+    kinds = {f.name: type(f.default) for f in fields(RoundAgent)}
+    out = {}
+    for item, name, value in _name_values(items, "--agent", AGENT_SETTINGS, "one of " + ", ".join(AGENT_SETTINGS)):
+        kind = kinds.get(name, float)
+        out[name] = (bool(_number("--agent", item, value, int)) if kind is bool
+                     else _number("--agent", item, value, int) if kind is int else _number("--agent", item, value))
+    return out
 
 
 def parse_sim(items) -> dict:
