@@ -1,8 +1,9 @@
 """What ``raf experiment competition`` measures from the ground truth of a run, cycle by cycle, the same in
 both modes: fed from the in-process simulator (bare_truth) or from ``raf sim --trace`` (full_stack).
 
-Per run: collision checks that hit (the robot's outline, carrying or not, against walls and ribs or beyond the
-floor's 2 cm overhang allowance, every 5 cycles), parts pushed (a part not on the magnet moving 2 mm - 5 cm
+Per run: collision checks that hit (the robot's outline, and a held part's at its real pose once it is 3 cm or
+more from every slot centre, against walls and ribs or beyond the floor's 2 cm overhang allowance, every 5
+cycles), parts pushed (a part not on the magnet moving 2 mm - 5 cm
 within 5 cycles: a push, not a machine's teleport), the wheel odometry's error against the truth over each
 second per metre driven, the time split per agent activity (when the caller knows it), and for the figures the
 path and the animation frames.
@@ -19,12 +20,15 @@ class RunObserver:
     """Feed :meth:`cycle` after every control cycle; :meth:`figures` gives the run's keys."""
 
     def __init__(self, field, robot, record_path: bool = False):
-        from ..agent.footprint import carrying_footprint, robot_footprint
+        from ..agent.footprint import PLATE_THICKNESS, Footprint, Rect, robot_footprint
         from ..agent.obstacles import FieldObstacles
         from ..localization.odometry import DiffDriveOdometry
 
         self.walls = FieldObstacles(field, [])
-        self.fp, self.fc = robot_footprint(robot), carrying_footprint(robot, field.part)
+        self.fp = robot_footprint(robot)
+        p = field.part  # a part in its own frame: the plate towards +x (its pose's heading is the plate's facing)
+        self.part_outline = Footprint((Rect(-p.depth / 2, p.depth / 2 + PLATE_THICKNESS, -p.width / 2, p.width / 2),))
+        self.slot_xy = [s.xy for s in field.slots]
         self.period = robot.control_period
         self.record_path = record_path
         self.touched = self.off_floor = self.pushed = 0
@@ -60,13 +64,19 @@ class RunObserver:
         if seq % CHECK_EVERY:
             return
         x, y, th = pose
-        outline = self.fc if held is not None else self.fp
-        if self.walls.collides(outline, pose):  # a wall, a rib or beyond the floor's allowance
-            self.touched += 1
-            hit_wall = self.walls.collides(outline, pose, ignore_floor=True)
-            self.off_floor += not hit_wall
-            self.hits.append((round(t, 2), round(x, 3), round(y, 3), "wall" if hit_wall else "floor"))
         parts = parts() if callable(parts) else parts
+        # the robot's outline, and a held part where it really is once it has left its slot (in a slot it
+        # stands between ribs, against the back: not a collision; the robot's outline checks the approach)
+        checks = [(self.fp, pose)]
+        if held is not None and held in parts and self._out_of_slot(parts[held]):
+            checks.append((self.part_outline, parts[held]))
+        hit = next((c for c in checks if self.walls.collides(*c)), None)
+        if hit is not None:  # a wall, a rib or beyond the floor's allowance
+            self.touched += 1
+            hit_wall = self.walls.collides(*hit, ignore_floor=True)
+            self.off_floor += not hit_wall
+            kind = ("wall" if hit_wall else "floor") + (" (the held part)" if hit[0] is self.part_outline else "")
+            self.hits.append((round(t, 2), round(x, 3), round(y, 3), kind))
         if self.record_path:
             self.path.append((round(t, 3), round(x, 4), round(y, 4)))
             # for the animated picture (_competition_gif): pose with heading, held part, parts
@@ -80,6 +90,9 @@ class RunObserver:
                     self.pushed += 1
                     self.pushes.append((round(t, 2), round(px, 3), round(py, 3), round(1000 * d, 1), activity))
             self._last_xy[pid] = (px, py, "held" if held == pid else "")
+
+    def _out_of_slot(self, part_pose, within: float = 0.03) -> bool:
+        return all(math.hypot(part_pose[0] - sx, part_pose[1] - sy) > within for sx, sy in self.slot_xy)
 
     def figures(self) -> dict:
         """The run's keys (see the module docstring); ``path`` and ``frames`` when recording."""
