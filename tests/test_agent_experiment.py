@@ -66,7 +66,7 @@ def test_the_full_stack_mode_names_itself_and_reports_the_pose_error_against_its
     assert res["mode"] == "full_stack" and "EKF" in res["pose_source"]
     assert res["full_stack_r1_last_score_median_s"] == 84.3
     assert res["full_stack_r1_last_score_median_target_met"] is False
-    assert res["full_stack_r1_collisions"] == 4 and res["full_stack_r1_parts_pushed_target_met"] is True
+    assert res["full_stack_r1_collisions"] == 4 and res["full_stack_r1_parts_knocked_out_target_met"] is True
     assert res["full_stack_r1_pose_error_docking_max_m"] == 0.025
     assert res["full_stack_r1_pose_error_docking_max_target_met"] is False  # 2.5 cm > 2 cm in one run
     res = competition.summarize("full_stack", [r, dict(r, seed=1, pose_error_docking_max_m=float("nan"))])

@@ -62,7 +62,7 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
     runs = json.loads((tmp_path / "runs.json").read_text())
     assert runs[0]["middleware"] == middleware and "error" not in runs[0], runs[0].get("error")
     assert res["full_stack_r1_s0_points"] == res["full_stack_r1_s0_max_points"] == 4, runs[0]["logs"]
-    assert res["full_stack_r1_false_starts"] == 0 and res["full_stack_r1_parts_pushed"] == 0
+    assert res["full_stack_r1_false_starts"] == 0 and res["full_stack_r1_parts_knocked_out"] == 0
     assert 0 < res["full_stack_r1_s0_pose_error_docking_max_m"] <= 0.02
     assert res["full_stack_r1_pose_error_docking_max_target_met"] is True
     assert runs[0]["pose_samples_docking"] > 50  # the pose was recorded while docking (25 Hz)

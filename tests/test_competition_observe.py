@@ -21,3 +21,18 @@ def test_a_part_in_its_slot_is_not_a_collision_one_against_a_rib_is(field, robot
     # and the robot's own outline in a wall counts whatever it holds
     obs.cycle(0.6, 15, (slot.xy[0], slot.xy[1], slot.facing), None, (0, 0), {7: part_in_slot})
     assert obs.touched == 2 and obs.hits[-1][3] == "wall"
+
+
+def test_a_part_that_leaves_its_slot_unheld_is_knocked_out_a_machines_move_or_a_pick_is_not(field, robot):
+    obs = RunObserver(field, robot)
+    a, b = field.slot("machine_A", 1), field.slot("machine_A", 2)
+    far = (0.0, -0.3, 0.0)
+    obs.cycle(0.0, 0, far, None, (0, 0), {1: (*a.xy, a.facing), 2: (*a.xy, a.facing)})
+    obs.cycle(0.2, 5, far, None, (0, 0), {1: (*b.xy, b.facing), 2: (*a.xy, a.facing)})  # processed: input -> output
+    assert obs.knocked_out == 0
+    obs.cycle(0.4, 10, far, 2, (0, 0), {1: (*b.xy, b.facing), 2: (a.xy[0] + 0.1, a.xy[1], a.facing)})  # picked
+    assert obs.knocked_out == 0
+    obs.cycle(0.6, 15, far, None, (0, 0), {1: (b.xy[0] + 0.05, b.xy[1] + 0.02, b.facing),
+                                           2: (a.xy[0] + 0.1, a.xy[1], a.facing)})  # shoved 5 cm
+    assert obs.knocked_out == 1 and obs.knocks[0][1] == 1
+    assert obs.figures()["parts_knocked_out"] == 1

@@ -3,8 +3,9 @@ both modes: fed from the in-process simulator (bare_truth) or from ``raf sim --t
 
 Per run: collision checks that hit (the robot's outline, and a held part's at its real pose once it is 3 cm or
 more from every slot centre, against walls and ribs or beyond the floor's 2 cm overhang allowance, every 5
-cycles), parts pushed (a part not on the magnet moving 2 mm - 5 cm
-within 5 cycles: a push, not a machine's teleport), the wheel odometry's error against the truth over each
+cycles), parts knocked out of slots (a part more than 3 cm from every slot centre that was within 3 cm of one
+at the check before, not on the magnet then or now: the issue's target is none), parts pushed (stricter: a part
+not on the magnet moving 2 mm - 5 cm within 5 cycles: a push, not a machine's teleport), the wheel odometry's error against the truth over each
 second per metre driven, the time split per agent activity (when the caller knows it), and for the figures the
 path and the animation frames.
 """
@@ -31,7 +32,9 @@ class RunObserver:
         self.slot_xy = [s.xy for s in field.slots]
         self.period = robot.control_period
         self.record_path = record_path
-        self.touched = self.off_floor = self.pushed = 0
+        self.touched = self.off_floor = self.pushed = self.knocked_out = 0
+        self.knocks: list[tuple] = []  # (t, part id, x, y): a part that left a slot without being held
+        self._in_slot: dict[int, bool] = {}
         self.hits: list[tuple] = []  # (t, x, y, "wall" | "floor")
         self.pushes: list[tuple] = []  # (t, x, y, mm moved, activity)
         self.path: list[tuple] = []
@@ -82,6 +85,12 @@ class RunObserver:
             # for the animated picture (_competition_gif): pose with heading, held part, parts
             self.frames.append((round(t, 2), round(x, 4), round(y, 4), round(th, 3), held,
                                 [(pid, *(round(v, 3) for v in p)) for pid, p in sorted(parts.items())]))
+        for pid, pp in parts.items():
+            inside = not self._out_of_slot(pp)
+            if self._in_slot.get(pid) and not inside and held != pid and self._last_xy.get(pid, (0, 0, ""))[2] != "held":
+                self.knocked_out += 1  # out of its slot, not on the magnet: knocked out (a machine moves slot to slot)
+                self.knocks.append((round(t, 2), pid, round(pp[0], 3), round(pp[1], 3)))
+            self._in_slot[pid] = inside
         for pid, (px, py, _) in parts.items():
             last = self._last_xy.get(pid)
             if last is not None and held != pid:
@@ -99,6 +108,7 @@ class RunObserver:
         moved = sum(s[2] for s in self.slip)
         out = {"collision_checks_hit": self.touched, "off_floor_checks": self.off_floor, "collision_hits": self.hits,
                "parts_pushed": self.pushed, "pushes": self.pushes,
+               "parts_knocked_out": self.knocked_out, "knocks": self.knocks,
                "odometry_error_per_m": sum(s[0] for s in self.slip) / moved if moved > 0 else 0.0,
                "odometry_error_max_per_s_m": max((s[0] for s in self.slip), default=0.0),
                "odometry_heading_error_max_per_s_rad": max((s[1] for s in self.slip), default=0.0)}
