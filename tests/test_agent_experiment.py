@@ -97,3 +97,9 @@ def test_the_full_stack_reads_raf_sims_final_report_or_its_last_status_line(tmp_
     assert not competition.wait_for_report(log, limit=0.3, poll=0.1)
     log.write_text(REPORT)
     assert competition.wait_for_report(log, limit=0.3, poll=0.1)
+
+
+def test_analyse_measures_kept_runs_again_and_names_a_missing_one(tmp_path):
+    res = competition.run(args(mode="full_stack", analyse=str(tmp_path), rounds="1", seeds=1), None)
+    assert "no such run kept" in res["full_stack_r1_s0_error"]
+    assert res["full_stack_r1_max_score_target_met"] is False
