@@ -84,6 +84,7 @@ def test_node(name: str = "raf_test"):
             api = mw.api()
             if middleware() == "ros2":
                 node = api.init_node(name, argv=[sys.argv[0]], anonymous=True, signals=False)
+                node.on_callback_error = SPIN_ERRORS.append  # a service worker's error fails its test too
                 _SPIN = threading.Thread(target=_spin_ros2, args=(node,), name="raf-test-spin", daemon=True)
                 _SPIN.start()
                 atexit.register(_destroy_ros2_node, node)

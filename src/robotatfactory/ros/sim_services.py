@@ -63,8 +63,8 @@ class SimServices:
         return self
 
     def shutdown(self) -> None:
-        """Stop serving: the services leave the graph (a call already being answered still gets its answer
-        when the node is still up)."""
+        """Stop serving: the services leave the graph (on ROS 1 a call already being answered still gets its
+        answer; on ROS 2 the closed service cannot send one, and the caller's wait ends in its timeout)."""
         for s in self.services:
             self.bridge.node.close(s)
         self.services.clear()

@@ -125,6 +125,7 @@ class Ros2Node(Node):
         self._workers: set = set()  # service calls being answered (service())
         self.executor = None  # made by spin() (make_executor) unless set before
         self.callback_errors = 0  # callbacks that raised (logged, the node goes on)
+        self.on_callback_error = None  # called with the error's text as well (tests: fail the test it happened in)
 
     @property
     def name(self) -> str:
@@ -161,17 +162,16 @@ class Ros2Node(Node):
 
         def work(d: "_Deferred", header) -> None:
             try:
-                resp = handler(d.request, d.response)
-            except Exception as e:  # noqa: BLE001 - as a callback's error: logged, the node goes on (no answer)
-                self.callback_errors += 1
-                throttled(self.node.get_logger().error, 5.0, f"service {srv.srv_name} failed: {e!r}")
-                return
-            try:
-                send(resp, header)
-            except Exception as e:  # noqa: BLE001 - the service was closed meanwhile, or a wrong response type
-                if type(e).__name__ != "InvalidHandle":
-                    self.callback_errors += 1
-                    throttled(self.node.get_logger().error, 5.0, f"service {srv.srv_name}: answer failed: {e!r}")
+                try:
+                    resp = handler(d.request, d.response)
+                except Exception as e:  # noqa: BLE001 - as a callback's error: logged, the node goes on (no answer)
+                    self._callback_failed(f"service {srv.srv_name} failed", e)
+                    return
+                try:
+                    send(resp, header)
+                except Exception as e:  # noqa: BLE001 - the service was closed meanwhile, or a wrong response type
+                    if type(e).__name__ != "InvalidHandle":
+                        self._callback_failed(f"service {srv.srv_name}: answer failed", e)
             finally:
                 with self._lock:
                     self._workers.discard(threading.current_thread())
@@ -188,6 +188,15 @@ class Ros2Node(Node):
         srv.send_response = send_response
         self._keep.append(srv)
         return srv
+
+    def _callback_failed(self, what: str, e: Exception) -> None:
+        """A callback or a service worker raised: counted (under the lock: workers are threads), logged, and
+        handed to ``on_callback_error`` when set."""
+        with self._lock:
+            self.callback_errors += 1
+        throttled(self.node.get_logger().error, 5.0, f"{what}: {e!r}")
+        if self.on_callback_error is not None:
+            self.on_callback_error(f"{what}: {e!r}")
 
     def timer(self, period, callback):
         t = self.node.create_timer(period, callback, callback_group=self.group)
@@ -343,8 +352,7 @@ class Ros2Node(Node):
                 except Exception as e:  # noqa: BLE001 - a callback's error must not end the node (as in rospy)
                     if type(e).__name__ == "InvalidHandle":  # an entity destroyed while the executor held it
                         continue
-                    self.callback_errors += 1
-                    throttled(self.node.get_logger().error, 5.0, f"a callback failed (node goes on): {e!r}")
+                    self._callback_failed("a callback failed (node goes on)", e)
         finally:
             self._shutdown.set()
 
