@@ -24,6 +24,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..ros.master import free_port
+
 FULL_DURATION = {1: 130.0, 2: 190.0, 3: 230.0}  # simulated s of one run at most (raf sim --duration)
 START_AFTER = 3.0  # simulated s before the run starts (the agent's nodes are up by then)
 END_AFTER_MAX = 1.0  # simulated s the maximum score must stand before raf sim ends the run
@@ -53,30 +55,23 @@ def dock_windows(events: list[tuple[float, str]]) -> list[tuple[float, float, st
 def pose_errors(poses: list[tuple[float, float, float, float]], trace) -> list[tuple[float, float, float]]:
     """(stamp, position error m, heading error rad) of each pose ``(stamp, x, y, theta)`` against the
     trace's ground truth at that stamp (poses outside the trace are left out)."""
+    from ..localization.geometry import wrap_angle
+
     out = []
     for t, x, y, th in poses:
         g = trace.pose_at(t)
         if g is not None:
-            out.append((t, math.hypot(x - g[0], y - g[1]), abs(math.remainder(th - g[2], 2 * math.pi))))
+            out.append((t, math.hypot(x - g[0], y - g[1]), abs(wrap_angle(th - g[2]))))
     return out
 
 
 def read_poses(bag_path: Path, topic: str = "pose") -> list[tuple[float, float, float, float]]:
     """(stamp s, x, y, yaw) of every PoseWithCovarianceStamped on ``topic`` in the bag."""
     from ..ros.bags import find_topic, open_bag
+    from ..ros.calibration_source import odom_pose
 
-    out = []
     with open_bag(bag_path) as bag:
-        names = find_topic(bag.topics, topic)
-        for _topic, _t, m in bag.messages(names):
-            st = m.header.stamp
-            ns = getattr(st, "nanosec", None)
-            stamp = st.sec + (ns if ns is not None else st.nsec) * 1e-9
-            p, q = m.pose.pose.position, m.pose.pose.orientation
-            yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
-            out.append((stamp, p.x, p.y, yaw))
-    out.sort()
-    return out
+        return sorted(odom_pose(m) for _topic, _t, m in bag.messages(find_topic(bag.topics, topic)))
 
 
 def read_commands(bag_path: Path, topic: str = "cmd_vel") -> list[tuple[float, float, float]]:
@@ -116,8 +111,6 @@ class SimStartError(RuntimeError):
 
 
 def _udp_port() -> int:
-    from ..ros.master import free_port
-
     return free_port(socket.SOCK_DGRAM)
 
 
@@ -135,10 +128,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     log_dir.mkdir(parents=True, exist_ok=True)
     trace_path = log_dir / "trace.jsonl"
     bag_path = log_dir / ("pose.bag" if mw == "ros1" else "pose_bag")
-    from ..ros.master import free_port
-
     # (each run's own; a port another run took meanwhile makes raf sim exit at once: SimStartError, retried)
-    sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()
+    sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()  # (TCP)
     field_args = ["--field", field_name] if field_name else []
     wall0 = time.perf_counter()
     graph = private_graph(mw).start()

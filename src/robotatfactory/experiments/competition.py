@@ -333,15 +333,16 @@ def _job(spec):
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None) -> dict:
     from ._competition_full import SimStartError, play_full_stack
 
-    for attempt in range(3):
+    tries = 3
+    while True:
+        tries -= 1
         try:
             return play_full_stack(round_no, seed, out_dir, record, field_name)
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
-            if attempt == 2:
+            if not tries:
                 return _failed(round_no, seed, e)
         except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
             return _failed(round_no, seed, e)
-    raise AssertionError("unreachable")
 
 
 def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: str | None) -> dict:

@@ -563,7 +563,7 @@ class SimRunner:
         """True once the run has had its maximum score for ``after`` simulation seconds (checked once per
         simulated second, and every cycle once reached)."""
         if self._max_at is None:
-            if sim.referee is None or sim.seq % 25:
+            if sim.referee is None or sim.seq % max(1, round(1.0 / sim.robot.control_period)):
                 return False
             rep = sim.referee.report(sim.time)
             if not rep.started or rep.points < rep.max_points:

@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import bisect
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
 from ..errors import ConfigError
+from ..localization.geometry import wrap_angle
 
 VERSION = 1
 
@@ -99,9 +99,9 @@ class Trace:
             return rec[i].pose
         a, b = rec[i - 1], rec[i]
         u = (t - a.t) / (b.t - a.t)
-        dth = math.remainder(b.pose[2] - a.pose[2], 2 * math.pi)
+        dth = wrap_angle(b.pose[2] - a.pose[2])
         return (a.pose[0] + u * (b.pose[0] - a.pose[0]), a.pose[1] + u * (b.pose[1] - a.pose[1]),
-                math.remainder(a.pose[2] + u * dth, 2 * math.pi))
+                wrap_angle(a.pose[2] + u * dth))
 
 
 def read_trace(path: str | Path) -> Trace:
