@@ -152,6 +152,8 @@ def run(args) -> int:
     n = args.robots
     if not 1 <= n <= 4:
         raise ConfigError(f"--robots {n}: must be 1..4")
+    if n > 1 and (args.trace or args.end_after_max is not None):
+        raise ConfigError("--trace and --end-after-max run with one robot only")
     if n == 1:
         if len(poses) > 1:
             raise ConfigError(f"{len(poses)} start poses for one robot (use --robots N for several)")
@@ -208,9 +210,6 @@ def run(args) -> int:
 
     sim = Simulator(field, robot, config)
     if n > 1:
-        if args.trace or args.end_after_max is not None:
-            sim.close()
-            raise ConfigError("--trace and --end-after-max run with one robot only")
         return _run_several(field, sim, runner_config)
     runner = SimRunner(sim, runner_config)
     old = {s: signal.signal(s, runner.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}

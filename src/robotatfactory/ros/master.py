@@ -126,7 +126,6 @@ class PrivateMaster(_PrivateGraph):
         self.proc = None
 
 
-
 def ensure_master(start_private: bool, who: str) -> "PrivateMaster | None":
     """For ``raf bridge``/``raf localize``: start a private roscore when asked, then insist a master answers.
 
@@ -193,7 +192,6 @@ class PrivateDomain(_PrivateGraph):
         if self._lock is not None:
             self._lock.close()
             self._lock = None
-
 
 
 def private_graph(middleware: str | None = None) -> "PrivateMaster | PrivateDomain":
