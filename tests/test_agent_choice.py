@@ -52,3 +52,7 @@ def test_outgoing_slots_are_kept_for_the_parts_from_machine_b(field, robot, pend
     assert len(keep) == kept
     agent._go_fastest("to_place", pose, dest)
     assert agent.mode == "to_place" and agent.target not in keep
+    if not kept:  # nothing to keep: the leg reached soonest, as without the rule
+        free, _ = carrying_agent(field, robot, state, src, reserve_outgoing=False)
+        free._go_fastest("to_place", pose, dest)
+        assert agent.target == free.target

@@ -103,13 +103,10 @@ class PathPlanner:
         cell = ob.cell(*xy)
         if free[cell]:
             return None
-        idx = np.argwhere(free)
-        if len(idx) == 0:
-            raise NoPath("no free cell on the map for this footprint")
-        k = int(np.argmin(np.hypot(idx[:, 0] - cell[0], idx[:, 1] - cell[1])))
-        return tuple(map(float, ob.center(int(idx[k, 0]), int(idx[k, 1]))))
+        return tuple(map(float, ob.center(*self._nearest_free(cell, free, max_dist=math.inf))))
 
-    def _nearest_free(self, cell, free: np.ndarray) -> tuple[int, int]:
+    def _nearest_free(self, cell, free: np.ndarray, max_dist: float = 0.1) -> tuple[int, int]:
+        """The free cell nearest ``cell``; NoPath when there is none within ``max_dist`` m."""
         if free[cell]:
             return cell
         idx = np.argwhere(free)
@@ -117,7 +114,7 @@ class PathPlanner:
             raise NoPath("no free cell on the map for this footprint")
         d = np.hypot(idx[:, 0] - cell[0], idx[:, 1] - cell[1])
         k = int(np.argmin(d))
-        if d[k] * self.obstacles.resolution > 0.1:
+        if d[k] * self.obstacles.resolution > max_dist:
             raise NoPath(f"point {self.obstacles.center(*cell)} is {d[k] * self.obstacles.resolution:.2f} m "
                          "from any free cell")
         return int(idx[k, 0]), int(idx[k, 1])

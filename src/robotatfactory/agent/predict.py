@@ -49,5 +49,5 @@ class InFlight:
         # before there are enough (the start), the oldest known command stands in for the missing ones
         fill = [cmds[0]] * (n - len(cmds)) if cmds else []
         for _t, v, w in fill + cmds:
-            pose = compose2(pose, se2_exp((v * self.period, 0.0, w * self.period)))
+            pose = extrapolate(pose, v, w, self.period)
         return tuple(pose)
