@@ -14,31 +14,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..proc import free_port, stop_process  # noqa: F401  (re-exported: callers import them from here)
+
 ROOT = Path(__file__).resolve().parents[3]  # the repository (package.xml lives here)
-
-
-def free_port(kind=socket.SOCK_STREAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def stop_process(proc: subprocess.Popen, sig=signal.SIGINT, timeout: float = 10.0) -> int | None:
-    """Signal a process started with ``start_new_session=True`` (its whole group), then kill it if needed."""
-    if proc.poll() is not None:
-        return proc.returncode
-    try:
-        os.killpg(proc.pid, sig)
-    except ProcessLookupError:
-        return proc.poll()
-    try:
-        return proc.wait(timeout)
-    except subprocess.TimeoutExpired:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        return proc.wait(5)
 
 
 class _PrivateGraph:

@@ -1,0 +1,137 @@
+"""``raf simtwo``: the real SimTwo on Linux: build it from pinned sources, run it headless.
+
+``build`` and ``run`` are thin over :mod:`robotatfactory.simtwo_linux` (no ROS).
+"""
+from __future__ import annotations
+
+import argparse
+
+NAME = "simtwo"
+HELP = "the real SimTwo on Linux: build it from pinned sources (build), run it headless (run)"
+ORDER = 21
+DESCRIPTION = """\
+SimTwo, the competition's simulator, built from pinned sources with the project's Linux patches
+(simtwo/linux/) and run headless under its own Xvfb, with the project's control.pas, LIDAR and settings
+installed into a fresh copy of the scene (docs/simtwo.md, "SimTwo on Linux").
+
+  raf simtwo build --sources ../shared/vendor/simtwo    build (cached under build/simtwo/: a second run
+                                                       with nothing changed takes under a second)
+  raf simtwo build                                     the same; the sources from $RAF_SIMTWO_SOURCES, else
+                                                       ../shared/vendor/simtwo beside the repository, else
+                                                       git clones at the pinned commits
+  raf simtwo run                                       RobotFactoryPro2022 on the default ports (UDP 9808 in,
+                                                       frames to 127.0.0.1:9810, camera tcp 9899) until Ctrl-C
+  raf simtwo run --free-ports                          free ports (printed), for a run beside others
+  raf simtwo info                                      where the build is, its patches, the tools
+
+Then: raf bridge (same ports), or raf up --simulator simtwo for the whole stack."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    b = sub.add_parser("build", help="build SimTwo from the pinned sources (cached)",
+                       description="Build SimTwo: Debian's packages checked, the pinned sources (an archive "
+                                   "directory or git), the project's patches, lazbuild with a private "
+                                   "configuration. Output: build/simtwo/<key>/.")
+    b.add_argument("--sources", metavar="DIR", help="a directory with the pinned archives (simtwo/linux/"
+                                                    "sources.json), e.g. ../shared/vendor/simtwo")
+    b.add_argument("--force", action="store_true", help="build again even when a build of these inputs exists")
+    r = sub.add_parser("run", help="run SimTwo headless until Ctrl-C (or --duration)",
+                       description="Start SimTwo headless: a fresh copy of the scene with the project's side "
+                                   "installed, its own Xvfb and ports, the camera window opened; wait for the "
+                                   "first SensorFrame; run until Ctrl-C or --duration; stop all it started.")
+    r.add_argument("--scene", default="RobotFactoryPro2022", help="the scene folder (default RobotFactoryPro2022)")
+    r.add_argument("--port", type=int, metavar="UDP", help="the UDP port SimTwo listens on (default 9808)")
+    r.add_argument("--bridge", default=None, metavar="HOST:PORT",
+                   help="where the SensorFrames go (control.pas BRIDGE_IP/BRIDGE_PORT; default 127.0.0.1:9810)")
+    r.add_argument("--camera-port", type=int, metavar="TCP", help="the camera's ZMQ port (default 9899)")
+    r.add_argument("--free-ports", action="store_true", help="free ports for all three (printed)")
+    r.add_argument("--no-camera", action="store_true", help="do not open SimTwo's camera window")
+    r.add_argument("--script", metavar="FILE", help="another scene script instead of simtwo/control.pas")
+    r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
+    r.add_argument("--ready-timeout", type=float, default=90.0, metavar="S",
+                   help="how long SimTwo may take to send its first SensorFrame (default 90)")
+    r.add_argument("--keep", metavar="DIR", help="run in DIR and keep it (the scene copy, simtwo.log, xvfb.log)")
+    sub.add_parser("info", help="the build's folder, patches and tools")
+
+
+def _progress(msg: str) -> None:
+    print(f"[simtwo] {msg}", flush=True)
+
+
+def run(args) -> int:
+    from ..simtwo_linux import build as b
+
+    if args.action == "build":
+        from pathlib import Path
+
+        sources = Path(args.sources) if args.sources else b.default_sources()
+        try:
+            res = b.build(sources, progress=_progress, force=args.force)
+        except b.BuildError as e:
+            print(f"raf simtwo build: {e}", flush=True)
+            return 1
+        what = "up to date" if res.cached else "built"
+        _progress(f"{what}: {res.executable} ({res.seconds:.1f} s)")
+        return 0
+    if args.action == "info":
+        found = b.find()
+        print(f"build:   {found.executable if found else 'not built (raf simtwo build)'}")
+        print(f"key:     {b.cache_key()} (build/simtwo/<key>)")
+        print(f"tools:   {b.tool_versions()}")
+        print(f"sources: {b.default_sources() or 'git clones'}")
+        missing = b.missing_packages()
+        print(f"Debian:  {'all installed' if not missing else 'missing ' + ' '.join(missing)}")
+        for p in b.patches():
+            print(f"patch:   {p.name}")
+        return 0
+    return _run(args, b)
+
+
+def _sigterm(_sig, _frame):
+    raise SystemExit(143)  # stop() runs in the finally, as on Ctrl-C
+
+
+def _run(args, b) -> int:
+    import signal
+    import time
+    from pathlib import Path
+
+    from ..errors import ConfigError
+    from ..simtwo_linux.run import Ports, SimTwoError, SimTwoRun
+
+    try:
+        build = b.require()
+    except b.BuildError as e:
+        raise ConfigError(str(e)) from None
+    ports = Ports.free() if args.free_ports else Ports()
+    host = "127.0.0.1"
+    if args.port:
+        ports.udp = args.port
+    if args.camera_port:
+        ports.camera = args.camera_port
+    if args.bridge:
+        host, _, port = args.bridge.rpartition(":")
+        if not host or not port.isdigit():
+            raise ConfigError(f"--bridge {args.bridge}: expected HOST:PORT")
+        ports.bridge = int(port)
+    sim = SimTwoRun(build, ports, scene=args.scene, camera=not args.no_camera, bridge_host=host,
+                    script=Path(args.script) if args.script else None,
+                    workdir=Path(args.keep) if args.keep else None, keep=bool(args.keep), progress=_progress)
+    signal.signal(signal.SIGTERM, _sigterm)
+    try:
+        sim.start(args.ready_timeout)
+        _progress(f"running (pid {sim.pid}, display {sim.display}): udp {ports.udp}, frames to {host}:"
+                  f"{ports.bridge}, camera tcp://127.0.0.1:{ports.camera}; Ctrl-C stops it")
+        end = time.monotonic() + args.duration if args.duration else None
+        while end is None or time.monotonic() < end:
+            sim.check()
+            time.sleep(0.2)
+        return 0
+    except SimTwoError as e:
+        print(f"raf simtwo run: {e}", flush=True)
+        return 1
+    finally:
+        sim.stop()
+        if args.keep:
+            _progress(f"kept {args.keep}")
