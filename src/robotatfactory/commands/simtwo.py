@@ -47,6 +47,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--camera-port", type=int, metavar="TCP", help="the camera's ZMQ port (default 9899)")
     r.add_argument("--free-ports", action="store_true", help="free ports for all three (printed)")
     r.add_argument("--no-camera", action="store_true", help="do not open SimTwo's camera window")
+    r.add_argument("--round", type=int, choices=(1, 2, 3),
+                   help="put the scene's parts (Part1..Part4) on the incoming slots as this round's draw has them "
+                        "(with --seed or --parts; default: where SimTwo's scene file has them)")
+    r.add_argument("--seed", type=int, default=0, help="seed of the round's draw (default 0)")
+    r.add_argument("--parts", metavar="RGBX", help="the incoming parts, slot 1 first (overrides the draw)")
     r.add_argument("--script", metavar="FILE", help="another scene script instead of simtwo/control.pas")
     r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
     r.add_argument("--ready-timeout", type=float, default=90.0, metavar="S",
@@ -83,7 +88,7 @@ def run(args) -> int:
         missing = b.missing_packages()
         print(f"Debian:  {'all installed' if not missing else 'missing ' + ' '.join(missing)}")
         for p in b.patches():
-            print(f"patch:   {p.name}")
+            print(f"patch:   {p.parent.name}/{p.name}")
         return 0
     return _run(args, b)
 
@@ -115,7 +120,16 @@ def _run(args, b) -> int:
         if not host or not port.isdigit():
             raise ConfigError(f"--bridge {args.bridge}: expected HOST:PORT")
         ports.bridge = int(port)
-    sim = SimTwoRun(build, ports, scene=args.scene, camera=not args.no_camera, bridge_host=host,
+    parts = None
+    if args.round is not None:
+        from ..competition.rounds import RoundSetup
+        from ..field import load_field
+        from ..simtwo_linux.scene import field_for_simtwo, round_parts
+
+        setup = RoundSetup.make(args.round, args.seed, args.parts)
+        parts = round_parts(load_field(field_for_simtwo(args.field)), setup.incoming)
+        _progress(setup.describe())
+    sim = SimTwoRun(build, ports, scene=args.scene, parts=parts, camera=not args.no_camera, bridge_host=host,
                     script=Path(args.script) if args.script else None,
                     workdir=Path(args.keep) if args.keep else None, keep=bool(args.keep), progress=_progress)
     signal.signal(signal.SIGTERM, _sigterm)

@@ -42,6 +42,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="no localization node (the bridge then takes map -> odom from the first ground truth)")
     g.add_argument("--rviz", action="store_true", help="also start RViz (ROS 1: rviz; ROS 2: rviz2 if installed)")
     g = parser.add_argument_group("simulator")
+    g.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
+                   help="standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, built by raf simtwo "
+                        "build), realtime, the field simtwo2022, the round's parts placed in its scene and, with "
+                        "--agent, a standalone raf server (machines do not run)")
     g.add_argument("--round", type=int, choices=(1, 2, 3), default=1, help="competition round (default 1)")
     g.add_argument("--seed", type=int, default=0, help="seed of the round and the noise (default 0)")
     mode = g.add_mutually_exclusive_group()
@@ -77,7 +81,10 @@ def _ports(free: bool) -> dict:
 
 def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
     """(name, raf arguments, the line saying where it runs) per child, in start order: the nodes first (so
-    the bridge listens before the simulator sends), raf sim last."""
+    the bridge listens before the simulator sends), raf sim last; SimTwo first (it is ready once its first
+    SensorFrame arrived on the bridge's port, before the bridge takes the port)."""
+    if args.simulator == "simtwo":
+        return _plan_simtwo(args, ports)
     field = ["--field", args.field]
     cam = f"tcp://127.0.0.1:{ports['camera']}"
     mode = args.mode or ("realtime" if args.agent else "lockstep")
@@ -101,6 +108,37 @@ def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
         sim += ["--duration", str(args.duration)]
     sim += list(args.sim_arg)
     out.append(("sim", sim, f"{mode}, round {args.round} seed {args.seed}, commands on udp 127.0.0.1:{ports['sim']}"))
+    return out
+
+
+def _plan_simtwo(args, ports: dict) -> list[tuple[str, list[str], str]]:
+    from ..errors import ConfigError
+    from ..simtwo_linux.scene import field_for_simtwo
+
+    if args.mode == "lockstep":
+        raise ConfigError("--lockstep: the real SimTwo runs in real time only (no lockstep)")
+    field = ["--field", field_for_simtwo(args.field)]
+    cam = f"tcp://127.0.0.1:{ports['camera']}"
+    sim = [*field, "simtwo", "run", "--port", str(ports["sim"]), "--bridge", f"127.0.0.1:{ports['bridge']}",
+           "--camera-port", str(ports["camera"]), "--round", str(args.round), "--seed", str(args.seed)]
+    if args.duration is not None:
+        sim += ["--duration", str(args.duration)]
+    sim += list(args.sim_arg)
+    out = [("sim", sim, f"the real SimTwo, round {args.round} seed {args.seed} parts, commands on udp "
+                        f"127.0.0.1:{ports['sim']}, camera {cam}")]
+    bridge = [*field, "bridge", "--port", str(ports["bridge"]), "--camera", cam, "--sim-host", "127.0.0.1"]
+    if args.no_localize:
+        bridge += ["--set", "tf/map_to_odom=first_ground_truth"]
+    out.append(("bridge", bridge, f"udp 127.0.0.1:{ports['bridge']} <- SensorFrames, camera {cam}, sim/* services "
+                                  "via SimTwo's teleport labels"))
+    if not args.no_localize:
+        out.append(("localize", [*field, "localize"], "pose, camera_pose, aruco/*, map -> odom"))
+    if args.agent:
+        out.append(("server", [*field, "server", "--round", str(args.round), "--seed", str(args.seed), "--port",
+                               str(ports["server"]), "--start-after", "3"],
+                    f"factory-state server udp 127.0.0.1:{ports['server']} (static: machines do not run)"))
+        out.append(("agent", [*field, "agent", "--server-port", str(ports["server"])],
+                    f"factory-state server udp 127.0.0.1:{ports['server']}"))
     return out
 
 
@@ -205,7 +243,7 @@ class _ChildDied(Exception):
 
 #: the line each command prints once it runs (ros/cli.run_node's "raf WHO: ..." line, raf sim's banner)
 READY = {"bridge": " listening on udp ", "localize": " running (field ", "agent": " running (field ",
-         "sim": "raf sim: field "}
+         "sim": "raf sim: field ", "simtwo": "[simtwo] running (", "server": "factory-state server on udp "}
 
 
 def _graph(args, mw: str):
@@ -287,7 +325,8 @@ def run(args) -> int:
         for name, argv, what in plan(args, mw, ports):
             p = children.start(name, raf + argv)
             print(f"  {name:<9} pid {p.pid:<7} {what}", flush=True)
-            _wait_ready(children, name, READY[name], args.ready_timeout, lambda: stopping["signal"] is not None)
+            marker = READY["simtwo" if name == "sim" and args.simulator == "simtwo" else name]
+            _wait_ready(children, name, marker, args.ready_timeout, lambda: stopping["signal"] is not None)
         if rviz:
             p = children.start("rviz", rviz)
             print(f"  {'rviz':<9} pid {p.pid:<7} {' '.join(rviz)}", flush=True)
@@ -298,7 +337,8 @@ def run(args) -> int:
             if d is not None:
                 name, rc = d
                 if name == "sim" and rc == 0:
-                    print("raf up: raf sim ended; stopping the rest", flush=True)
+                    print(f"raf up: {'SimTwo' if args.simulator == 'simtwo' else 'raf sim'} ended; stopping the rest",
+                          flush=True)
                     break
                 raise _ChildDied(name, rc)
             time.sleep(0.2)

@@ -71,8 +71,14 @@ def spec() -> dict:
     return json.loads((LINUX_DIR / "sources.json").read_text())
 
 
-def patches() -> list[Path]:
-    return sorted((LINUX_DIR / "patches").glob("*.patch"))
+def patches(source: str | None = None) -> list[Path]:
+    """The patches of one source (``SimTwo``, ``5dpo_lazarus``, ...; sources.json's ``patches`` folder), in
+    the order they apply; without ``source``, every source's."""
+    out = []
+    for src in spec()["sources"]:
+        if src.get("patches") and source in (None, src["name"]):
+            out += sorted((LINUX_DIR / src["patches"]).glob("*.patch"))
+    return out
 
 
 def units() -> list[Path]:
@@ -244,18 +250,21 @@ def build(sources: Path | None = None, progress: Progress = lambda _m: None, for
     for src in s["sources"]:
         _fetch(src, Path(sources) if sources else None, src_dir, log, progress)
 
-    simtwo = src_dir / "SimTwo"
-    plist = patches()
-    progress(f"patches: applying {len(plist)} ({plist[0].stem} .. {plist[-1].stem})")
     # build/ lies inside the project's own git checkout: without a ceiling, git apply would take the paths as
     # the project's and silently skip them
-    git_env = dict(os.environ, GIT_CEILING_DIRECTORIES=str(simtwo.parent))
-    for p in plist:
-        try:
-            _run(["git", "apply", "--whitespace=nowarn", str(p)], "patches", cwd=simtwo, log=log, env=git_env)
-        except BuildError as e:
-            raise BuildError("patches", f"{p.name} does not apply to SimTwo at "
-                                        f"{s['sources'][0]['commit'][:7]}: {e}") from None
+    git_env = dict(os.environ, GIT_CEILING_DIRECTORIES=str(src_dir))
+    for src in s["sources"]:
+        plist = patches(src["name"])
+        if plist:
+            progress(f"patches: {src['name']}: applying {len(plist)} ({plist[0].stem} .. {plist[-1].stem})")
+        for p in plist:
+            try:
+                _run(["git", "apply", "--whitespace=nowarn", str(p)], "patches", cwd=src_dir / src["name"],
+                     log=log, env=git_env)
+            except BuildError as e:
+                raise BuildError("patches", f"{p.parent.name}/{p.name} does not apply to {src['name']} at "
+                                            f"{src['commit'][:7]}: {e}") from None
+    simtwo = src_dir / "SimTwo"
     plat = simtwo / "platform" / "linux"
     plat.mkdir(parents=True)
     for u in units():

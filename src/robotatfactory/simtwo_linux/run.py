@@ -77,6 +77,7 @@ class SimTwoRun:
     bridge_host: str = LOCALHOST
     script: Path | None = None                  # default: simtwo/control.pas
     extra_ini: dict = field(default_factory=dict)
+    parts: list | None = None                   # scene.PartPlacement per Part1..4; None: the scene file's
     workdir: Path | None = None                 # default: a new temporary folder, removed by stop()
     keep: bool = False                          # keep the folder (scene copy, logs) after stop()
     progress: Callable[[str], None] = lambda _m: None
@@ -116,7 +117,7 @@ class SimTwoRun:
         self.workdir.mkdir(parents=True, exist_ok=True)
         try:
             settings = SceneSettings(udp_port=self.ports.udp, bridge_host=self.bridge_host,
-                                     bridge_port=self.ports.bridge, extra_ini=self.extra_ini)
+                                     bridge_port=self.ports.bridge, extra_ini=self.extra_ini, parts=self.parts)
             if self.script is not None:
                 settings.script = Path(self.script)
             install(self.build.simtwo_dir, self.scene_dir, settings, self.scene)

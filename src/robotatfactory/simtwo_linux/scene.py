@@ -8,7 +8,7 @@ its scene's ``config_*.ini`` when it exits, so every run gets its own):
 - ``config_Params.ini`` [Config] and ``config_Cameras.ini`` [Cameras] get the lines of
   ``simtwo/settings/*.ini`` (steps 4-5), with SimTwo's UDP port set;
 - headless only: the Cameras window is placed where no other window covers it (a covered or off-screen
-  OpenGL window reads back black).
+  OpenGL window reads back black), and the main viewer is made small (:data:`VIEWER_WINDOW`).
 """
 from __future__ import annotations
 
@@ -22,8 +22,22 @@ from ..simtwo.ports import BRIDGE_UDP_PORT, LOCALHOST, SIMTWO_UDP_PORT
 ROOT = Path(__file__).resolve().parents[3]
 SIMTWO_DIR = ROOT / "simtwo"
 DEFAULT_SCENE = "RobotFactoryPro2022"
+#: the field model of SimTwo's RobotAtFactory 4.0 scene (robotatfactory/data/field_simtwo2022.json)
+SIMTWO_FIELD = "simtwo2022"
+
+
+def field_for_simtwo(name: str) -> str:
+    """The field to use with SimTwo's scene: ``name`` unless it is the project's default (the rules' field,
+    which SimTwo's scene is not), then :data:`SIMTWO_FIELD`."""
+    from ..field import DEFAULT_FIELD
+
+    return SIMTWO_FIELD if name == DEFAULT_FIELD else name
 #: where the Cameras window goes on the virtual screen (right of every window SimTwo's scene opens)
 CAMERAS_WINDOW = {"FCameras_Left": "1700", "FCameras_Top": "0"}
+#: headless, nobody looks at the main viewer: a small one renders faster, so SimTwo's GUI loop (which also
+#: receives the bridge's replies) turns more often (replies in 67 % of the cycles instead of 55 % with the
+#: camera on); the physics and the camera's image do not depend on it
+VIEWER_WINDOW = {"FViewer_Width": "160", "FViewer_Height": "120"}
 
 
 class SceneError(ValueError):
@@ -40,6 +54,60 @@ class SceneSettings:
     script: Path = SIMTWO_DIR / "control.pas"
     lidar: bool = True                       # paste simtwo/AGV_lidar.xml into AGV.xml
     extra_ini: dict[str, dict[str, str]] = field(default_factory=dict)  # {"config_Params.ini": {key: value}}
+    parts: list[PartPlacement] | None = None  # None: the parts where the scene file has them
+
+
+@dataclass(frozen=True)
+class PartPlacement:
+    """Where one of the scene's parts (robots Part1..Part4) starts: its colour (``R``, ``G``, ``B``), the
+    centre (m, SimTwo's world frame) and the heading of its plate (rad, as a field's Slot.facing)."""
+
+    color: str
+    x: float
+    y: float
+    facing: float
+
+
+#: SimTwo's part bodies, and the height of a part standing on the floor (scene.xml part_pos_z)
+PART_FILES = {"R": "PartRed.xml", "G": "PartGreen.xml", "B": "PartBlue.xml"}
+PART_Z = 0.0021
+#: where a part the round does not use waits: outside the field, beyond the walls
+SPARE_PART_XY = (1.5, 1.2)
+
+
+def round_parts(field, incoming) -> list[PartPlacement]:
+    """Placements of Part1..Part4 for a round's incoming warehouse (``RoundSetup.incoming``: a part type or
+    None per slot, slot 1 first): each part on its incoming slot's centre; spare parts off the field."""
+    out = []
+    spare = 0
+    for number, part in enumerate(incoming, start=1):
+        if part is None:
+            x, y = SPARE_PART_XY
+            out.append(PartPlacement("B", x + 0.2 * spare, y, 0.0))
+            spare += 1
+            continue
+        slot = field.slot("incoming", number)
+        out.append(PartPlacement(part.letter, slot.xy[0], slot.xy[1], slot.facing))
+    return out
+
+
+def place_parts(scene_xml: Path, parts: list[PartPlacement]) -> None:
+    """Rewrite the ``<pos>``, ``<rot_deg>`` and ``<body>`` of robots Part1..PartN in ``scene_xml``. The part's
+    plate is on its -y side (Parts.xml), so its rotation is the plate's heading + 90 degrees."""
+    import math
+
+    text = scene_xml.read_text(encoding="latin-1")
+    for i, p in enumerate(parts, start=1):
+        if p.color not in PART_FILES:
+            raise SceneError(f"part {i}: colour {p.color!r} is not one of {sorted(PART_FILES)}")
+        m = re.search(rf"<robot>\s*<ID name='Part{i}'/>.*?</robot>", text, re.S)
+        if not m:
+            raise SceneError(f"{scene_xml}: no robot Part{i} to place")
+        deg = math.degrees(p.facing + math.pi / 2)
+        body = (f"<robot>\n    <ID name='Part{i}'/>\n    <pos x='{p.x:.6f}' y='{p.y:.6f}' z='{PART_Z}'/>\n"
+                f"    <rot_deg x='0' y='0' z='{deg:.4f}'/>\n    <body file='{PART_FILES[p.color]}'/>\n  </robot>")
+        text = text[:m.start()] + body + text[m.end():]
+    scene_xml.write_text(text, encoding="latin-1")
 
 
 def ini_lines(path: Path) -> dict[str, str]:
@@ -122,12 +190,15 @@ def install(simtwo_dir: Path, dest: Path, settings: SceneSettings | None = None,
     (dest / "control.pas").write_text(script, encoding="latin-1")
     if s.lidar:
         install_lidar(dest / "AGV.xml")
+    if s.parts is not None:
+        place_parts(dest / "scene.xml", s.parts)
     params = ini_lines(SIMTWO_DIR / "settings" / "config_Params.ini")
     params["EditUDPPort_Text"] = str(s.udp_port)
     set_ini(dest / "config_Params.ini", "Config", params)
     cameras = ini_lines(SIMTWO_DIR / "settings" / "config_Cameras.ini")
     if headless:
         cameras.update(CAMERAS_WINDOW)
+        set_ini(dest / "config_Viewer.ini", "Viewer", VIEWER_WINDOW)
     set_ini(dest / "config_Cameras.ini", "Cameras", cameras)
     for name, values in s.extra_ini.items():  # each of SimTwo's ini files has one section
         m = re.search(r"^\[(\w+)\]", (dest / name).read_text(encoding="latin-1"), re.M)
