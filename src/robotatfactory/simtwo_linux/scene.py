@@ -127,7 +127,7 @@ def ini_lines(path: Path) -> dict[str, str]:
 def set_ini(path: Path, section: str, values: dict[str, str]) -> None:
     """Set ``values`` in ``[section]`` of ``path``, keeping every other line (SimTwo's ini files are flat:
     one section each); a key that is not there yet is added at the section's end."""
-    text = path.read_text(encoding="latin-1") if path.exists() else f"[{section}]\n"
+    text = path.read_bytes().decode("latin-1") if path.exists() else f"[{section}]\n"  # keeps CRLF
     nl = "\r\n" if "\r\n" in text else "\n"
     lines = text.splitlines()
     try:
@@ -142,7 +142,7 @@ def set_ini(path: Path, section: str, values: dict[str, str]) -> None:
         if key in todo:
             lines[i] = f"{key}={todo.pop(key)}"
     lines[end:end] = [f"{k}={v}" for k, v in todo.items()]
-    path.write_text(nl.join(lines) + nl, encoding="latin-1")
+    path.write_bytes((nl.join(lines) + nl).encode("latin-1"))
 
 
 def lidar_element() -> str:

@@ -1,0 +1,182 @@
+"""raf simtwo: the build's steps and errors, the scene copy, the patches (no ROS; one test runs SimTwo)."""
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import re
+import tarfile
+from pathlib import Path
+
+import pytest
+
+from robotatfactory.simtwo_linux import build, scene
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_patch_says_why_and_is_a_git_diff():
+    ps = build.patches()
+    assert len(ps) >= 12 and {p.parent.name for p in ps} == {"patches", "patches-5dpo_lazarus"}
+    for p in ps:
+        text = p.read_bytes().decode("latin-1")
+        head, sep, _ = text.partition("diff --git ")
+        assert sep, f"{p.name}: no git diff"
+        assert head.startswith("robotatfactory: "), p.name
+        assert len(head.split()) >= 15, f"{p.name}: the header must say why"
+
+
+def test_bootstrap_installs_the_build_packages():
+    text = (ROOT / "scripts" / "bootstrap.sh").read_text()
+    listed = set(re.search(r"DEB_PACKAGES=\((.*?)\n\)", text, re.S).group(1).split())
+    missing = set(build.DEBIAN_PACKAGES) - listed
+    assert not missing, f"scripts/bootstrap.sh does not install {missing}"
+
+
+def test_first_compiler_error_names_file_and_line():
+    log = ("Hint: start\n/b/SimTwo/Viewer.pas(8,3) Fatal: (10022) Can't find unit Windows used by Viewer\n"
+           "Fatal: (1018) Compilation aborted\nError: /usr/bin/ppcx64 returned an error exitcode\n")
+    assert build.first_compiler_error(log).startswith("/b/SimTwo/Viewer.pas(8,3) Fatal: (10022)")
+
+
+# ---- the build's steps on a miniature source set (no lazbuild needed before the patches step) ----------
+def _archive(path: Path, top: str, files: dict[str, bytes]) -> str:
+    with tarfile.open(path, "w:gz") as t:
+        for name, data in files.items():
+            info = tarfile.TarInfo(f"{top}/{name}")
+            info.size = len(data)
+            t.addfile(info, io.BytesIO(data))
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture
+def mini(tmp_path, monkeypatch):
+    """A sources.json with one tiny source, its archive, and a patch folder: build.py pointed at them."""
+    srcdir, linux = tmp_path / "vendor", tmp_path / "linux"
+    srcdir.mkdir()
+    (linux / "patches").mkdir(parents=True)
+    (linux / "units").mkdir()
+    sha = _archive(srcdir / "simtwo-x.tar.gz", "SimTwo", {"a.pas": b"begin\r\nend.\r\n"})
+    spec = {"lazarus_packages": [], "project": "SimTwo/SimTwo.lpi", "executable": "SimTwo/SimTwo2020",
+            "sources": [{"name": "SimTwo", "repository": "file:///nonexistent/SimTwo", "commit": "0" * 40,
+                         "archive": "simtwo-x.tar.gz", "sha256": sha, "patches": "patches"}]}
+    (linux / "sources.json").write_text(json.dumps(spec))
+    monkeypatch.setattr(build, "LINUX_DIR", linux)
+    monkeypatch.setattr(build, "BUILD_ROOT", tmp_path / "build")
+    monkeypatch.setattr(build, "missing_packages", lambda: [])
+    return srcdir, linux
+
+
+def test_a_patch_that_does_not_apply_is_named(mini):
+    srcdir, linux = mini
+    (linux / "patches" / "01-bad.patch").write_text(
+        "robotatfactory: a patch for another version\n\ndiff --git a/a.pas b/a.pas\n--- a/a.pas\n+++ b/a.pas\n"
+        "@@ -1,2 +1,2 @@\n-program x;\n+program y;\n end.\n")
+    with pytest.raises(build.BuildError) as e:
+        build.build(srcdir)
+    assert e.value.step == "patches" and "01-bad.patch" in str(e.value)
+
+
+def test_a_patch_applies_inside_the_source_tree_not_the_project(mini):
+    srcdir, linux = mini
+    (linux / "patches" / "01-good.patch").write_bytes(
+        b"robotatfactory: rename\n\ndiff --git a/a.pas b/a.pas\n--- a/a.pas\n+++ b/a.pas\n"
+        b"@@ -1,2 +1,2 @@\n-begin\r\n+begin {patched}\r\n end.\r\n")
+    with pytest.raises(build.BuildError) as e:  # lazbuild finds no project in this miniature: that step fails
+        build.build(srcdir)
+    assert e.value.step == "lazbuild"
+    patched = next(build.BUILD_ROOT.glob("*/src/SimTwo/a.pas")).read_bytes()
+    assert patched == b"begin {patched}\r\nend.\r\n"  # applied there (build/ lies inside the project's git)
+
+
+def test_an_archive_that_is_not_the_pinned_one_is_refused(mini):
+    srcdir, _ = mini
+    _archive(srcdir / "simtwo-x.tar.gz", "SimTwo", {"a.pas": b"something else"})
+    with pytest.raises(build.BuildError) as e:
+        build.build(srcdir)
+    assert e.value.step == "sources" and "sha256" in str(e.value)
+
+
+def test_no_archive_and_no_clone_says_what_to_pass(mini, tmp_path):
+    with pytest.raises(build.BuildError) as e:
+        build.build(tmp_path / "empty")
+    assert e.value.step == "sources" and "--sources DIR" in str(e.value)
+
+
+def test_the_cache_key_follows_the_patches(mini):
+    _, linux = mini
+    k0 = build.cache_key()
+    (linux / "patches" / "01-x.patch").write_text("robotatfactory: x\n")
+    assert build.cache_key() != k0
+
+
+# ---- the real build and its scene -------------------------------------------------------------------
+def test_the_build_is_cached():
+    b = build.build(build.default_sources())  # built by the bootstrap: found, not built again
+    assert b.cached and b.executable.exists()
+    assert b.executable == build.require().executable
+
+
+def test_scene_copy_has_the_projects_side(tmp_path):
+    from robotatfactory.competition.rounds import RoundSetup
+    from robotatfactory.field import load_field
+
+    b = build.require()
+    setup = RoundSetup.make(2, 5)
+    parts = scene.round_parts(load_field("simtwo2022"), setup.incoming)
+    s = scene.SceneSettings(udp_port=40123, bridge_host="10.1.2.3", bridge_port=40124, parts=parts,
+                            extra_ini={"config_Params.ini": {"EditTargetFPS_Text": "50"}})
+    d = scene.install(b.simtwo_dir, tmp_path / "scene", s)
+    pas = (d / "control.pas").read_text(encoding="latin-1")
+    assert "BRIDGE_IP = '10.1.2.3';" in pas and re.search(r"BRIDGE_PORT = 40124;", pas)
+    agv = (d / "AGV.xml").read_text(encoding="latin-1")
+    assert agv.count("<ID value='ranger2d'/>") == 1
+    assert agv.index("<ID value='ranger2d'/>") < agv.rindex("</sensors>")
+    params = (d / "config_Params.ini").read_text(encoding="latin-1")
+    for line in ("CBUDPConnect_Checked=1", "EditUDPPort_Text=40123", "RGControlBlock_ItemIndex=1",
+                 "EditScriptPeriod_Text=40", "EditTargetFPS_Text=50"):
+        assert re.search(rf"^{re.escape(line)}\r?$", params, re.M), line
+    assert "CBSendImage_Checked=1" in (d / "config_Cameras.ini").read_text()
+    xml = (d / "scene.xml").read_text(encoding="latin-1")
+    for i, (p, kind) in enumerate(zip(parts, setup.incoming), start=1):
+        m = re.search(rf"<ID name='Part{i}'/>\s*<pos x='([-\d.]+)' y='([-\d.]+)'.*?<rot_deg x='0' y='0' "
+                      rf"z='([-\d.]+)'/>\s*<body file='(\w+)\.xml'/>", xml, re.S)
+        assert m, i
+        if kind is not None:
+            assert m.group(4) == {"R": "PartRed", "G": "PartGreen", "B": "PartBlue"}[kind.letter]
+            assert (float(m.group(1)), float(m.group(2))) == pytest.approx(load_field("simtwo2022").slot(
+                "incoming", i).xy)
+            assert float(m.group(3)) == pytest.approx(0.0, abs=1e-3)  # facing -90 deg: the scene's own 0
+    # a second install of the lidar changes nothing
+    scene.install_lidar(d / "AGV.xml")
+    assert (d / "AGV.xml").read_text(encoding="latin-1") == agv
+
+
+def test_script_without_its_constants_is_refused():
+    with pytest.raises(scene.SceneError, match="BRIDGE_PORT"):
+        scene.configure_script("const\n  BRIDGE_IP = '1.2.3.4';\n", scene.SceneSettings())
+
+
+def test_set_ini_keeps_other_lines_and_adds_missing_keys(tmp_path):
+    p = tmp_path / "x.ini"
+    p.write_bytes(b"[Config]\r\nA=1\r\nB=2\r\n")
+    scene.set_ini(p, "Config", {"B": "3", "C": "4"})
+    assert p.read_bytes() == b"[Config]\r\nA=1\r\nB=3\r\nC=4\r\n"
+
+
+@pytest.mark.simtwo
+def test_a_script_compile_error_is_in_the_error(tmp_path):
+    """SimTwo's own message (patch 11 puts the editor's messages on its standard output) ends the wait at once
+    and is in the error, not a time-out."""
+    from robotatfactory.simtwo_linux.run import Ports, SimTwoError, SimTwoRun
+
+    bad = tmp_path / "control.pas"
+    text = (ROOT / "simtwo" / "control.pas").read_text(encoding="latin-1")
+    bad.write_text(text.replace("FrameSeq := FrameSeq + 1;", "FrameSeq := FrameSeq + undeclared_thing;", 1),
+                   encoding="latin-1")
+    run = SimTwoRun(build.require(), Ports.free(), camera=False, script=bad)
+    with pytest.raises(SimTwoError) as e:
+        run.start(timeout=90)
+    assert "undeclared_thing" in str(e.value).lower() and "[Error]" in str(e.value)
+    assert not run.alive
