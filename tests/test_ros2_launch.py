@@ -13,7 +13,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH2 = ROOT / "launch" / "ros2"
-NAMES = ("bridge", "localization", "sim", "competition")
+NAMES = ("bridge", "localization", "sim", "competition", "simtwo")
 
 
 # ---- reading the files ------------------------------------------------------------------------------
@@ -362,6 +362,10 @@ def _stub_modules(prefix: str, share: str) -> dict:
             assert v in ("true", "false", "1", "0"), v
             return v in ("true", "1")
 
+    class UnlessCondition(IfCondition):
+        def evaluate(self, ctx) -> bool:
+            return not super().evaluate(ctx)
+
     class ParameterValue:
         def __init__(self, value, *, value_type=None):
             self.value, self.value_type = value, value_type
@@ -380,6 +384,7 @@ def _stub_modules(prefix: str, share: str) -> dict:
     mods["launch.substitutions"].LaunchConfiguration = LaunchConfiguration
     mods["launch.substitutions"].PathJoinSubstitution = PathJoinSubstitution
     mods["launch.conditions"].IfCondition = IfCondition
+    mods["launch.conditions"].UnlessCondition = UnlessCondition
     mods["launch.launch_description_sources"].PythonLaunchDescriptionSource = PythonLaunchDescriptionSource
     mods["launch_ros.actions"].Node = Node
     mods["launch_ros.substitutions"].FindPackageShare = FindPackageShare
@@ -519,9 +524,10 @@ def test_launch_files_resolve_like_their_ros1_twins(name, tmp_path):
         extra = {k: (params[k], defaults.get(k)) for k in set(params) - set(expect) if not _same(params[k], defaults.get(k))}
         assert not extra, f"{node_name}: not the defaults: {extra}"
     sims = [rest for kind, *rest in out if kind == "process"]
-    raf1 = [args for n, (typ, _, args) in nodes1.items() if typ == "raf"]
+    raf1 = [(n, args) for n, (typ, _, args) in nodes1.items() if typ == "raf"]
     assert len(sims) == len(raf1)
-    for (cmd, proc_name, on_exit), args in zip(sims, raf1):
-        assert cmd[0] == "/opt/raf_ws/install/robotatfactory/lib/robotatfactory/raf" and proc_name == "raf_sim"
-        assert cmd[1:] == args.split(), "the same raf sim command line as roslaunch's"
-        assert on_exit is not None, "the launch ends with raf sim (required=true)"
+    for (cmd, proc_name, on_exit), (name1, args) in zip(sims, raf1):
+        # raf sim, or raf simtwo run: the same process name and command line as roslaunch's
+        assert cmd[0] == "/opt/raf_ws/install/robotatfactory/lib/robotatfactory/raf" and proc_name == name1
+        assert cmd[1:] == args.split(), f"the same {name1} command line as roslaunch's"
+        assert on_exit is not None, f"the launch ends with {name1} (required=true)"

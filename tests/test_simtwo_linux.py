@@ -4,7 +4,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import math
 import re
 import tarfile
 from pathlib import Path
@@ -139,7 +138,7 @@ def test_scene_copy_has_the_projects_side(tmp_path):
         assert re.search(rf"^{re.escape(line)}\r?$", params, re.M), line
     assert "CBSendImage_Checked=1" in (d / "config_Cameras.ini").read_text()
     xml = (d / "scene.xml").read_text(encoding="latin-1")
-    for i, (p, kind) in enumerate(zip(parts, setup.incoming), start=1):
+    for i, kind in enumerate(setup.incoming, start=1):
         m = re.search(rf"<ID name='Part{i}'/>\s*<pos x='([-\d.]+)' y='([-\d.]+)'.*?<rot_deg x='0' y='0' "
                       rf"z='([-\d.]+)'/>\s*<body file='(\w+)\.xml'/>", xml, re.S)
         assert m, i
@@ -153,9 +152,11 @@ def test_scene_copy_has_the_projects_side(tmp_path):
     assert (d / "AGV.xml").read_text(encoding="latin-1") == agv
 
 
-def test_script_without_its_constants_is_refused():
+def test_script_with_half_its_constants_is_refused_and_one_without_is_left_alone():
     with pytest.raises(scene.SceneError, match="BRIDGE_PORT"):
         scene.configure_script("const\n  BRIDGE_IP = '1.2.3.4';\n", scene.SceneSettings())
+    other = "const\n  K = 1;\nprocedure Control;\nbegin\nend;\n"
+    assert scene.configure_script(other, scene.SceneSettings()) == other
 
 
 def test_set_ini_keeps_other_lines_and_adds_missing_keys(tmp_path):
@@ -180,3 +181,70 @@ def test_a_script_compile_error_is_in_the_error(tmp_path):
         run.start(timeout=90)
     assert "undeclared_thing" in str(e.value).lower() and "[Error]" in str(e.value)
     assert not run.alive
+
+
+@pytest.mark.simtwo
+def test_ctrl_c_stops_simtwo_and_its_x_server(tmp_path):
+    """raf simtwo run, stopped with SIGINT once it runs: no SimTwo and no Xvfb of it left, its folder gone."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    log = tmp_path / "run.log"
+    with open(log, "wb") as out:
+        p = subprocess.Popen([sys.executable, "-m", "robotatfactory", "simtwo", "run", "--free-ports",
+                              "--no-camera"], stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        end = time.monotonic() + 120
+        while b"[simtwo] running (pid " not in log.read_bytes():
+            assert p.poll() is None and time.monotonic() < end, log.read_text()
+            time.sleep(0.2)
+        text = log.read_text()
+        pid = int(re.search(r"running \(pid (\d+), display :(\d+)\)", text).group(1))
+        cwd = Path(os.readlink(f"/proc/{pid}/cwd"))  # SimTwo changes into its scene
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        workdir = Path(cmdline[1].decode()).parent
+        assert workdir.name.startswith("raf-simtwo-") and cwd == workdir / "scene"
+        xpid = int(subprocess.run(["pgrep", "-P", str(p.pid), "-x", "Xvfb"], capture_output=True,
+                                  text=True).stdout.split()[0])  # the run's own X server, a child of raf
+        assert "-displayfd" in Path(f"/proc/{xpid}/cmdline").read_text()
+        os.killpg(p.pid, signal.SIGINT)
+        assert p.wait(30) == 130
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert not Path(f"/proc/{pid}").exists(), "SimTwo still running"
+    assert not Path(f"/proc/{xpid}").exists(), "its Xvfb still running"
+    assert not workdir.exists(), "the run's folder was not removed"
+
+
+@pytest.mark.simtwo
+def test_script_api_calling_convention_on_linux():
+    """simtwo/linux/abi_check.pas in the real SimTwo: every native function of the script API that takes or
+    returns a record by value (and the Extended maths) gives the known result. Before patches 12-14, 18 of
+    these failed on Linux (Power(2, 10) = 0, RandG garbage, colours as list indices, ...)."""
+    import time
+
+    from robotatfactory.simtwo_linux.run import Ports, SimTwoRun
+
+    run = SimTwoRun(build.require(), Ports.free(), camera=True, script=ROOT / "simtwo" / "linux" / "abi_check.pas",
+                    ready_line="script: ABI ")
+    try:
+        run.start(timeout=90)  # ready at its first check's line; then the camera is opened for GetCameraPixel
+        end = time.monotonic() + 60
+        while not any(m.startswith("script: ABI done") for m in run.messages()):
+            run.check()
+            assert time.monotonic() < end, "\n".join(run.messages()[-30:])
+            time.sleep(0.5)
+        lines = [m[len("script: "):] for m in run.messages() if m.startswith("script: ABI ")]
+    finally:
+        run.stop()
+    fails = [x for x in lines if " FAIL " in x]
+    done = re.match(r"ABI done (\d+) (\d+)", lines[-1])
+    assert not fails, "\n".join(fails)
+    assert done and int(done.group(2)) == 0 and int(done.group(1)) >= 90, lines[-1]
+    for name in ("GetSensorValues", "Power", "RandG", "GetSolidColor", "SetMotorPars", "BiLinInterp",
+                 "GetCameraPixel", "GetRobotPos2D"):
+        assert f"ABI {name} ok" in lines, name

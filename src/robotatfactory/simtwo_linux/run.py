@@ -7,9 +7,10 @@ One :class:`SimTwoRun` is one SimTwo with everything it needs and nothing shared
   so that LCL does not rescale the forms (the camera's viewer must stay 640 x 480); Mesa renders in software;
 - its own ports: SimTwo's UDP port (the scene's ``config_Params.ini``), the bridge's port (``control.pas``)
   and the camera's (``SIMTWO_CAMERA_PORT``, patch 10);
-- ready when the first SensorFrame arrives (read on the bridge's port while nothing else listens there) or,
-  with a bridge already listening, when the script reports it is streaming; SimTwo's own messages (script
-  compile and run errors, patch 11) end the wait at once and are in the error;
+- ready when the first SensorFrame arrives (read on the bridge's port while nothing else listens there) or
+  when the script reports it is streaming (``ready_line``: with a bridge already listening, or a script that
+  sends no frames); SimTwo's own messages (script compile and run errors, patch 11) end the wait at once and
+  are in the error;
 - the camera: SimTwo publishes frames only while its Cameras window is open, and no setting opens it. The
   run presses Ctrl+A in the viewer (``TFViewer.FormKeyDown``: the Cameras menu item), as a person would,
   with xdotool, and waits for a whole frame on the camera's port;
@@ -78,6 +79,7 @@ class SimTwoRun:
     script: Path | None = None                  # default: simtwo/control.pas
     extra_ini: dict = field(default_factory=dict)
     parts: list | None = None                   # scene.PartPlacement per Part1..4; None: the scene file's
+    ready_line: str = READY_LINE                # SimTwo's output that means the script runs (with no SensorFrame)
     workdir: Path | None = None                 # default: a new temporary folder, removed by stop()
     keep: bool = False                          # keep the folder (scene copy, logs) after stop()
     progress: Callable[[str], None] = lambda _m: None
@@ -192,7 +194,7 @@ class SimTwoRun:
                             break
                     except BlockingIOError:
                         pass
-                elif any(m.startswith(READY_LINE) for m in self.messages()):
+                if any(m.startswith(self.ready_line) for m in self.messages()):
                     break
                 time.sleep(0.05)
             else:

@@ -166,12 +166,16 @@ def install_lidar(agv_xml: Path) -> None:
 
 
 def configure_script(text: str, s: SceneSettings) -> str:
-    """``control.pas`` with ``BRIDGE_IP`` and ``BRIDGE_PORT`` set, as step 2 tells a user to."""
-    for name, value in (("BRIDGE_IP", f"'{s.bridge_host}'"), ("BRIDGE_PORT", str(s.bridge_port))):
-        text, n = re.subn(rf"^(\s*{name}\s*=\s*)[^;]*;", lambda m, v=value: m.group(1) + v + ";", text,
-                          count=1, flags=re.M)
-        if n != 1:
-            raise SceneError(f"the script has no constant {name} to set (simtwo/control.pas defines it)")
+    """The script with ``BRIDGE_IP`` and ``BRIDGE_PORT`` set, as step 2 tells a user to. Both or neither: a
+    script with neither does not talk to the bridge (e.g. simtwo/linux/abi_check.pas) and is left as it is."""
+    values = {"BRIDGE_IP": f"'{s.bridge_host}'", "BRIDGE_PORT": str(s.bridge_port)}
+    found = {name for name in values if re.search(rf"^\s*{name}\s*=", text, re.M)}
+    if found and found != set(values):
+        missing = sorted(set(values) - found)[0]
+        raise SceneError(f"the script has no constant {missing} to set (simtwo/control.pas defines it)")
+    for name in found:
+        text = re.sub(rf"^(\s*{name}\s*=\s*)[^;]*;", lambda m, v=values[name]: m.group(1) + v + ";", text,
+                      count=1, flags=re.M)
     return text
 
 
