@@ -219,16 +219,13 @@ def _drive(pub, twist_type, v: float, w: float, seconds: float) -> None:
         time.sleep(0.05)
 
 
-def _rel(a, b):
-    """b in a's frame (x, y, yaw)."""
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return c * dx + s * dy, -s * dx + c * dy, math.remainder(b[2] - a[2], 2 * math.pi)
 
 
 def test_odometry_against_simtwo_ground_truth(stack):
     """A drive in the open band south of the machines (straight 0.6 m, half a turn on the spot, straight back):
     odometry's displacement against SimTwo's ground truth."""
+    from robotatfactory.localization.geometry import between2
+
     t = srv_types()
     Odometry, Twist = _msg("nav_msgs", "Odometry"), _msg("geometry_msgs", "Twist")
     assert _service("set_robot_pose", t.SetRobotPose, x=-0.15, y=-0.33, theta=0.0).success
@@ -248,7 +245,7 @@ def test_odometry_against_simtwo_ground_truth(stack):
         odom.close()
         gt.close()
     path = sum(math.dist(a, b) for a, b in zip(pts, pts[1:]))
-    ro, rg = _rel(o0, o1), _rel(g0, g1)
+    ro, rg = between2(o0, o1), between2(g0, g1)
     err = math.hypot(ro[0] - rg[0], ro[1] - rg[1])
     herr = abs(math.degrees(math.remainder(ro[2] - rg[2], 2 * math.pi)))
     print(f"path {path:.3f} m (truth), odometry error {1000 * err:.1f} mm ({1000 * err / path:.1f} mm/m), "

@@ -43,15 +43,12 @@ def _script(tmp: Path) -> Path:
     return tmp / "control.pas"
 
 
-def _rel(a, b):
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return c * dx + s * dy, -s * dx + c * dy, math.remainder(b[2] - a[2], 2 * math.pi)
 
 
 def one_run(camera: bool) -> dict:
     import zmq
 
+    from ..localization.geometry import between2
     from ..localization.odometry import DiffDriveOdometry
     from ..robot import load_robot
     from ..simtwo import Command, SensorFrame
@@ -141,7 +138,7 @@ def one_run(camera: bool) -> dict:
     path = 0.0
     for a, b in zip(names[:-1], names[1:]):
         (oa, ga), (ob, gb) = marks[a], marks[b]
-        ro, rg = _rel(oa, ob), _rel(ga, gb)
+        ro, rg = between2(oa, ob), between2(ga, gb)
         if b in ("straight", "back"):
             d = math.hypot(rg[0], rg[1])
             path += d
@@ -151,7 +148,7 @@ def one_run(camera: bool) -> dict:
             out["spin_truth_deg"] = math.degrees(rg[2])
             out["spin_odom_over_truth"] = ro[2] / rg[2]
     (o0, g0), (o1, g1) = marks["settle"], marks["stop"]
-    ro, rg = _rel(o0, o1), _rel(g0, g1)
+    ro, rg = between2(o0, o1), between2(g0, g1)
     err = math.hypot(ro[0] - rg[0], ro[1] - rg[1])
     out["odom_error_mm"] = 1000 * err
     out["odom_error_mm_per_m"] = 1000 * err / path
