@@ -1,10 +1,11 @@
 """Errors a user can cause (bad settings, unknown names); ``raf`` prints them without a traceback."""
 from .field.loader import FieldError
 from .simtwo.errors import ProtocolError
+from .simtwo_linux.build import BuildError
 
 
 class ConfigError(ValueError):
     """A setting or parameter has a bad value; the message names the setting and what is allowed."""
 
 
-UserError = (FieldError, ProtocolError, ConfigError, FileNotFoundError)
+UserError = (FieldError, ProtocolError, ConfigError, FileNotFoundError, BuildError)

@@ -105,10 +105,7 @@ def _run(args, b) -> int:
     from ..errors import ConfigError
     from ..simtwo_linux.run import Ports, SimTwoError, SimTwoRun
 
-    try:
-        build = b.require()
-    except b.BuildError as e:
-        raise ConfigError(str(e)) from None
+    build = b.require()  # a BuildError (a user error: raf prints it) when it is not built
     ports = Ports.free() if args.free_ports else Ports()
     host = "127.0.0.1"
     if args.port:
