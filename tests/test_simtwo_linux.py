@@ -266,3 +266,32 @@ def test_bench_simtwo_one_run():
     assert r["straight_odom_over_truth"] == pytest.approx(1.0, abs=0.01)
     assert r["spin_truth_turn_deg"] == pytest.approx(180, abs=10)
     assert abs(r["spin_odom_minus_truth_turn_deg"]) < 8  # measured: 3.7-4.4 deg short (docs/simtwo.md)
+
+
+def test_raf_up_plan_with_simtwo():
+    """raf up --simulator simtwo: SimTwo first (its readiness reads the bridge's port), the field of SimTwo's
+    scene, no control channel (the sim/* services go through the teleport labels), a standalone factory
+    server before the agent; --lockstep refused."""
+    import argparse
+
+    from robotatfactory.commands import up
+    from robotatfactory.errors import ConfigError
+
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--field", default="rules2026")
+    up.add_arguments(parser)
+    ports = {"sim": 1, "bridge": 2, "control": 3, "camera": 4, "server": 5}
+    steps = up.plan(parser.parse_args(["--simulator", "simtwo", "--agent", "--round", "2", "--seed", "7"]), "ros1",
+                    ports)
+    assert [name for name, _, _ in steps] == ["sim", "bridge", "localize", "server", "agent"]
+    args = {name: a for name, a, _ in steps}
+    assert args["sim"][:4] == ["--field", "simtwo2022", "simtwo", "run"]
+    assert args["sim"][args["sim"].index("--bridge") + 1] == "127.0.0.1:2"
+    assert args["sim"][args["sim"].index("--round") + 1] == "2" and "7" in args["sim"]
+    assert all(a[1] == "simtwo2022" for a in args.values())
+    assert not any("simulator/control" in x for x in args["bridge"])
+    assert args["server"][args["server"].index("--port") + 1] == "5"
+    standin = up.plan(parser.parse_args([]), "ros1", ports)
+    assert [name for name, _, _ in standin] == ["bridge", "localize", "sim"] and standin[0][1][1] == "rules2026"
+    with pytest.raises(ConfigError, match="real time"):
+        up.plan(parser.parse_args(["--simulator", "simtwo", "--lockstep"]), "ros1", ports)

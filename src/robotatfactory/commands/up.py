@@ -80,66 +80,53 @@ def _ports(free: bool) -> dict:
 
 
 def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
-    """(name, raf arguments, the line saying where it runs) per child, in start order: the nodes first (so
-    the bridge listens before the simulator sends), raf sim last; SimTwo first (it is ready once its first
-    SensorFrame arrived on the bridge's port, before the bridge takes the port)."""
-    if args.simulator == "simtwo":
-        return _plan_simtwo(args, ports)
-    field = ["--field", args.field]
-    cam = f"tcp://127.0.0.1:{ports['camera']}"
-    mode = args.mode or ("realtime" if args.agent else "lockstep")
-    bridge = [*field, "bridge", "--port", str(ports["bridge"]), "--camera", cam, "--sim-host", "127.0.0.1",
-              "--set", f"simulator/control=127.0.0.1:{ports['control']}"]
-    if args.no_localize:
-        bridge += ["--set", "tf/map_to_odom=first_ground_truth"]
-    out = [("bridge", bridge, f"udp 127.0.0.1:{ports['bridge']} <- SensorFrames, camera {cam}, sim/* services "
-                              f"via 127.0.0.1:{ports['control']}")]
-    if not args.no_localize:
-        out.append(("localize", [*field, "localize"], "pose, camera_pose, aruco/*, map -> odom"))
-    if args.agent:
-        out.append(("agent", [*field, "agent", "--server-port", str(ports["server"])],
-                    f"factory-state server udp 127.0.0.1:{ports['server']}"))
-    sim = [*field, "sim", f"--{mode}", "--round", str(args.round), "--seed", str(args.seed),
-           "--port", str(ports["sim"]), "--bridge", f"127.0.0.1:{ports['bridge']}", "--camera-bind", cam,
-           "--server-port", str(ports["server"]), "--control-port", str(ports["control"])]
-    if args.agent:
-        sim += ["--start-after", "3"]
-    if args.duration is not None:
-        sim += ["--duration", str(args.duration)]
-    sim += list(args.sim_arg)
-    out.append(("sim", sim, f"{mode}, round {args.round} seed {args.seed}, commands on udp 127.0.0.1:{ports['sim']}"))
-    return out
-
-
-def _plan_simtwo(args, ports: dict) -> list[tuple[str, list[str], str]]:
+    """(name, raf arguments, the line saying where it runs) per child, in start order: with raf sim the nodes
+    first (so the bridge listens before the simulator sends), raf sim last; with SimTwo, SimTwo first (it is
+    ready once its first SensorFrame arrived on the bridge's port, before the bridge takes the port)."""
     from ..errors import ConfigError
     from ..simtwo_linux.scene import field_for_simtwo
 
-    if args.mode == "lockstep":
+    simtwo = args.simulator == "simtwo"
+    if simtwo and args.mode == "lockstep":
         raise ConfigError("--lockstep: the real SimTwo runs in real time only (no lockstep)")
-    field = ["--field", field_for_simtwo(args.field)]
+    field = ["--field", field_for_simtwo(args.field) if simtwo else args.field]
     cam = f"tcp://127.0.0.1:{ports['camera']}"
-    sim = [*field, "simtwo", "run", "--port", str(ports["sim"]), "--bridge", f"127.0.0.1:{ports['bridge']}",
-           "--camera-port", str(ports["camera"]), "--round", str(args.round), "--seed", str(args.seed)]
+    bridge = [*field, "bridge", "--port", str(ports["bridge"]), "--camera", cam, "--sim-host", "127.0.0.1"]
+    if simtwo:
+        services = "via SimTwo's teleport labels"
+    else:
+        bridge += ["--set", f"simulator/control=127.0.0.1:{ports['control']}"]
+        services = f"via 127.0.0.1:{ports['control']}"
+    if args.no_localize:
+        bridge += ["--set", "tf/map_to_odom=first_ground_truth"]
+    nodes = [("bridge", bridge, f"udp 127.0.0.1:{ports['bridge']} <- SensorFrames, camera {cam}, sim/* services "
+                                f"{services}")]
+    if not args.no_localize:
+        nodes.append(("localize", [*field, "localize"], "pose, camera_pose, aruco/*, map -> odom"))
+    if args.agent:
+        if simtwo:  # raf sim serves the round itself; with SimTwo a standalone server does
+            nodes.append(("server", [*field, "server", "--round", str(args.round), "--seed", str(args.seed),
+                                     "--port", str(ports["server"]), "--start-after", "3"],
+                          f"factory-state server udp 127.0.0.1:{ports['server']} (static: machines do not run)"))
+        nodes.append(("agent", [*field, "agent", "--server-port", str(ports["server"])],
+                      f"factory-state server udp 127.0.0.1:{ports['server']}"))
+    if simtwo:
+        sim = [*field, "simtwo", "run", "--port", str(ports["sim"]), "--bridge", f"127.0.0.1:{ports['bridge']}",
+               "--camera-port", str(ports["camera"]), "--round", str(args.round), "--seed", str(args.seed)]
+        what = (f"the real SimTwo, round {args.round} seed {args.seed} parts, commands on udp 127.0.0.1:"
+                f"{ports['sim']}, camera {cam}")
+    else:
+        mode = args.mode or ("realtime" if args.agent else "lockstep")
+        sim = [*field, "sim", f"--{mode}", "--round", str(args.round), "--seed", str(args.seed),
+               "--port", str(ports["sim"]), "--bridge", f"127.0.0.1:{ports['bridge']}", "--camera-bind", cam,
+               "--server-port", str(ports["server"]), "--control-port", str(ports["control"])]
+        if args.agent:
+            sim += ["--start-after", "3"]
+        what = f"{mode}, round {args.round} seed {args.seed}, commands on udp 127.0.0.1:{ports['sim']}"
     if args.duration is not None:
         sim += ["--duration", str(args.duration)]
     sim += list(args.sim_arg)
-    out = [("sim", sim, f"the real SimTwo, round {args.round} seed {args.seed} parts, commands on udp "
-                        f"127.0.0.1:{ports['sim']}, camera {cam}")]
-    bridge = [*field, "bridge", "--port", str(ports["bridge"]), "--camera", cam, "--sim-host", "127.0.0.1"]
-    if args.no_localize:
-        bridge += ["--set", "tf/map_to_odom=first_ground_truth"]
-    out.append(("bridge", bridge, f"udp 127.0.0.1:{ports['bridge']} <- SensorFrames, camera {cam}, sim/* services "
-                                  "via SimTwo's teleport labels"))
-    if not args.no_localize:
-        out.append(("localize", [*field, "localize"], "pose, camera_pose, aruco/*, map -> odom"))
-    if args.agent:
-        out.append(("server", [*field, "server", "--round", str(args.round), "--seed", str(args.seed), "--port",
-                               str(ports["server"]), "--start-after", "3"],
-                    f"factory-state server udp 127.0.0.1:{ports['server']} (static: machines do not run)"))
-        out.append(("agent", [*field, "agent", "--server-port", str(ports["server"])],
-                    f"factory-state server udp 127.0.0.1:{ports['server']}"))
-    return out
+    return [("sim", sim, what), *nodes] if simtwo else [*nodes, ("sim", sim, what)]
 
 
 class Children:
