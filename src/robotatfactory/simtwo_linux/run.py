@@ -136,16 +136,16 @@ class SimTwoRun:
     def _start_xvfb(self) -> None:
         r, w = os.pipe()
         try:
-            self._xvfb = subprocess.Popen(
-                ["Xvfb", "-displayfd", str(w), "-screen", "0", SCREEN, "-dpi", "96", "-nolisten", "tcp",
-                 "-noreset"], pass_fds=(w,), stdout=subprocess.DEVNULL,
-                stderr=open(self.workdir / "xvfb.log", "wb"), start_new_session=True,
-                preexec_fn=_die_with_parent)
+            with open(self.workdir / "xvfb.log", "wb") as log:
+                self._xvfb = subprocess.Popen(
+                    ["Xvfb", "-displayfd", str(w), "-screen", "0", SCREEN, "-dpi", "96", "-nolisten", "tcp",
+                     "-noreset"], pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+                    preexec_fn=_die_with_parent)
         except FileNotFoundError:
             os.close(r)
-            os.close(w)
             raise SimTwoError("Xvfb is not installed (apt-get install xvfb)") from None
-        os.close(w)
+        finally:
+            os.close(w)
         with os.fdopen(r) as f:
             number = f.readline().strip()  # Xvfb writes its display number when it is ready
         if not number:
