@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import hashlib
+import math
 import io
 import json
 import re
@@ -269,7 +270,7 @@ def test_bench_simtwo_one_run():
 
 
 def test_raf_up_plan_with_simtwo():
-    """raf up --simulator simtwo: SimTwo first (its readiness reads the bridge's port), the field of SimTwo's
+    """raf up --simulator simtwo: SimTwo first (it takes 10-20 s to start), the field of SimTwo's
     scene, no control channel (the sim/* services go through the teleport labels), a standalone factory
     server before the agent; --lockstep refused."""
     import argparse
@@ -295,3 +296,49 @@ def test_raf_up_plan_with_simtwo():
     assert [name for name, _, _ in standin] == ["bridge", "localize", "sim"] and standin[0][1][1] == "rules2026"
     with pytest.raises(ConfigError, match="real time"):
         up.plan(parser.parse_args(["--simulator", "simtwo", "--lockstep"]), "ros1", ports)
+
+
+@pytest.mark.simtwo
+@pytest.mark.ros
+def test_roslaunch_simtwo_launch(tmp_path):
+    """roslaunch robotatfactory simtwo.launch (ROS 1): SimTwo, the bridge and the localization start together
+    (the bridge binds its port while SimTwo starts: nothing else may hold it) and the EKF's pose is near
+    SimTwo's truth; stopping roslaunch leaves no SimTwo behind."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    from robotatfactory.proc import free_port, stop_process
+
+    master = free_port()
+    env = dict(os.environ, ROS_MASTER_URI=f"http://127.0.0.1:{master}",
+               ROS_PACKAGE_PATH=os.pathsep.join([str(ROOT), os.environ.get("ROS_PACKAGE_PATH", "")]))
+    env.pop("ROS_DOMAIN_ID", None)
+    import socket
+
+    udp = lambda: free_port(socket.SOCK_DGRAM)  # noqa: E731
+    log = tmp_path / "roslaunch.log"
+    with open(log, "wb") as out:
+        p = subprocess.Popen(["roslaunch", "-p", str(master), "robotatfactory", "simtwo.launch", f"port:={udp()}",
+                              f"sim_port:={udp()}", f"camera_port:={free_port()}"], env=env, stdout=out,
+                             stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        def echo(topic: str) -> tuple[float, float]:
+            r = subprocess.run(["rostopic", "echo", "-n", "1", f"{topic}/pose/pose/position"], env=env,
+                               capture_output=True, text=True, timeout=60)
+            v = dict(line.split(": ") for line in r.stdout.splitlines() if ": " in line)
+            return float(v["x"]), float(v["y"])
+
+        end = time.monotonic() + 120
+        while b"[simtwo] running (pid" not in log.read_bytes():
+            assert p.poll() is None and time.monotonic() < end, log.read_text()[-3000:]
+            time.sleep(0.5)
+        pose, truth = echo("/pose"), echo("/ground_truth")
+        text = log.read_text()
+        assert "process has died" not in text, text[-3000:]
+        pid = int(re.search(r"running \(pid (\d+),", text).group(1))
+    finally:
+        stop_process(p, signal.SIGINT, timeout=30)
+    assert math.dist(pose, truth) < 0.03, (pose, truth)
+    assert not Path(f"/proc/{pid}").exists(), "SimTwo still running after roslaunch stopped"

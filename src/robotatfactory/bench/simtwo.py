@@ -67,7 +67,7 @@ def one_run(camera: bool, spin_rate: float = SPIN_RATE) -> dict:
     run = SimTwoRun(build.require(), ports, camera=camera, script=_script(tmp))
     t0 = time.monotonic()
     run.start()
-    out = {"first_frame_s": run.first_frame_s, "start_s": time.monotonic() - t0}
+    out = {"streaming_s": run.first_frame_s, "start_s": time.monotonic() - t0}
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", ports.bridge))
     sock.settimeout(2.0)

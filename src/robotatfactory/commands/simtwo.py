@@ -38,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     b.add_argument("--force", action="store_true", help="build again even when a build of these inputs exists")
     r = sub.add_parser("run", help="run SimTwo headless until Ctrl-C (or --duration)",
                        description="Start SimTwo headless: a fresh copy of the scene with the project's side "
-                                   "installed, its own Xvfb and ports, the camera window opened; wait for the "
-                                   "first SensorFrame; run until Ctrl-C or --duration; stop all it started.")
+                                   "installed, its own Xvfb and ports, the camera window opened; wait until the "
+                                   "script streams; run until Ctrl-C or --duration; stop all it started.")
     r.add_argument("--scene", default="RobotFactoryPro2022", help="the scene folder (default RobotFactoryPro2022)")
     r.add_argument("--port", type=int, metavar="UDP", help="the UDP port SimTwo listens on (default 9808)")
     r.add_argument("--bridge", default=None, metavar="HOST:PORT",
@@ -55,7 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--script", metavar="FILE", help="another scene script instead of simtwo/control.pas")
     r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
     r.add_argument("--ready-timeout", type=float, default=90.0, metavar="S",
-                   help="how long SimTwo may take to send its first SensorFrame (default 90)")
+                   help="how long SimTwo may take until its script streams (default 90)")
+    r.add_argument("--ready-line", default="raf: streaming to", metavar="TEXT",
+                   help="the start of the line the script prints (WriteLn) when it runs (default: control.pas's "
+                        "'raf: streaming to', printed right before its first SensorFrame)")
     r.add_argument("--keep", metavar="DIR", help="run in DIR and keep it (the scene copy, simtwo.log, xvfb.log)")
     sub.add_parser("info", help="the build's folder, patches and tools")
 
@@ -126,7 +129,7 @@ def _run(args, b) -> int:
         setup = RoundSetup.make(args.round, args.seed, args.parts)
         parts = round_parts(load_field(field_for_simtwo(args.field)), setup.incoming)
         _progress(setup.describe())
-    sim = SimTwoRun(build, ports, scene=args.scene, parts=parts, camera=not args.no_camera, bridge_host=host,
+    sim = SimTwoRun(build, ports, scene=args.scene, parts=parts, ready_line=f"script: {args.ready_line}", camera=not args.no_camera, bridge_host=host,
                     script=Path(args.script) if args.script else None,
                     workdir=Path(args.keep) if args.keep else None, keep=bool(args.keep), progress=_progress)
     signal.signal(signal.SIGTERM, _sigterm)

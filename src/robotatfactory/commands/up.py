@@ -81,8 +81,8 @@ def _ports(free: bool) -> dict:
 
 def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
     """(name, raf arguments, the line saying where it runs) per child, in start order: with raf sim the nodes
-    first (so the bridge listens before the simulator sends), raf sim last; with SimTwo, SimTwo first (it is
-    ready once its first SensorFrame arrived on the bridge's port, before the bridge takes the port)."""
+    first (so the bridge listens before the simulator sends), raf sim last; with SimTwo, SimTwo first (it
+    takes 10-20 s to start; the nodes then meet a stream that runs)."""
     from ..errors import ConfigError
     from ..simtwo_linux.scene import field_for_simtwo
 

@@ -7,10 +7,10 @@ One :class:`SimTwoRun` is one SimTwo with everything it needs and nothing shared
   so that LCL does not rescale the forms (the camera's viewer must stay 640 x 480); Mesa renders in software;
 - its own ports: SimTwo's UDP port (the scene's ``config_Params.ini``), the bridge's port (``control.pas``)
   and the camera's (``SIMTWO_CAMERA_PORT``, patch 10);
-- ready when the first SensorFrame arrives (read on the bridge's port while nothing else listens there) or
-  when the script reports it is streaming (``ready_line``: with a bridge already listening, or a script that
-  sends no frames); SimTwo's own messages (script compile and run errors, patch 11) end the wait at once and
-  are in the error;
+- ready when the script reports that it streams (``ready_line``: control.pas prints ``raf: streaming to ...``
+  at the end of ``Initialize``, and ``Control`` sends the first SensorFrame right after it in the same script
+  call); the bridge's port is not read, so that a bridge started at the same time can bind it. SimTwo's own
+  messages (script compile and run errors, patch 11) end the wait at once and are in the error;
 - the camera: SimTwo publishes frames only while its Cameras window is open, and no setting opens it. The
   run presses Ctrl+A in the viewer (``TFViewer.FormKeyDown``: the Cameras menu item), as a person would,
   with xdotool, and waits for a whole frame on the camera's port;
@@ -40,7 +40,7 @@ from .scene import DEFAULT_SCENE, SceneSettings, install
 #: the virtual screen: wide enough for the Cameras window beside the others (scene.CAMERAS_WINDOW)
 SCREEN = "2400x1200x24"
 CAMERA_FRAME_BYTES = 640 * 480 * 4
-READY_LINE = "script: raf: streaming to"
+READY_LINE = "script: raf: streaming to"  # control.pas's Initialize, right before its first SensorFrame
 ERROR_RE = re.compile(r"^SimTwo: .*(\[Error\]|Error while executing|Exception while executing)")
 
 
@@ -85,7 +85,7 @@ class SimTwoRun:
     progress: Callable[[str], None] = lambda _m: None
 
     display: str | None = None
-    first_frame_s: float | None = None          # from SimTwo's start to its first SensorFrame (or ready line)
+    first_frame_s: float | None = None          # from SimTwo's start to the script's ready line (its first frame)
     camera_s: float | None = None               # from pressing Ctrl+A to the first whole camera frame
     _xvfb: subprocess.Popen | None = None
     _simtwo: subprocess.Popen | None = None
@@ -167,44 +167,23 @@ class SimTwoRun:
                                             stderr=subprocess.STDOUT, start_new_session=True,
                                             preexec_fn=_die_with_parent)
 
-    def _probe(self) -> socket.socket | None:
-        """A socket on the bridge's port to see the first SensorFrame, or None when a bridge has it."""
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            s.bind((self.bridge_host if self.bridge_host == LOCALHOST else "0.0.0.0", self.ports.bridge))
-        except OSError:
-            s.close()
-            return None
-        s.setblocking(False)
-        return s
-
     def _wait_ready(self, timeout: float) -> None:
-        probe = self._probe()
+        """Until the script reports that it streams. It does not read the bridge's port: a bridge started at
+        the same time (roslaunch) must be able to bind it."""
         end = time.monotonic() + timeout
-        try:
-            while time.monotonic() < end:
-                self.check()
-                errors = [m for m in self.messages() if ERROR_RE.match(m)]
-                if errors:
-                    raise SimTwoError("SimTwo reports script errors:\n" + "\n".join(self.messages()[-20:]))
-                if probe is not None:
-                    try:
-                        data = probe.recv(65535)
-                        if data.startswith(b"RAF\r\n"):
-                            break
-                    except BlockingIOError:
-                        pass
-                if any(m.startswith(self.ready_line) for m in self.messages()):
-                    break
-                time.sleep(0.05)
-            else:
-                raise SimTwoError(f"no SensorFrame from SimTwo within {timeout:.0f} s; its messages:\n"
-                                  + self.tail())
-        finally:
-            if probe is not None:
-                probe.close()
+        while time.monotonic() < end:
+            self.check()
+            messages = self.messages()
+            if any(ERROR_RE.match(m) for m in messages):
+                raise SimTwoError("SimTwo reports script errors:\n" + "\n".join(messages[-20:]))
+            if any(m.startswith(self.ready_line) for m in messages):
+                break
+            time.sleep(0.05)
+        else:
+            raise SimTwoError(f"SimTwo's script did not print {self.ready_line[len('script: '):]!r} within "
+                              f"{timeout:.0f} s; its messages:\n" + self.tail())
         self.first_frame_s = time.monotonic() - self._t_start
-        self.progress(f"SimTwo: first SensorFrame {self.first_frame_s:.1f} s after the start")
+        self.progress(f"SimTwo: streaming {self.first_frame_s:.1f} s after the start")
 
     def _xdotool(self, *args: str) -> str:
         r = subprocess.run(["xdotool", *args], env=self._env(), capture_output=True, text=True, timeout=20)
