@@ -24,7 +24,7 @@ installed into a fresh copy of the scene (docs/simtwo.md, "SimTwo on Linux").
   raf simtwo run --free-ports                          free ports (printed), for a run beside others
   raf simtwo info                                      where the build is, its patches, the tools
 
-Then: raf bridge (same ports), or raf up --simulator simtwo for the whole stack."""
+Then: raf --field simtwo2022 bridge (the same ports), or raf up --simulator simtwo for the whole stack."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
