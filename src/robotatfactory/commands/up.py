@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
                    help="standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, built by raf simtwo "
                         "build), realtime, the field simtwo2022, the round's parts placed in its scene and, with "
-                        "--agent, a standalone raf server (machines do not run)")
+                        "--agent, a standalone raf server (static: machines do not run, parts are not tracked)")
     g.add_argument("--round", type=int, choices=(1, 2, 3), default=1, help="competition round (default 1)")
     g.add_argument("--seed", type=int, default=0, help="seed of the round and the noise (default 0)")
     mode = g.add_mutually_exclusive_group()
@@ -107,7 +107,8 @@ def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
         if simtwo:  # raf sim serves the round itself; with SimTwo a standalone server does
             nodes.append(("server", [*field, "server", "--round", str(args.round), "--seed", str(args.seed),
                                      "--port", str(ports["server"]), "--start-after", "3"],
-                          f"factory-state server udp 127.0.0.1:{ports['server']} (static: machines do not run)"))
+                          f"factory-state server udp 127.0.0.1:{ports['server']} (static: machines do not run, parts "
+                          "are not tracked)"))
         nodes.append(("agent", [*field, "agent", "--server-port", str(ports["server"])],
                       f"factory-state server udp 127.0.0.1:{ports['server']}"))
     if simtwo:
