@@ -2,11 +2,12 @@
 
 Each run: ``raf simtwo run``'s SimTwoRun (camera open), a scripted bridge in this process that answers every
 SensorFrame at once (settle 2 s, 0.6 m straight at 0.2 m/s, half a turn on the spot at 1.5 rad/s or
-``--spin-rate``, 0.5 m straight, stop), and from what SimTwo itself sends or prints: frame rate, SimTwo's clock against the wall
-clock, the share of cycles in which SimTwo applied a reply (control.pas's status line), camera frames per
-second and how long after the SensorFrame before it each arrives (an upper bound of the camera's latency: the
-image shows the scene at or after that frame), and odometry (the encoders' totals through the project's DiffDriveOdometry) against SimTwo's ground
-truth, over the whole drive and per segment. Ranges are min-max over the runs.
+``--spin-rate``, 0.5 m straight, stop), and from what SimTwo itself sends or prints: frame rate, SimTwo's
+clock against the wall clock, the share of cycles in which SimTwo applied a reply (control.pas's status line),
+camera frames per second and how long after the SensorFrame before it each arrives (an upper bound of the
+camera's latency: the image shows the scene at or after that frame), and odometry (the encoders' totals
+through the project's DiffDriveOdometry) against SimTwo's ground truth, over the whole drive and per segment.
+Ranges are min-max over the runs.
 """
 from __future__ import annotations
 
@@ -67,7 +68,7 @@ def one_run(camera: bool, spin_rate: float = SPIN_RATE) -> dict:
     run = SimTwoRun(build.require(), ports, camera=camera, script=_script(tmp))
     t0 = time.monotonic()
     run.start()
-    out = {"streaming_s": run.first_frame_s, "start_s": time.monotonic() - t0}
+    out = {"streaming_s": run.ready_s, "start_s": time.monotonic() - t0}
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", ports.bridge))
     sock.settimeout(2.0)

@@ -59,7 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--ready-line", default="raf: streaming to", metavar="TEXT",
                    help="the start of the line the script prints (WriteLn) when it runs (default: control.pas's "
                         "'raf: streaming to', printed right before its first SensorFrame)")
-    r.add_argument("--keep", metavar="DIR", help="run in DIR and keep it (the scene copy, simtwo.log, xvfb.log)")
+    r.add_argument("--keep", metavar="DIR", help="run in DIR, a new or empty folder, and keep it (the scene copy, "
+                                                 "simtwo.log, xvfb.log)")
     sub.add_parser("info", help="the build's folder, patches and tools")
 
 
@@ -129,9 +130,15 @@ def _run(args, b) -> int:
         setup = RoundSetup.make(args.round, args.seed, args.parts)
         parts = round_parts(load_field(field_for_simtwo(args.field)), setup.incoming)
         _progress(setup.describe())
-    sim = SimTwoRun(build, ports, scene=args.scene, parts=parts, ready_line=f"script: {args.ready_line}", camera=not args.no_camera, bridge_host=host,
-                    script=Path(args.script) if args.script else None,
-                    workdir=Path(args.keep) if args.keep else None, keep=bool(args.keep), progress=_progress)
+    elif args.parts or args.seed:
+        raise ConfigError("--parts and --seed place a round's parts: give --round too")
+    workdir = Path(args.keep) if args.keep else None
+    if workdir is not None and workdir.exists() and (not workdir.is_dir() or any(workdir.iterdir())):
+        raise ConfigError(f"--keep {workdir}: not a new or empty folder (the run writes its scene copy and logs "
+                          "there and keeps them)")
+    sim = SimTwoRun(build, ports, scene=args.scene, parts=parts, ready_line=f"script: {args.ready_line}",
+                    camera=not args.no_camera, bridge_host=host, script=Path(args.script) if args.script else None,
+                    workdir=workdir, keep=workdir is not None, progress=_progress)
     signal.signal(signal.SIGTERM, _sigterm)
     try:
         sim.start(args.ready_timeout)

@@ -23,17 +23,12 @@ import threading
 import time
 
 from ..sim.control import ControlClient
-from ..simtwo.teleport import TeleportSender
+from ..simtwo.teleport import SIMTWO_PART_PREFIX, SIMTWO_PART_Z, TeleportSender, part_heading
 from .mw import api
 
 SERVICES = ("reset", "pause", "resume", "step", "set_robot_pose", "place_part", "get_state")
 SIMTWO_SERVICES = ("reset", "set_robot_pose", "place_part", "get_state")
 STANDIN, SIMTWO = "stand-in", "simtwo"
-# SimTwo's RobotFactoryPro2022 scene: the parts are robots Part1..Part4 (scene.xml), placed at
-# z = part_pos_z = 0.0021 m; their plate is on the part's -y side (PartBlue.xml 'Plate', y = -part_depth/2),
-# so SetRobotPos's heading is the plate's heading + pi/2
-SIMTWO_PART_Z = 0.0021
-SIMTWO_PART_PREFIX = "Part"
 TELEPORT_WAIT = 3.0  # wall s a SimTwo teleport may take to be delivered and seen in the ground truth
 POSE_TOLERANCE = 0.02  # m: the ground truth confirms a SimTwo teleport of the robot
 
@@ -226,8 +221,8 @@ class SimServices:
             if not field.floor.contains(req.x, req.y):
                 return _answer(resp, False, f"out_of_field: ({req.x:g}, {req.y:g}) is not on the floor")
             x, y, facing = req.x, req.y, req.facing
-        return _answer(resp, *self._teleport(x, y, math.remainder(facing + math.pi / 2, 2 * math.pi),
-                                                 SIMTWO_PART_Z, f"{SIMTWO_PART_PREFIX}{int(req.part)}"))
+        return _answer(resp, *self._teleport(x, y, part_heading(facing), SIMTWO_PART_Z,
+                                                 f"{SIMTWO_PART_PREFIX}{int(req.part)}"))
 
     def _get_state(self, req, resp):
         kind = self.probe()

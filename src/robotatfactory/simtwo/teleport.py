@@ -23,6 +23,16 @@ from .labels import LabelledValues, encode_labels, format_int, format_real
 
 TELEPORT_LABELS = ("TpId", "TpTarget", "TpX", "TpY", "TpZ", "TpTh")
 DEFAULT_REPEATS = 5
+# SimTwo's RobotAtFactory scenes (RobotFactoryPro2022): the parts are robots Part1..Part4 (scene.xml) standing at
+# z = part_pos_z = 0.0021 m; their plate is on the part's -y side (PartBlue.xml 'Plate', y = -part_depth/2)
+SIMTWO_PART_Z = 0.0021
+SIMTWO_PART_PREFIX = "Part"
+
+
+def part_heading(facing: float) -> float:
+    """SimTwo's heading of a part (``SetRobotPos``, the scene's ``rot_deg z``) whose plate faces ``facing``
+    (rad, a field slot's convention): the plate is on the part's -y side, so the plate's heading + pi/2."""
+    return math.remainder(facing + math.pi / 2, 2 * math.pi)
 
 
 @dataclass(frozen=True)

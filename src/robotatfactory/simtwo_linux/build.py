@@ -118,7 +118,8 @@ def missing_packages() -> list[str]:
 def lazarus_dir() -> Path:
     """Debian's Lazarus tree (/usr/lib/lazarus/2.2.6)."""
     # the versioned folder ("default" is Debian's alternatives link to it)
-    found = sorted({d.resolve() for d in LAZARUS_ROOT.glob("*") if (d / "lcl").is_dir()}) if LAZARUS_ROOT.is_dir() else []
+    found = sorted({d.resolve() for d in LAZARUS_ROOT.glob("*") if (d / "lcl").is_dir()}
+                   if LAZARUS_ROOT.is_dir() else [])
     if not found:
         raise BuildError("packages", f"no Lazarus under {LAZARUS_ROOT} (apt-get install lazarus-ide-2.2 lcl-2.2)")
     return found[-1]

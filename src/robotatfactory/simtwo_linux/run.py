@@ -85,7 +85,7 @@ class SimTwoRun:
     progress: Callable[[str], None] = lambda _m: None
 
     display: str | None = None
-    first_frame_s: float | None = None          # from SimTwo's start to the script's ready line (its first frame)
+    ready_s: float | None = None                # from SimTwo's start to the script's ready line
     camera_s: float | None = None               # from pressing Ctrl+A to the first whole camera frame
     _xvfb: subprocess.Popen | None = None
     _simtwo: subprocess.Popen | None = None
@@ -182,8 +182,8 @@ class SimTwoRun:
         else:
             raise SimTwoError(f"SimTwo's script did not print {self.ready_line[len('script: '):]!r} within "
                               f"{timeout:.0f} s; its messages:\n" + self.tail())
-        self.first_frame_s = time.monotonic() - self._t_start
-        self.progress(f"SimTwo: streaming {self.first_frame_s:.1f} s after the start")
+        self.ready_s = time.monotonic() - self._t_start
+        self.progress(f"SimTwo: streaming {self.ready_s:.1f} s after the start")
 
     def _xdotool(self, *args: str) -> str:
         r = subprocess.run(["xdotool", *args], env=self._env(), capture_output=True, text=True, timeout=20)

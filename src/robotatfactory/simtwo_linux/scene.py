@@ -12,12 +12,14 @@ its scene's ``config_*.ini`` when it exits, so every run gets its own):
 """
 from __future__ import annotations
 
+import math
 import re
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..simtwo.ports import BRIDGE_UDP_PORT, LOCALHOST, SIMTWO_UDP_PORT
+from ..simtwo.teleport import SIMTWO_PART_PREFIX, SIMTWO_PART_Z, part_heading
 
 ROOT = Path(__file__).resolve().parents[3]
 SIMTWO_DIR = ROOT / "simtwo"
@@ -26,18 +28,20 @@ DEFAULT_SCENE = "RobotFactoryPro2022"
 SIMTWO_FIELD = "simtwo2022"
 
 
+#: where the Cameras window goes on the virtual screen (right of every window SimTwo's scene opens)
+CAMERAS_WINDOW = {"FCameras_Left": "1700", "FCameras_Top": "0"}
+#: headless, nobody looks at the main viewer: a small one renders faster, so SimTwo's GUI loop (which also
+#: receives the bridge's replies) turns more often (replies in 58-67 % of the cycles instead of 55 % with the
+#: camera on); the physics and the camera's image do not depend on it
+VIEWER_WINDOW = {"FViewer_Width": "160", "FViewer_Height": "120"}
+
+
 def field_for_simtwo(name: str) -> str:
     """The field to use with SimTwo's scene: ``name`` unless it is the project's default (the rules' field,
     which SimTwo's scene is not), then :data:`SIMTWO_FIELD`."""
     from ..field import DEFAULT_FIELD
 
     return SIMTWO_FIELD if name == DEFAULT_FIELD else name
-#: where the Cameras window goes on the virtual screen (right of every window SimTwo's scene opens)
-CAMERAS_WINDOW = {"FCameras_Left": "1700", "FCameras_Top": "0"}
-#: headless, nobody looks at the main viewer: a small one renders faster, so SimTwo's GUI loop (which also
-#: receives the bridge's replies) turns more often (replies in 67 % of the cycles instead of 55 % with the
-#: camera on); the physics and the camera's image do not depend on it
-VIEWER_WINDOW = {"FViewer_Width": "160", "FViewer_Height": "120"}
 
 
 class SceneError(ValueError):
@@ -68,9 +72,8 @@ class PartPlacement:
     facing: float
 
 
-#: SimTwo's part bodies, and the height of a part standing on the floor (scene.xml part_pos_z)
+#: SimTwo's part bodies by colour
 PART_FILES = {"R": "PartRed.xml", "G": "PartGreen.xml", "B": "PartBlue.xml"}
-PART_Z = 0.0021
 #: where a part the round does not use waits: outside the field, beyond the walls
 SPARE_PART_XY = (1.5, 1.2)
 
@@ -92,19 +95,18 @@ def round_parts(field, incoming) -> list[PartPlacement]:
 
 
 def place_parts(scene_xml: Path, parts: list[PartPlacement]) -> None:
-    """Rewrite the ``<pos>``, ``<rot_deg>`` and ``<body>`` of robots Part1..PartN in ``scene_xml``. The part's
-    plate is on its -y side (Parts.xml), so its rotation is the plate's heading + 90 degrees."""
-    import math
-
+    """Rewrite the ``<pos>``, ``<rot_deg>`` and ``<body>`` of robots Part1..PartN in ``scene_xml``, turned as
+    SimTwo turns a part (:func:`~robotatfactory.simtwo.teleport.part_heading`)."""
     text = scene_xml.read_text(encoding="latin-1")
     for i, p in enumerate(parts, start=1):
         if p.color not in PART_FILES:
             raise SceneError(f"part {i}: colour {p.color!r} is not one of {sorted(PART_FILES)}")
-        m = re.search(rf"<robot>\s*<ID name='Part{i}'/>.*?</robot>", text, re.S)
+        name = f"{SIMTWO_PART_PREFIX}{i}"
+        m = re.search(rf"<robot>\s*<ID name='{name}'/>.*?</robot>", text, re.S)
         if not m:
-            raise SceneError(f"{scene_xml}: no robot Part{i} to place")
-        deg = math.degrees(p.facing + math.pi / 2)
-        body = (f"<robot>\n    <ID name='Part{i}'/>\n    <pos x='{p.x:.6f}' y='{p.y:.6f}' z='{PART_Z}'/>\n"
+            raise SceneError(f"{scene_xml}: no robot {name} to place")
+        deg = math.degrees(part_heading(p.facing))
+        body = (f"<robot>\n    <ID name='{name}'/>\n    <pos x='{p.x:.6f}' y='{p.y:.6f}' z='{SIMTWO_PART_Z}'/>\n"
                 f"    <rot_deg x='0' y='0' z='{deg:.4f}'/>\n    <body file='{PART_FILES[p.color]}'/>\n  </robot>")
         text = text[:m.start()] + body + text[m.end():]
     scene_xml.write_text(text, encoding="latin-1")
