@@ -270,7 +270,8 @@ def test_bench_simtwo_one_run():
 
 
 def test_raf_up_plan_with_simtwo():
-    """raf up --simulator simtwo: SimTwo first (it takes 10-20 s to start), the field of SimTwo's
+    """raf up --simulator simtwo: the bridge first (it holds its free port at once), SimTwo before the factory
+    server and the agent (the round starts once SimTwo streams), the field of SimTwo's
     scene, no control channel (the sim/* services go through the teleport labels), a standalone factory
     server before the agent; --lockstep refused."""
     import argparse
@@ -284,7 +285,7 @@ def test_raf_up_plan_with_simtwo():
     ports = {"sim": 1, "bridge": 2, "control": 3, "camera": 4, "server": 5}
     steps = up.plan(parser.parse_args(["--simulator", "simtwo", "--agent", "--round", "2", "--seed", "7"]), "ros1",
                     ports)
-    assert [name for name, _, _ in steps] == ["sim", "bridge", "localize", "server", "agent"]
+    assert [name for name, _, _ in steps] == ["bridge", "localize", "sim", "server", "agent"]
     args = {name: a for name, a, _ in steps}
     assert args["sim"][:4] == ["--field", "simtwo2022", "simtwo", "run"]
     assert args["sim"][args["sim"].index("--bridge") + 1] == "127.0.0.1:2"

@@ -80,9 +80,10 @@ def _ports(free: bool) -> dict:
 
 
 def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
-    """(name, raf arguments, the line saying where it runs) per child, in start order: with raf sim the nodes
-    first (so the bridge listens before the simulator sends), raf sim last; with SimTwo, SimTwo first (it
-    takes 10-20 s to start; the nodes then meet a stream that runs)."""
+    """(name, raf arguments, the line saying where it runs) per child, in start order: the bridge first, so
+    that it holds its port (a free port chosen now) before anything else can take it and listens before the
+    simulator sends; raf sim last; SimTwo (10-20 s to start) before the factory server and the agent, so that
+    the round starts once SimTwo streams."""
     from ..errors import ConfigError
     from ..simtwo_linux.scene import field_for_simtwo
 
@@ -127,7 +128,10 @@ def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
     if args.duration is not None:
         sim += ["--duration", str(args.duration)]
     sim += list(args.sim_arg)
-    return [("sim", sim, what), *nodes] if simtwo else [*nodes, ("sim", sim, what)]
+    if simtwo:
+        first = [n for n in nodes if n[0] in ("bridge", "localize")]
+        return [*first, ("sim", sim, what), *nodes[len(first):]]
+    return [*nodes, ("sim", sim, what)]
 
 
 class Children:
