@@ -2,7 +2,8 @@
 //
 // Every control cycle (the script period, 40 ms) this script
 //   1. reads both encoders (GetAxisOdo: ticks since the previous cycle), the ground truth
-//      (GetRobotX/Y/Theta), the contact switch, the LIDAR (GetSensorValues of a ranger2d);
+//      (GetRobotX/Y/Theta), the contact switch, the LIDAR (GetSensorValues of a ranger2d) and
+//      the ground truth of the scene's parts Part1..PartN (for a referee: `raf referee`);
 //   2. sends them to the ROS bridge (`raf bridge`) as one SensorFrame datagram, exactly as
 //      docs/protocol.md (protocol version 1) defines it: labelled strings, CR LF line ends,
 //      integers %d, reals %.6g with a '.' decimal point whatever the Windows locale;
@@ -46,6 +47,11 @@ const
   TRACK = 0.135;               // m, between the wheels
   MAGNET_VIN_ON = 1;           // SetSensorVin value for "on" (force 0.5 * Vin * fmax)
 
+  // ---- the parts' ground truth (optional labels PartsN, Parts: for a referee, never the robot) --
+  SEND_PARTS = 1;              // 1: report robots Part1..PartN of the scene every cycle; 0: never
+  PART_PREFIX = 'Part';        // the scene's parts are robots Part1, Part2, ... (scene.xml)
+  MAX_PARTS = 8;
+
   // ---- wheel speed control: SimTwo's own PID (CalcPID), enabled and set ONCE in Initialize ----
   // SimTwo runs it inside the physics loop every controller period (the scene's <controller
   // period='10'/>, ms) as V = KP*e + KI*S + KD*(e - e_prev)/0.001 + KF*w_ref, e = w_ref - w (rad/s
@@ -81,6 +87,8 @@ var
   CfgLidarNoiseA, CfgLidarNoiseB: double;
 
   iRobot, iAxisLeft, iAxisRight, iContact, iMagnet, iLidar: integer;
+  iParts: array[0..7] of integer;  // robot indices of Part1..PartN (MAX_PARTS at most)
+  NParts: integer;
 
   FrameSeq: integer;           // Seq of the frame this cycle sends: 0 for the first
   TimeMs: integer;             // simulation time at the end of this cycle, ms
@@ -579,6 +587,18 @@ begin
 end;
 
 // Wheel speed references for SimTwo's speed controller (enabled once, in Initialize) and the magnet
+// x;y;theta of each part in turn (SimTwo's ground truth, field frame)
+function PartsLine: string;
+var i: integer;
+begin
+  result := '';
+  for i := 0 to NParts - 1 do begin
+    if i > 0 then result := result + ';';
+    result := result + FmtReal(GetRobotX(iParts[i])) + ';' + FmtReal(GetRobotY(iParts[i])) + ';'
+              + FmtReal(GetRobotTheta(iParts[i]));
+  end;
+end;
+
 procedure ApplyCommand;
 var wl, wr: double;
 begin
@@ -637,6 +657,8 @@ begin
          + LabelLine('Magnet', IntToStr(MagnetApplied))
          + LabelLine('LidarN', IntToStr(nRays))
          + LabelLine('Lidar', lidar);
+  if NParts > 0 then
+    frame := frame + LabelLine('PartsN', IntToStr(NParts)) + LabelLine('Parts', PartsLine);
   WriteUDPData(CfgBridgeIP, CfgBridgePort, frame);
   NFrames := NFrames + 1;
 
@@ -690,7 +712,7 @@ end;
 
 // this procedure is called once when the script is started
 procedure Initialize;
-var i: integer;
+var i, j: integer;
     s: string;
 begin
   CfgBridgeIP := BRIDGE_IP;
@@ -720,6 +742,15 @@ begin
   if iMagnet < 0 then LogMsg('sensor ' + MAGNET_ID + ' not found: the electromagnet cannot be switched');
   iLidar := GetSensorIndex(iRobot, LIDAR_ID);
   if iLidar < 0 then LogMsg('sensor ' + LIDAR_ID + ' not found: LidarN will be 0 (see simtwo/AGV_lidar.xml)');
+  NParts := 0;
+  if SEND_PARTS = 1 then begin
+    for i := 1 to MAX_PARTS do begin
+      j := GetRobotIndex(PART_PREFIX + IntToStr(i));
+      if j < 0 then break;     // Part1..PartN: the first missing one ends the list
+      iParts[NParts] := j;
+      NParts := NParts + 1;
+    end;
+  end;
 
   FrameSeq := 0;
   TimeMs := 0;

@@ -222,3 +222,29 @@ def test_random_camera_bytes_only_raise_protocol_error(data):
 def test_encode_frame_rejects_wrong_shapes():
     with pytest.raises(ProtocolError, match="HxWx3 uint8"):
         encode_frame(np.zeros((480, 640), np.uint8))
+
+
+# ---- the optional parts labels ------------------------------------------------------------------------------
+
+def test_parts_round_trip_and_absent_by_default():
+    f = SensorFrame(3, 120, (1, 2), (10, 20), 0.1, -0.2, 0.3, False, True,
+                    parts=((0.5, -0.25, 1.5708), (-0.7, 0.4, -3.1)))
+    raw = f.encode()
+    assert b"PartsN\r\n2\r\n" in raw
+    g = SensorFrame.decode(raw)
+    assert g == f and g.parts == ((0.5, -0.25, 1.5708), (-0.7, 0.4, -3.1))
+    plain = SensorFrame(3, 120, (1, 2), (10, 20), 0.1, -0.2, 0.3, False, True)
+    assert b"Parts" not in plain.encode() and SensorFrame.decode(plain.encode()).parts == ()
+
+
+@pytest.mark.parametrize("n, values, what", [
+    ("2", "0;0;0", "3 values, but PartsN 2 needs 6"),
+    ("1", "0;nan;0", "not a finite number"),
+    ("1", "0;x;0", "expected a real number"),
+    ("-1", "", "-1 parts"),
+])
+def test_bad_parts_labels_are_named(n, values, what):
+    raw = SensorFrame(0, 40, (0, 0), (0, 0), 0.0, 0.0, 0.0, False, False).encode()
+    raw += f"PartsN\r\n{n}\r\n\r\nParts\r\n{values}\r\n\r\n".encode()
+    with pytest.raises(ProtocolError, match=what):
+        SensorFrame.decode(raw)

@@ -53,7 +53,7 @@ PASCALSCRIPT = max(Path("/usr/lib/lazarus").glob("*/components/PascalScript/Sour
                    default=Path("/usr/lib/lazarus/2.2.6/components/PascalScript/Source"))
 ROBOT_JSON = REPO / "src" / "robotatfactory" / "data" / "robot_simtwo.json"
 FRAME_LABELS = ["RAF", "Seq", "Tms", "Enc1", "Enc2", "Odo1", "Odo2", "X", "Y", "Theta", "Contact", "Magnet",
-                "LidarN", "Lidar"]
+                "LidarN", "Lidar", "PartsN", "Parts"]
 TICK = b"HARNESS-TICK"
 PERIOD_MS = 40  # the stand-in's ScriptPeriod
 
@@ -190,7 +190,7 @@ def parse_record(lines: list[str]) -> tuple[dict[int, Cycle], dict, dict]:
             name = parts[0]
             if name == "SensorValues":
                 c.get.setdefault(name, {})[int(parts[1])] = [float(v) for v in parts[3].split(";")]
-            elif name in ("AxisOdo", "SensorVal"):
+            elif name in ("AxisOdo", "SensorVal", "PartX", "PartY", "PartTheta"):
                 c.get.setdefault(name, {})[int(parts[1])] = float(parts[2])
             else:
                 c.get[name] = parts[1:]
@@ -345,7 +345,8 @@ def test_frames_are_the_protocols_datagrams(main_run):
         assert lines[0::3] == FRAME_LABELS, f"frame {k}: labels or their order"
         assert all(x == "" for x in lines[2::3])
         # the same labels, in the same order, as the Python encoder writes them
-        ref = SensorFrame(0, 0, (0, 0), (0, 0), 0.0, 0.0, 0.0, False, False).encode().decode().split("\r\n")[:-1]
+        ref = SensorFrame(0, 0, (0, 0), (0, 0), 0.0, 0.0, 0.0, False, False,
+                          parts=((0.0, 0.0, 0.0),) * 4).encode().decode().split("\r\n")[:-1]
         assert lines[0::3] == ref[0::3]
 
 
@@ -364,6 +365,10 @@ def test_sensor_values_survive_the_trip(main_run):
         assert close6(f.x, float(g["RobotX"][0]))
         assert close6(f.y, float(g["RobotY"][0]))
         assert close6(f.theta, float(g["RobotTheta"][0]))
+        # the parts: Part1..Part4 of the scene, in order, as SimTwo returned them
+        assert len(f.parts) == 4
+        for r, (px, py, pth) in enumerate(f.parts, start=1):
+            assert close6(px, g["PartX"][r]) and close6(py, g["PartY"][r]) and close6(pth, g["PartTheta"][r])
         contact_raw = g["SensorVal"][6]
         assert f.contact == (contact_raw > 0)
         # Magnet: what SetSensorVin applied during the cycle that just ended
@@ -643,6 +648,17 @@ def test_missing_robot_axes_and_sensors(harness_exe, tmp_path):
     init = " ".join(run.cycles[-1].logs)
     for name in ("robot AGV", "axis LeftAxis", "ranger2d", "solenoid1", "MicroSwitch"):
         assert name in init
+
+
+def test_parts_end_at_the_first_missing_one(harness_exe, tmp_path):
+    run = run_harness(harness_exe, tmp_path, 2, lambda k, raw: [reply(k, 0.0, 0.0, 0)], missing="Part3")
+    for raw in run.frames:
+        f = SensorFrame.decode(raw)
+        assert len(f.parts) == 2  # Part1, Part2; Part4 is not reached
+    (tmp_path / "none").mkdir()
+    run = run_harness(harness_exe, tmp_path / "none", 2, lambda k, raw: [reply(k, 0.0, 0.0, 0)], missing="Part1")
+    for raw in run.frames:
+        assert b"PartsN" not in raw and SensorFrame.decode(raw).parts == ()
 
 
 # ---- 5. the script compiles in SimTwo's engine, and the engine is SimTwo's -------------------------------

@@ -268,8 +268,22 @@ begin
   HarnessRec(Format('GET %d AxisOdo %d %d', [HCycle, i, result]));
 end;
 
+// the parts (robots 1..4): a pose per robot and cycle, recorded as PartX/PartY/PartTheta R value
+function PartValue(R: integer; const what: string): double;
+begin
+  if (R < 1) or (R > High(ROBOT_ROWS)) then Fail(Format('Get%s: robot index %d does not exist', [what, R]));
+  if what = 'X' then result := 0.1 * R - 0.00731 * HCycle
+  else if what = 'Y' then result := -0.45 + 0.2 * R + 1.5e-6 * HCycle
+  else result := 0.25 * R - 3.0 + 0.011 * HCycle;
+  HarnessRec(Format('GET %d Part%s %d %s', [HCycle, what, R, HarnessReal(result)]));
+end;
+
 function GetRobotX(R: integer): double;
 begin
+  if R > 0 then begin
+    result := PartValue(R, 'X');
+    exit;
+  end;
   CheckRobot(R, 'GetRobotX');
   result := -0.725 + 0.0123456789 * HCycle;
   HarnessRec(Format('GET %d RobotX %s', [HCycle, HarnessReal(result)]));
@@ -278,6 +292,10 @@ end;
 function GetRobotY(R: integer): double;
 var k: integer;
 begin
+  if R > 0 then begin
+    result := PartValue(R, 'Y');
+    exit;
+  end;
   CheckRobot(R, 'GetRobotY');
   k := HCycle;
   if k mod 10 = 3 then result := 2.5e-6 * k
@@ -290,6 +308,10 @@ end;
 function GetRobotTheta(R: integer): double;
 var a: double;
 begin
+  if R > 0 then begin
+    result := PartValue(R, 'Theta');
+    exit;
+  end;
   CheckRobot(R, 'GetRobotTheta');
   a := 0.3 * HCycle - 3.0;
   while a > pi do a := a - 2 * pi;

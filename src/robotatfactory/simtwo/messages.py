@@ -73,6 +73,37 @@ def decode_ranges(s: str, label: str = "Lidar") -> np.ndarray:
     return arr
 
 
+def encode_parts(parts) -> str:
+    """Part poses to one value line: ``x;y;theta`` of each part in turn, ``%.6g`` each."""
+    return LIDAR_SEPARATOR.join("%.6g" % float(v) for pose in parts for v in pose)
+
+
+def _decode_parts(v: LabelledValues) -> tuple[tuple[float, float, float], ...]:
+    """The optional ``PartsN``/``Parts`` labels: () when the frame has none."""
+    if "PartsN" not in v:
+        return ()
+    n = v.get_int("PartsN")
+    if n < 0:
+        raise ProtocolError(f"label 'PartsN' (line {v.line_of('PartsN')}): {n} parts")
+    if n == 0:
+        return ()
+    raw = v.raw("Parts").strip()
+    vals = raw.split(LIDAR_SEPARATOR) if raw else []
+    if len(vals) != 3 * n:
+        raise ProtocolError(f"label 'Parts' (line {v.line_of('Parts')}): {len(vals)} values, but PartsN {n} "
+                            f"needs {3 * n} (x;y;theta per part)")
+    out = []
+    for i, s in enumerate(vals):
+        try:
+            x = float(s)
+        except ValueError:
+            raise ProtocolError(f"label 'Parts': value {i} is {s[:20]!r}, expected a real number") from None
+        if not math.isfinite(x):
+            raise ProtocolError(f"label 'Parts': value {i} is {s!r}, not a finite number")
+        out.append(x)
+    return tuple((out[k], out[k + 1], out[k + 2]) for k in range(0, len(out), 3))
+
+
 @dataclass
 class SensorFrame:
     """What the simulator measured in one control cycle (simulator -> ROS)."""
@@ -87,6 +118,9 @@ class SensorFrame:
     contact: bool  # micro switch pressed
     magnet: bool  # electromagnet state as applied
     ranges: np.ndarray = field(default_factory=lambda: np.empty(0))  # metres, -1 = no return
+    #: ground truth of the scene's parts, (x, y, theta) of part 1..N (SimTwo: robots Part1..PartN; theta is the
+    #: simulator's heading of the part body); optional labels ``PartsN``/``Parts``, empty when not sent
+    parts: tuple[tuple[float, float, float], ...] = ()
 
     @property
     def time(self) -> float:
@@ -109,6 +143,8 @@ class SensorFrame:
             ("LidarN", format_int(len(self.ranges))),
             ("Lidar", encode_ranges(self.ranges)),
         ]
+        if self.parts:
+            items += [("PartsN", format_int(len(self.parts))), ("Parts", encode_parts(self.parts))]
         return encode_labels(items)
 
     @classmethod
@@ -128,7 +164,7 @@ class SensorFrame:
             enc_total=(v.get_int("Odo1"), v.get_int("Odo2")),
             x=v.get_real("X"), y=v.get_real("Y"), theta=v.get_real("Theta"),
             contact=v.get_bool("Contact"), magnet=v.get_bool("Magnet"),
-            ranges=ranges,
+            ranges=ranges, parts=_decode_parts(v),
         )
 
     def __eq__(self, other):  # ndarray field: compare explicitly
@@ -137,7 +173,7 @@ class SensorFrame:
         return (self.seq, self.time_ms, self.enc_delta, self.enc_total, self.x, self.y, self.theta,
                 self.contact, self.magnet) == (other.seq, other.time_ms, other.enc_delta, other.enc_total,
                                                other.x, other.y, other.theta, other.contact, other.magnet) \
-            and np.array_equal(self.ranges, other.ranges)
+            and np.array_equal(self.ranges, other.ranges) and tuple(self.parts) == tuple(other.parts)
 
 
 @dataclass(frozen=True)
