@@ -272,8 +272,8 @@ def test_bench_simtwo_one_run():
 def test_raf_up_plan_with_simtwo():
     """raf up --simulator simtwo: the bridge first (it holds its free port at once), SimTwo before the factory
     server and the agent (the round starts once SimTwo streams), the field of SimTwo's
-    scene, no control channel (the sim/* services go through the teleport labels), a standalone factory
-    server before the agent; --lockstep refused."""
+    scene, no control channel (the sim/* services go through the teleport labels), the referee (factory-state
+    server, machines, score from SimTwo's part positions) before the agent; --lockstep refused."""
     import argparse
 
     from robotatfactory.commands import up
@@ -285,14 +285,16 @@ def test_raf_up_plan_with_simtwo():
     ports = {"sim": 1, "bridge": 2, "control": 3, "camera": 4, "server": 5}
     steps = up.plan(parser.parse_args(["--simulator", "simtwo", "--agent", "--round", "2", "--seed", "7"]), "ros1",
                     ports)
-    assert [name for name, _, _ in steps] == ["bridge", "localize", "sim", "server", "agent"]
+    assert [name for name, _, _ in steps] == ["bridge", "localize", "sim", "referee", "agent"]
     args = {name: a for name, a, _ in steps}
     assert args["sim"][:4] == ["--field", "simtwo2022", "simtwo", "run"]
     assert args["sim"][args["sim"].index("--bridge") + 1] == "127.0.0.1:2"
     assert args["sim"][args["sim"].index("--round") + 1] == "2" and "7" in args["sim"]
     assert all(a[1] == "simtwo2022" for a in args.values())
     assert not any("simulator/control" in x for x in args["bridge"])
-    assert args["server"][args["server"].index("--port") + 1] == "5"
+    assert args["referee"][2:5] == ["referee", "--round", "2"] and "7" in args["referee"]
+    assert args["referee"][args["referee"].index("--server-port") + 1] == "5"
+    assert args["agent"][args["agent"].index("--server-port") + 1] == "5"
     standin = up.plan(parser.parse_args([]), "ros1", ports)
     assert [name for name, _, _ in standin] == ["bridge", "localize", "sim"] and standin[0][1][1] == "rules2026"
     with pytest.raises(ConfigError, match="real time"):

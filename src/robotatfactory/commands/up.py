@@ -45,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
                    help="standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, built by raf simtwo "
                         "build), realtime, the field simtwo2022, the round's parts placed in its scene and, with "
-                        "--agent, a standalone raf server (static: machines do not run, parts are not tracked)")
+                        "--agent, raf referee (the factory-state server, the machines and the score, from the part positions "
+                        "SimTwo's script reports)")
     g.add_argument("--round", type=int, choices=(1, 2, 3), default=1, help="competition round (default 1)")
     g.add_argument("--seed", type=int, default=0, help="seed of the round and the noise (default 0)")
     mode = g.add_mutually_exclusive_group()
@@ -105,11 +106,11 @@ def plan(args, mw: str, ports: dict) -> list[tuple[str, list[str], str]]:
     if not args.no_localize:
         nodes.append(("localize", [*field, "localize"], "pose, camera_pose, aruco/*, map -> odom"))
     if args.agent:
-        if simtwo:  # raf sim serves the round itself; with SimTwo a standalone server does
-            nodes.append(("server", [*field, "server", "--round", str(args.round), "--seed", str(args.seed),
-                                     "--port", str(ports["server"]), "--start-after", "3"],
-                          f"factory-state server udp 127.0.0.1:{ports['server']} (static: machines do not run, parts "
-                          "are not tracked)"))
+        if simtwo:  # raf sim serves the round itself; with SimTwo the referee does, from SimTwo's part positions
+            nodes.append(("referee", [*field, "referee", "--round", str(args.round), "--seed", str(args.seed),
+                                      "--server-port", str(ports["server"]), "--start-after", "3"],
+                          f"factory-state server udp 127.0.0.1:{ports['server']}, machines and score from SimTwo's "
+                          "part positions"))
         nodes.append(("agent", [*field, "agent", "--server-port", str(ports["server"])],
                       f"factory-state server udp 127.0.0.1:{ports['server']}"))
     if simtwo:
@@ -235,7 +236,8 @@ class _ChildDied(Exception):
 
 #: the line each command prints once it runs (ros/cli.run_node's "raf WHO: ..." line, raf sim's banner)
 READY = {"bridge": " listening on udp ", "localize": " running (field ", "agent": " running (field ",
-         "sim": "raf sim: field ", "simtwo": "[simtwo] running (", "server": "factory-state server on udp "}
+         "sim": "raf sim: field ", "simtwo": "[simtwo] running (", "server": "factory-state server on udp ",
+         "referee": " running (field "}
 
 
 def _graph(args, mw: str):

@@ -115,16 +115,27 @@ def _udp_port() -> int:
 
 
 def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path: bool = False,
-                    field_name: str | None = None) -> dict:
+                    field_name: str | None = None, simulator: str = "standin") -> dict:
     """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
-    :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``)."""
+    :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``).
+
+    ``simulator="simtwo"``: the real SimTwo (``raf simtwo run``, the round's parts in its scene, field
+    ``simtwo2022``) instead of ``raf sim``, and ``raf referee`` (the factory, the machines, the score and the
+    trace from the part positions SimTwo reports) instead of raf sim's own; the referee ends the run."""
     from ..ros.master import private_graph
     from ..ros.mw import name as middleware
     from ..ros.processes import Procs
     from .competition import wait_for_report
 
     mw = middleware()
-    log_dir = Path(out_dir) / f"full_r{round_no}_s{seed}" if out_dir else Path(tempfile.mkdtemp(prefix="raf-comp-"))
+    simtwo = simulator == "simtwo"
+    if simtwo:
+        from ..field import DEFAULT_FIELD
+        from ..simtwo_linux.scene import field_for_simtwo
+
+        field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
+    tag = "simtwo" if simtwo else "full"
+    log_dir = Path(out_dir) / f"{tag}_r{round_no}_s{seed}" if out_dir else Path(tempfile.mkdtemp(prefix="raf-comp-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     trace_path = log_dir / "trace.jsonl"
     bag_path = log_dir / ("pose.bag" if mw == "ros1" else "pose_bag")
@@ -141,14 +152,28 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         procs.raf("localize", *field_args, "localize", env=env)
         procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
                   *(["--format", "bag"] if mw == "ros1" else []), env=env)
+        if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
+            procs.raf("referee", *field_args, "referee", "--round", str(round_no), "--seed", str(seed),
+                      "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
+                      "--server-port", str(server_port), "--trace", str(trace_path), "--end-after-max",
+                      str(END_AFTER_MAX), "--status-every", "5", env=env, may_exit=True)
+            _wait_logged(procs, "referee", "running", 60.0)
         procs.raf("agent", *field_args, "agent", "--server-port", str(server_port), env=env)
         _wait_logged(procs, "agent", "running", 60.0)
-        sim = procs.raf("sim", *field_args, "sim", "--round", str(round_no), "--seed", str(seed),
-                        "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
-                        "--port", str(sim_port), "--bridge", f"127.0.0.1:{bridge_port}", "--camera-bind",
-                        f"tcp://127.0.0.1:{cam_port}", "--server-port", str(server_port), "--no-control",
-                        "--trace", str(trace_path), "--end-after-max", str(END_AFTER_MAX), "--status-every", "5",
-                        env=env, may_exit=True)
+        if simtwo:
+            procs.raf("sim", *field_args, "simtwo", "run", "--port", str(sim_port), "--bridge",
+                      f"127.0.0.1:{bridge_port}", "--camera-port", str(cam_port), "--round", str(round_no), "--seed",
+                      str(seed), "--duration", str(FULL_DURATION[round_no] * 1.5 + 60.0), env=env, may_exit=True)
+            _wait_logged(procs, "sim", "[simtwo] running", 120.0)
+        else:
+            procs.raf("sim", *field_args, "sim", "--round", str(round_no), "--seed", str(seed),
+                      "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
+                      "--port", str(sim_port), "--bridge", f"127.0.0.1:{bridge_port}", "--camera-bind",
+                      f"tcp://127.0.0.1:{cam_port}", "--server-port", str(server_port), "--no-control",
+                      "--trace", str(trace_path), "--end-after-max", str(END_AFTER_MAX), "--status-every", "5",
+                      env=env, may_exit=True)
+        ender = "referee" if simtwo else "sim"  # the process that ends the run and writes the final report
+        sim = procs.get(ender)
         started = time.monotonic()
         limit = started + FULL_DURATION[round_no] * 1.5 + 60.0
         done_at = None
@@ -160,15 +185,15 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                 break
             time.sleep(0.5)
         if sim.poll() is not None and sim.returncode != 0 and time.monotonic() - started < 20.0:
-            raise SimStartError(f"raf sim could not start (exit code {sim.returncode}): {procs.tail('sim', 3)}")
-        procs.stop("sim")  # SIGINT: raf sim writes its final report on the way out
-        wait_for_report(log_dir / "sim.log")
+            raise SimStartError(f"raf {ender} could not start (exit code {sim.returncode}): {procs.tail(ender, 3)}")
+        procs.stop(ender)  # SIGINT: raf sim (raf referee) writes its final report on the way out
+        wait_for_report(log_dir / f"{ender}.log")
         procs.stop("record")  # closes the bag
     finally:
         procs.stop_all()
         graph.cleanup()
     return analyse(round_no, seed, log_dir, trace_path, bag_path, record_path, field_name,
-                   wall_s=time.perf_counter() - wall0, middleware=mw)
+                   wall_s=time.perf_counter() - wall0, middleware=mw, report_log=f"{ender}.log")
 
 
 def _read(path: Path) -> str:
@@ -185,7 +210,7 @@ def _wait_logged(procs, name: str, text: str, timeout: float) -> None:
 
 
 def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path: Path, record_path: bool,
-            field_name: str | None, wall_s: float, middleware: str) -> dict:
+            field_name: str | None, wall_s: float, middleware: str, report_log: str = "sim.log") -> dict:
     """The run's figures from its logs, trace and bag (separate from running it, so a kept run's
     directory can be analysed again)."""
     from ..field import load_field
@@ -194,7 +219,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     from ._competition_observe import RunObserver
     from .competition import notes_of, parse_sim_report
 
-    text = _read(log_dir / "sim.log")
+    text = _read(log_dir / report_log)
     agent_log = _read(log_dir / "agent.log")
     points, max_points, last, found = parse_sim_report(text)
     notes = notes_of(text)

@@ -52,18 +52,22 @@ NAME = "competition"
 HELP = ("the autonomous robot plays rounds 1-3 over seeds on the whole stack (or --mode bare_truth): score, "
         "last-delivery time, failures, pose error while docking, per-round success rate and median time")
 MODES = ("bare_truth", "full_stack")
+SIMTWO_MODE = "simtwo_full_stack"  # full_stack on the real SimTwo (--simulator simtwo): the keys' prefix
 TIME_TARGETS = {1: 60.0, 2: 80.0, 3: 120.0}  # s, median time of the last scoring delivery (issue 11)
 POSE_TARGET = 0.02  # m: the agent's pose input against the truth while it picks or places (issue 11)
 POSE_SOURCE = {"bare_truth": "pose = ground truth, bare in-process simulator, no bridge/EKF",
-               "full_stack": "pose = EKF, raf sim + raf bridge + raf localize + raf agent"}
+               "full_stack": "pose = EKF, raf sim + raf bridge + raf localize + raf agent",
+               SIMTWO_MODE: "pose = EKF, the real SimTwo + raf bridge + raf localize + raf agent, raf referee"}
 TARGETS = {}
-for _m in MODES:
+for _m in (*MODES, SIMTWO_MODE):
     for _r, _t in TIME_TARGETS.items():
         TARGETS[f"{_m}_r{_r}_max_score_rate"] = ">= 0.9 (9 of 10 seeds)"
         TARGETS[f"{_m}_r{_r}_last_score_median_s"] = f"<= {_t:.0f} s (simulated)"
         TARGETS[f"{_m}_r{_r}_false_starts"] = "== 0"
         TARGETS[f"{_m}_r{_r}_parts_knocked_out"] = "== 0 (out of their slots)"
     TARGETS[f"full_stack_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
+    TARGETS[f"{SIMTWO_MODE}_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
+    TARGETS[f"{SIMTWO_MODE}_r{_r}_max_score_rate"] = ">= 0.8 (4 of 5 seeds: issue 19)"
 AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
                   "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock", "v_place",
                   "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin", "carry_w_spin",
@@ -81,6 +85,10 @@ def add_arguments(parser) -> None:
                              "at once (about 70-110 s of wall time per run); bare_truth: the agent around the "
                              "in-process stand-in, ground truth as its pose, faster than real time (the "
                              "options marked bare_truth)")
+    parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
+                        help="full_stack's simulator: standin (raf sim, default) or simtwo: the real SimTwo (raf simtwo "
+                             "run, field simtwo2022) with raf referee scoring from the part positions SimTwo reports; "
+                             "one run at a time (SimTwo needs a core); keys start with " + SIMTWO_MODE)
     parser.add_argument("--analyse", metavar="DIR", default=None,
                         help="full_stack: do not run; measure again the runs an earlier --out DIR kept (logs, trace, "
                              "pose bag) with this code, for --rounds and --seeds")
@@ -330,14 +338,15 @@ def _job(spec):
         return _failed(round_no, seed, e)
 
 
-def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None) -> dict:
+def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None,
+              simulator: str = "standin") -> dict:
     from ._competition_full import SimStartError, play_full_stack
 
     tries = 3
     while True:
         tries -= 1
         try:
-            return play_full_stack(round_no, seed, out_dir, record, field_name)
+            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator)
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
                 return _failed(round_no, seed, e)
@@ -345,13 +354,20 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
             return _failed(round_no, seed, e)
 
 
-def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: str | None) -> dict:
+def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: str | None,
+                simulator: str = "standin") -> dict:
     """A whole-stack run kept by ``--out`` (logs, trace, bag), measured again (``--analyse DIR``)."""
     import json
 
     from ._competition_full import analyse
 
-    d = kept / f"full_r{round_no}_s{seed}"
+    simtwo = simulator == "simtwo"
+    d = kept / f"{'simtwo' if simtwo else 'full'}_r{round_no}_s{seed}"
+    if simtwo:
+        from ..field import DEFAULT_FIELD
+        from ..simtwo_linux.scene import field_for_simtwo
+
+        field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
     if not d.is_dir():
         return _failed(round_no, seed, FileNotFoundError(f"{d}: no such run kept"))
     before = {}
@@ -362,7 +378,8 @@ def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: 
         pass
     bag = d / "pose.bag" if (d / "pose.bag").exists() else d / "pose_bag"
     return analyse(round_no, seed, d, d / "trace.jsonl", bag, record, field_name,
-                   wall_s=float(before.get("wall_s", math.nan)), middleware=before.get("middleware", "unknown"))
+                   wall_s=float(before.get("wall_s", math.nan)), middleware=before.get("middleware", "unknown"),
+                   report_log="referee.log" if simtwo else "sim.log")
 
 
 def _failed(round_no: int, seed: int, e: Exception) -> dict:
@@ -391,7 +408,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_picks_attempted"] = r["picks_attempted"]
         out[f"{p}_pick_failures"] = r["pick_failures"]
         out[f"{p}_timeouts"] = r["timeouts"]
-        if mode == "full_stack":
+        if mode.endswith("full_stack"):
             out[f"{p}_logs"] = r.get("logs", "")
             for k in ("pose_error_docking_max_m", "pose_error_docking_median_m", "pose_error_median_m",
                       "pose_error_p95_m", "pose_error_max_m"):
@@ -441,7 +458,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_parts_knocked_out_target_met"] = knocked == 0 and not any("error" in r for r in rs)
         out[f"{p}_pick_failures"] = sum(int(r.get("pick_failures", 0)) for r in rs)
         out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
-        if mode == "full_stack":  # the agent's pose against the truth while it picks or places (issue: <= 2 cm)
+        if mode.endswith("full_stack"):  # the agent's pose against the truth while it picks or places (issue: <= 2 cm)
             dock = [r["pose_error_docking_max_m"] for r in rs if math.isfinite(r.get("pose_error_docking_max_m", math.nan))]
             out[f"{p}_pose_error_docking_max_m"] = round(max(dock), 4) if dock else None
             out[f"{p}_pose_error_docking_max_target_met"] = bool(dock) and len(dock) == n and max(dock) <= POSE_TARGET
@@ -548,6 +565,11 @@ def run(args, out_dir: Path | None) -> dict:
         mode = "full_stack" if args.stack == "full" else "bare_truth"
     if mode not in MODES:
         raise ConfigError(f"--mode {mode!r}: choose one of {', '.join(MODES)}")
+    simulator = getattr(args, "simulator", "standin")
+    if simulator == "simtwo":
+        if mode != "full_stack":
+            raise ConfigError("--simulator simtwo runs the whole stack only (--mode full_stack)")
+        mode = SIMTWO_MODE
     try:
         rounds = [int(x) for x in str(args.rounds).split(",") if x.strip()]
     except ValueError:
@@ -558,6 +580,11 @@ def run(args, out_dir: Path | None) -> dict:
         raise ConfigError("--seeds must be at least 1")
     drive = parse_drive(args.drive)
     field_name = getattr(args, "field", None)
+    if simulator == "simtwo":  # SimTwo's scene is not the rules' field
+        from ..field import DEFAULT_FIELD
+        from ..simtwo_linux.scene import field_for_simtwo
+
+        field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
     first = int(args.first_seed)
     agent_options = parse_agent(getattr(args, "agent", None))
     sim_options = parse_sim(getattr(args, "sim", None))
@@ -575,17 +602,20 @@ def run(args, out_dir: Path | None) -> dict:
              for r in rounds for s in range(first, first + args.seeds)]
     t0 = time.perf_counter()
     jobs = max(1, int(args.jobs))
-    if mode == "full_stack":  # realtime: each run is its own private graph; --jobs of them at once (threads)
+    if simulator == "simtwo":
+        jobs = 1  # the real SimTwo needs about a core: one run at a time on a 2-core machine
+    if mode.endswith("full_stack"):  # realtime: each run is its own private graph; --jobs of them at once (threads)
         if drive or agent_options or sim_options or any(noise) or delay or cmd_delay:
             raise ConfigError("--drive, --agent, --sim, --pose-noise, --pose-delay and --cmd-delay are not passed to the whole "
                               "stack (full_stack): the nodes use their defaults and the EKF's pose")
         if getattr(args, "analyse", None):  # the runs kept in a directory, measured again with this code
-            runs = [_reanalysed(Path(args.analyse), r, s, rec, field_name) for r, s, _l, _d, _f, rec, *_ in specs]
+            runs = [_reanalysed(Path(args.analyse), r, s, rec, field_name, simulator)
+                    for r, s, _l, _d, _f, rec, *_ in specs]
         else:
             from concurrent.futures import ThreadPoolExecutor
 
             with ThreadPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
-                runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[5], field_name), specs))
+                runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[5], field_name, simulator), specs))
     elif jobs == 1 or len(specs) == 1:
         runs = [_job(s) for s in specs]
     else:

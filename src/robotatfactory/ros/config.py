@@ -24,6 +24,7 @@ DEFAULT_TOPICS = {
     "scan": "scan",
     "odom": "odom",
     "ground_truth": "ground_truth",
+    "parts_ground_truth": "ground_truth/parts",
     "joint_states": "joint_states",
     "contact": "contact",
     "magnet_state": "electromagnet/state",

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Pose, Quaternion, Transform, TransformStamped, Vector3
+from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Transform, TransformStamped, Vector3
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan
 
@@ -68,6 +68,16 @@ def transform(parent: str, child: str, T: np.ndarray, stamp=None) -> TransformSt
     m.child_frame_id = child
     x, y, z = (float(v) for v in T[:3, 3])
     m.transform = Transform(translation=Vector3(x=x, y=y, z=z), rotation=matrix_quaternion(T[:3, :3]))
+    return m
+
+
+def planar_poses(stamp, frame: str, poses) -> PoseArray:
+    """A PoseArray of planar poses ``(x, y, theta)`` on the floor (z 0)."""
+    m = PoseArray()
+    m.header.stamp = stamp
+    m.header.frame_id = frame
+    m.poses = [Pose(position=Point(x=float(x), y=float(y), z=0.0), orientation=yaw_quaternion(float(th)))
+               for x, y, th in poses]
     return m
 
 

@@ -167,6 +167,12 @@ class Node(ABC):
         holds up the node's other callbacks."""
 
     @abstractmethod
+    def call(self, name: str, srv_type, timeout: float = 5.0, **fields):
+        """Call the service ``name`` with a request of these fields and return its response; waits up to
+        ``timeout`` s for the service to be offered and for its answer (``TimeoutError``). Call it from a
+        thread of your own, never from a callback (on ROS 2 the answer comes through this node's executor)."""
+
+    @abstractmethod
     def timer(self, period: float, callback: Callable[[], None]):
         """Call ``callback()`` every ``period`` seconds of the node's clock (simulation time under sim time)."""
 

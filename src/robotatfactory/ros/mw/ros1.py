@@ -91,6 +91,13 @@ class Ros1Node(Node):
         resp_cls = srv_type._response_class
         return rospy.Service(name, srv_type, lambda req: handler(req, resp_cls()))
 
+    def call(self, name, srv_type, timeout=5.0, **fields):
+        try:
+            rospy.wait_for_service(name, timeout=timeout)
+        except rospy.ROSException:
+            raise TimeoutError(f"the service {name} is not offered within {timeout} s") from None
+        return rospy.ServiceProxy(name, srv_type)(srv_type._request_class(**fields))
+
     def timer(self, period, callback):
         return rospy.Timer(rospy.Duration.from_sec(period), lambda _ev: callback())
 

@@ -123,6 +123,7 @@ class Ros2Node(Node):
         self._static: dict = {}
         self._keep: list = []
         self._workers: set = set()  # service calls being answered (service())
+        self._clients: dict = {}  # (name, type) -> service client (call())
         self.executor = None  # made by spin() (make_executor) unless set before
         self.callback_errors = 0  # callbacks that raised (logged, the node goes on)
         self.on_callback_error = None  # called with the error's text as well (tests: fail the test it happened in)
@@ -146,6 +147,22 @@ class Ros2Node(Node):
                                            callback_group=self.group)
         self._keep.append(sub)
         return sub
+
+    def call(self, name, srv_type, timeout=5.0, **fields):
+        with self._lock:
+            key = (name, srv_type)
+            cli = self._clients.get(key)
+            if cli is None:
+                cli = self._clients[key] = self.node.create_client(srv_type, name, callback_group=self.group)
+        if not cli.wait_for_service(timeout_sec=timeout):
+            raise TimeoutError(f"the service {name} is not offered within {timeout} s")
+        fut = cli.call_async(srv_type.Request(**fields))
+        done = threading.Event()
+        fut.add_done_callback(lambda _f: done.set())
+        if not done.wait(timeout):
+            cli.remove_pending_request(fut)
+            raise TimeoutError(f"{name}: no response within {timeout} s")
+        return fut.result()
 
     def service(self, name, srv_type, handler):
         """Serve ``name``; each call runs ``handler`` in a worker thread of its own, which sends the answer
