@@ -45,4 +45,4 @@ def test_standin_drive_one_short_run():
     assert r["straight_odom_over_truth"] == pytest.approx(1.0, abs=0.04)
     # SimTwo turns 2.1 % more on the spot than its encoders say; the stand-in does so by default
     assert 1.01 <= r["spin_truth_over_odom_turn"] <= 1.035
-    assert r["clearance_min_m"] > 0.02
+    assert r["clearance_min_m"] > 0.005

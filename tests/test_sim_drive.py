@@ -220,6 +220,7 @@ def test_encoder_ticks_match_ground_truth_wheel_travel(field, robot):
     s = Simulator(field, robot, SimConfig(camera=False, competition=False, lidar=False, start_pose=(-0.6, CORRIDOR_Y, 0.0)))
     m, d = s.model, s.data
     wheel_bodies = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("wheel_left", "wheel_right")]
+    inset = float(robot.wheel.get("contact_inset", 0.0))
     last = [d.xpos[b].copy() for b in wheel_bodies]
     travel = np.zeros(2)
     totals = np.zeros(2, dtype=int)
@@ -231,8 +232,10 @@ def test_encoder_ticks_match_ground_truth_wheel_travel(field, robot):
         totals[:] = f.enc_total
         _, _, th = s.pose
         heading = np.array([math.cos(th), math.sin(th), 0.0])
-        for i, b in enumerate(wheel_bodies):  # signed path of each wheel's centre along the heading
-            p = d.xpos[b].copy()
+        left = np.array([-math.sin(th), math.cos(th), 0.0])
+        for i, b in enumerate(wheel_bodies):  # signed path of each wheel's floor contact along the heading
+            # (SimTwo's: contact_inset inside the tyre's centre plane, robot_simtwo.json)
+            p = d.xpos[b] - (1.0 if i == 0 else -1.0) * inset * left
             travel[i] += float((p - last[i]) @ heading)
             last[i] = p
     s.close()
@@ -277,14 +280,18 @@ def test_speed_pi_is_stable_on_a_lifted_wheel(robot):
 def test_circle_is_driven_round_and_round(sim, robot):
     """Ten seconds on a 0.18 m circle round the field's centre: the path stays on the circle."""
     v, w = 0.108, 0.6
+    # SimTwo's wheels grip contact_inset inside their centre planes: the robot turns track/(track - 2 inset)
+    # faster than commanded (robot_simtwo.json), on a circle that much smaller
+    inset = float(robot.wheel.get("contact_inset", 0.0))
+    radius = v / (w * robot.track / (robot.track - 2 * inset))
     sim.set_pose(0.0, -0.1, 0.0)
-    centre = np.array([0.0, -0.1 + v / w])
+    centre = np.array([0.0, -0.1 + radius])
     radii = []
     for k in range(250):
         sim.step_cycle(Command(v, w, False))
         if k > 15:
             radii.append(np.linalg.norm(np.array(sim.pose[:2]) - centre))
-    assert np.max(np.abs(np.array(radii) - v / w)) < 0.004
+    assert np.max(np.abs(np.array(radii) - radius)) < 0.004
     assert sim.data.ncon == 3  # two wheels and the caster on the floor, nothing else
 
 

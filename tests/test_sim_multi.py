@@ -24,7 +24,9 @@ from robotatfactory.simtwo import Command, SensorFrame
 # one robot) when the parts got SimTwo's feet, friction and mass (sim/scene.py, issue 11: they settle 0.1 mm
 # differently, so the images differ); it was ea4f1236bf33...c9d0c92. Recomputed again when the parts' floor
 # friction became per direction (no roll/pitch resistance, the feet's yaw torque): it was 8f571a435ee7...edc3c.
-ONE_ROBOT_DIGEST = "5187ca31c35aedccbe6785b04a2c0a4fa7ffc0acfb392e506a5951e3d096a4d4"
+# Recomputed when the wheels got SimTwo's contact 1.4 mm inside the tyre (robot_simtwo.json contact_inset): it was
+# 5187ca31c35a...96a4d4.
+ONE_ROBOT_DIGEST = "c9ce62ef5e18a5c0f3c0b0d1e6bdc0356201ae054fa55b53d5a68b256de216f5"
 
 A = (-0.65, 0.33, 0.0)  # a free stretch of the field (rules2026) along y = 0.33
 B = (-0.15, 0.33, math.pi)

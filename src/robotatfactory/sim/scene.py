@@ -462,6 +462,7 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field, n
     r = robot.wheel_radius
     wmass = float(robot.wheel["mass"])
     wwidth = float(robot.wheel.get("width", 0.02))
+    inset = float(robot.wheel.get("contact_inset", 0.0))
     m = robot.motor
     for side, sign in (("left", 1.0), ("right", -1.0)):
         wb = body.add_body(name=f"{p}wheel_{side}", pos=[0, sign * robot.track / 2, r])
@@ -473,7 +474,11 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field, n
         j = wb.add_joint(name=f"{p}wheel_{side}_hinge", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
         j.damping = [float(m["Bv"]) * float(m.get("gear", 1.0)) ** 2, 0.0, 0.0]
         j.frictionloss = float(m["Fc"]) * float(m.get("gear", 1.0))
-        g = wb.add_geom(name=f"{p}wheel_{side}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0, 0])
+        # the floor contact sits ``contact_inset`` inside the tyre's centre plane, where SimTwo's wheels grip:
+        # in a turn on the spot its robot turns as if the track were 2 * inset shorter (docs/simulator.md,
+        # "The wheels' contact")
+        g = wb.add_geom(name=f"{p}wheel_{side}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0, 0],
+                        pos=[0, -sign * inset, 0])
         # the sphere only rolls on the floor (it is wider than the 6 mm tyre); walls and parts meet the
         # wheel guard box instead
         g.contype, g.conaffinity, g.group = B_WHEEL, B_FLOOR, G_HIDDEN
