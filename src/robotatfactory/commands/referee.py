@@ -7,7 +7,7 @@ import argparse
 from ..simtwo.ports import SERVER_UDP_PORT
 
 NAME = "referee"
-HELP = "run the factory and the referee on a simulator that reports its parts (the real SimTwo): server, machines, score"
+HELP = "the factory and referee for a simulator that reports its parts (the real SimTwo): server, machines, score"
 ORDER = 41
 DESCRIPTION = """\
 Run next to `raf bridge` when the simulator is the real SimTwo (raf sim runs its own factory and referee),

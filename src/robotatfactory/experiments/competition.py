@@ -61,13 +61,13 @@ POSE_SOURCE = {"bare_truth": "pose = ground truth, bare in-process simulator, no
 TARGETS = {}
 for _m in (*MODES, SIMTWO_MODE):
     for _r, _t in TIME_TARGETS.items():
-        TARGETS[f"{_m}_r{_r}_max_score_rate"] = ">= 0.9 (9 of 10 seeds)"
+        TARGETS[f"{_m}_r{_r}_max_score_rate"] = (">= 0.8 (4 of 5 seeds: issue 19)" if _m == SIMTWO_MODE
+                                                 else ">= 0.9 (9 of 10 seeds)")
         TARGETS[f"{_m}_r{_r}_last_score_median_s"] = f"<= {_t:.0f} s (simulated)"
         TARGETS[f"{_m}_r{_r}_false_starts"] = "== 0"
         TARGETS[f"{_m}_r{_r}_parts_knocked_out"] = "== 0 (out of their slots)"
-    TARGETS[f"full_stack_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
-    TARGETS[f"{SIMTWO_MODE}_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
-    TARGETS[f"{SIMTWO_MODE}_r{_r}_max_score_rate"] = ">= 0.8 (4 of 5 seeds: issue 19)"
+        if _m != "bare_truth":
+            TARGETS[f"{_m}_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
 AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
                   "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock", "v_place",
                   "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin", "carry_w_spin",
@@ -86,8 +86,8 @@ def add_arguments(parser) -> None:
                              "in-process stand-in, ground truth as its pose, faster than real time (the "
                              "options marked bare_truth)")
     parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
-                        help="full_stack's simulator: standin (raf sim, default) or simtwo: the real SimTwo (raf simtwo "
-                             "run, field simtwo2022) with raf referee scoring from the part positions SimTwo reports; "
+                        help="full_stack's simulator: standin (raf sim, default) or simtwo: the real SimTwo (raf "
+                             "simtwo run, field simtwo2022) with raf referee scoring from the part positions SimTwo reports; "
                              "one run at a time (SimTwo needs a core); keys start with " + SIMTWO_MODE)
     parser.add_argument("--analyse", metavar="DIR", default=None,
                         help="full_stack: do not run; measure again the runs an earlier --out DIR kept (logs, trace, "
@@ -442,7 +442,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_runs"] = n
         out[f"{p}_max_score_runs"] = ok
         out[f"{p}_max_score_rate"] = round(ok / n, 3) if n else 0.0
-        out[f"{p}_max_score_target_met"] = bool(n) and n - ok <= n // 10
+        allowed = n // 5 if mode == SIMTWO_MODE else n // 10  # misses allowed: SimTwo 1 in 5, the stand-in 1 in 10
+        out[f"{p}_max_score_target_met"] = bool(n) and n - ok <= allowed
         out[f"{p}_last_score_median_s"] = round(med, 2) if math.isfinite(med) else None
         out[f"{p}_last_score_worst_s"] = round(max(times_all), 2) if times_all and math.isfinite(max(times_all)) \
             else None

@@ -47,6 +47,7 @@ NAME = "localization"
 HELP = ("simulator + bridge + localization on two routes, SimTwo-like by default (--ideal for the idealised "
         "stand-in): errors of odometry, closest marker, all markers, planar fit, EKF")
 MODES = ("simtwo", "ideal")
+REAL = "real_simtwo"  # the mode (and keys' prefix) of --simulator simtwo: the real SimTwo, not the stand-in
 ROUTE_CHOICES = ("reference", "second", "both")
 DEFAULT_LAPS = {"reference": 2, "second": 1}
 BAD_FIX_M = 0.05  # an accepted camera fix further than this from the truth is a failure
@@ -58,7 +59,7 @@ ROUTE_TARGETS = {
     "ekf_accepted_fixes_over_5cm": "== 0",
     "odometry_over_ekf_end_position_error": ">= 10 (informative)",
 }
-TARGETS = {f"{m}_{r}_{k}": v for m in MODES for r in ("reference", "second") for k, v in ROUTE_TARGETS.items()}
+TARGETS = {f"{m}_{r}_{k}": v for m in (*MODES, REAL) for r in ("reference", "second") for k, v in ROUTE_TARGETS.items()}
 #: raf experiment exits with status 1 when one of the *_target_met keys is false
 EXIT_STATUS_FROM_TARGETS = True
 METHODS = ("closest", "closest_checked", "all_pnp", "planar")
@@ -92,6 +93,10 @@ def add_arguments(parser) -> None:
                       help="simtwo: the stand-in as SimTwo behaves, calibration from raf calibrate (default); "
                            "ideal: the idealised stand-in and the exact calibration (the earlier figures)")
     mode.add_argument("--ideal", dest="mode", action="store_const", const="ideal", help="same as --mode ideal")
+    parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
+                        help="standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, camera open, field "
+                             "simtwo2022, its own wheels: no --wheel-error, no beacons), the robot teleported to each "
+                             "route's start; keys start with " + REAL)
     parser.add_argument("--route", choices=ROUTE_CHOICES, default="both",
                         help="reference: the loop the localization was tuned on; second: the held-out "
                              "figure-eight with station visits; both (default), one after the other")
@@ -159,6 +164,11 @@ def plan_from_args(args) -> Plan:
     mode = getattr(args, "mode", "simtwo") or "simtwo"
     if mode not in MODES:
         raise ConfigError(f"--mode {mode!r}: choose one of {', '.join(MODES)}")
+    if getattr(args, "simulator", "standin") == "simtwo":
+        if mode != "simtwo" or args.camera_error:
+            raise ConfigError("--simulator simtwo: the real SimTwo has neither --ideal nor --camera-error (its camera "
+                              "is what it renders)")
+        mode = REAL
     if args.laps is not None and args.laps < 1:
         raise ConfigError("--laps must be >= 1")
     if not 0.02 <= args.speed <= 0.5:
@@ -186,11 +196,15 @@ def plan_from_args(args) -> Plan:
         raise ConfigError(f"--save-bag {args.save_bag!r} exists already: give a new name (a bag is never overwritten)")
         cal, bag = "auto", str(Path(bag).resolve())
     if cal is None:
-        cal = "auto" if mode == "simtwo" else ("true" if args.camera_error else "none")
+        cal = "auto" if mode in ("simtwo", REAL) else ("true" if args.camera_error else "none")
     if cal not in ("auto", "true", "none"):
         if not Path(cal).is_file():
             raise ConfigError(f"--calibration {cal!r}: not a file (or auto, true, none)")
         cal = str(Path(cal).resolve())
+    if mode == REAL:
+        if cal == "true":
+            raise ConfigError("--calibration true: the stand-in's true camera; on SimTwo use auto, none or a file")
+        track_err = radius_err = 0.0  # SimTwo's wheels are what its scene builds
     return Plan(mode, routes, cal, bool(args.camera_error), track_err, radius_err, float(args.speed), bag or None)
 
 
@@ -834,12 +848,16 @@ class Session:
         self.procs.start("bridge", _raf("--field", args.field, "bridge", "--port", str(bport), "--camera", cam,
                                         "--sim-host", "127.0.0.1", *self._calibration_args(),
                                         *self._bridge_mode_args()), env)
+        if self.plan.mode == REAL:
+            self._start_simtwo(bport, sport, cport)
         if self.localize:
             loc_args = ["--field", args.field, "localize", "--set", "node/all_methods=true",
                         *self._calibration_args()]
             for s_ in args.set:
                 loc_args += ["--set", s_]
             self.procs.start("localize", _raf(*loc_args), env)
+        if self.plan.mode == REAL:
+            return
         time.sleep(3.0)  # let the bridge bind its port before the simulator starts sending
         x0, y0, th0 = self.route.start
         sim_args = ["--field", args.field, "sim", "--port", str(sport), "--bridge", f"127.0.0.1:{bport}",
@@ -851,6 +869,27 @@ class Session:
         if self.robot_file is not None:
             sim_args += ["--robot", str(self.robot_file)]
         self.procs.start("sim", _raf(*sim_args), env)
+
+    def _start_simtwo(self, bport: int, sport: int, cport: int) -> None:
+        """The real SimTwo (camera open), then the robot teleported to the route's start through the bridge's
+        sim/set_robot_pose (which waits for SimTwo's ground truth to confirm it); before the localization
+        starts, so that the filter never sees the jump."""
+        from ..ros.mw import api
+        from ..ros.processes import wait_until
+
+        args, env = self.args, self.graph.env()
+        time.sleep(1.0)  # the bridge binds its port
+        self.procs.start("sim", _raf("--field", args.field, "simtwo", "run", "--port", str(sport), "--bridge",
+                                     f"127.0.0.1:{bport}", "--camera-port", str(cport)), env)
+        log = self.log_dir / "sim.log"
+        wait_until(lambda: log.exists() and "[simtwo] running" in log.read_text(errors="replace"), 180,
+                   "SimTwo streaming with its camera", self.procs.check)
+        x0, y0, th0 = self.route.start
+        r = self.graph.exp.node.call("sim/set_robot_pose", api().srv_types().SetRobotPose, timeout=20.0,
+                                     x=x0, y=y0, theta=th0)
+        if not r.success:
+            raise RuntimeError(f"SimTwo: the teleport to the route's start failed: {r.message}")
+        self.applied.append("the real SimTwo (raf simtwo run), teleported to the route's start")
 
     def drive(self, robot, settle_s: float = 0.0) -> None:
         """Drive the route on ground truth; then keep the robot stopped for ``settle_s`` simulation seconds
@@ -1010,6 +1049,11 @@ def run(args, out_dir: Path | None) -> dict:
     from ..ros.processes import ExperimentNode
 
     plan = plan_from_args(args)
+    if plan.mode == REAL:  # SimTwo's scene is not the rules' field
+        from ..simtwo_linux.scene import field_for_simtwo
+
+        args.field = field_for_simtwo(args.field)
+        args.no_beacons = True  # SimTwo's scene has no LIDAR beacons
     field = load_field(args.field)
     nominal = load_robot()
     work = Path(tempfile.mkdtemp(prefix="raf-exp-loc-"))

@@ -16,7 +16,13 @@ compared with the reference at the middle of that interval, r(T - P/2).
 Figures: RMS and maximum error over the run, and the lag (the time shift of the reference that best
 matches the measurement, found on a 1 ms grid). Target: RMS error <= 0.01 m/s.
 
-Mode. By default the simulator runs its SimTwo-like drive: SimTwo's own speed controller (CalcPID with the
+Simulator. ``--simulator standin`` (the default) runs ``raf sim``; ``--simulator simtwo`` runs the real SimTwo
+(``raf simtwo run``, its camera closed, the field ``simtwo2022``): the experiment teleports the robot to the
+start pose through the bridge's ``sim/set_robot_pose`` and starts the reference ``--settle`` s after it is
+there. SimTwo runs free in real time (no lockstep; ``--no-lockstep`` is implied) and applies a reply only in
+the cycles its GUI loop lets it (docs/simtwo.md); the result ``simulator`` names which one ran.
+
+Mode. By default the stand-in runs its SimTwo-like drive: SimTwo's own speed controller (CalcPID with the
 robot's ``simtwo_pid`` gains, set once, switched on by the script: 0 V for 9 ms after each script call);
 ``--speed-control`` and ``--pid-timing`` select the others (``raf sim`` options of the same names). The
 result ``speed_mode`` names the mode. ``--lockstep`` (the runner waits for each reply, deterministic
@@ -40,6 +46,7 @@ HELP = "the paper's figure 5: a 0 -> 0.3 m/s cubic Hermite speed reference throu
 TARGETS = {"speed_rmse_mps": "<= 0.01 m/s (issue 4)"}
 
 P = 0.04  # s, control period
+START_POSE = (-0.7, 0.35, 0.0)  # m, m, rad: 1.2 m free ahead on both fields (rules2026, simtwo2022)
 
 
 def hermite_reference(t: np.ndarray | float, v_max: float = 0.3, rise: float = 1.0):
@@ -61,6 +68,9 @@ def add_arguments(parser) -> None:
                         default="script_enabled", help="raf sim --pid-timing (default script_enabled)")
     parser.add_argument("--no-lockstep", dest="lockstep", action="store_false",
                         help="run the simulator free instead of waiting for each reply")
+    parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
+                        help="standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, free-running, "
+                             "field simtwo2022, teleported to the start pose)")
 
 
 def analyse(t: np.ndarray, v: np.ndarray, v_max: float, rise: float) -> dict:
@@ -93,6 +103,12 @@ def run(args, out_dir: Path | None) -> dict:
 
     v_max, rise, hold = args.v_max, args.rise, args.hold
     duration = args.settle + rise + hold
+    simtwo = getattr(args, "simulator", "standin") == "simtwo"
+    field = args.field
+    if simtwo:
+        from ..simtwo_linux.scene import field_for_simtwo
+
+        field = field_for_simtwo(field)
     tmp = Path(tempfile.mkdtemp(prefix="raf-exp-speed-"))
     graph = private_graph().start()
     graph.use_in_this_process()
@@ -101,7 +117,7 @@ def run(args, out_dir: Path | None) -> dict:
     procs = Procs(tmp)
     exp = None
     try:
-        procs.raf("bridge", "--field", args.field, "bridge", "--port", str(port), "--no-camera", "--set",
+        procs.raf("bridge", "--field", field, "bridge", "--port", str(port), "--no-camera", "--set",
                   "lidar/enabled=false", env=env)
         exp = ExperimentNode("raf_speed_experiment")
         node = exp.node
@@ -109,16 +125,20 @@ def run(args, out_dir: Path | None) -> dict:
         lock = threading.Lock()
         rec: list[tuple[float, float, float]] = []  # (stamp, odom v, ground-truth v)
         gt_v: dict[int, float] = {}
-        t_start = args.settle
+        start = [math.inf if simtwo else args.settle]  # sim time the reference starts (SimTwo: after the teleport)
+        last_t = [-math.inf]
 
         def on_odom(m):
             ns = stamp_ns(m.header.stamp)
             T = ns * 1e-9
+            t_start = start[0]
             tw = Twist()
             tw.linear.x = float(hermite_reference(T + P - t_start, v_max, rise)) if T + P >= t_start else 0.0
             pub.publish(tw)
             with lock:
-                rec.append((T, m.twist.twist.linear.x, gt_v.get(ns, math.nan)))
+                last_t[0] = T
+                if T >= t_start - args.settle:
+                    rec.append((T, m.twist.twist.linear.x, gt_v.get(ns, math.nan)))
 
         def on_gt(m):
             with lock:
@@ -127,13 +147,18 @@ def run(args, out_dir: Path | None) -> dict:
         node.subscribe("ground_truth", Odometry, on_gt, QoS.RELIABLE, 10)
         node.subscribe("odom", Odometry, on_odom, QoS.SYNCHRONOUS, 10)
         wait_until(lambda: pub.subscriber_count() > 0, 60, "the bridge subscribing to cmd_vel", procs.check)
-        procs.raf("sim", "--field", args.field, "sim", "--port", str(sim_port), "--bridge", f"127.0.0.1:{port}",
-                  "--no-camera", "--no-server", *(["--lockstep", "--lockstep-timeout", "2.0"] if args.lockstep else []),
-                  "--realtime", "--start-pose=-0.7,0.35,0", "--speed-control", args.speed_control, "--pid-timing",
-                  args.pid_timing, "--seed", str(args.seed), "--duration", f"{duration + 0.2:.2f}",
-                  "--status-every", "1", env=env, may_exit=True)
-        procs.wait("sim", timeout=120 + 4 * duration)
+        if simtwo:
+            _run_on_simtwo(procs, exp.node, env, field, port, sim_port, start, last_t, args.settle, rise + hold)
+        else:
+            procs.raf("sim", "--field", field, "sim", "--port", str(sim_port), "--bridge", f"127.0.0.1:{port}",
+                      "--no-camera", "--no-server",
+                      *(["--lockstep", "--lockstep-timeout", "2.0"] if args.lockstep else []),
+                      "--realtime", f"--start-pose={START_POSE[0]},{START_POSE[1]},{START_POSE[2]}", "--speed-control",
+                      args.speed_control, "--pid-timing", args.pid_timing, "--seed", str(args.seed), "--duration",
+                      f"{duration + 0.2:.2f}", "--status-every", "1", env=env, may_exit=True)
+            procs.wait("sim", timeout=120 + 4 * duration)
         time.sleep(0.3)
+        t_start = start[0]
         with lock:
             data = [(T, v, gt_v.get(int(round(T * 1e9)), g)) for T, v, g in rec]
     finally:
@@ -150,8 +175,9 @@ def run(args, out_dir: Path | None) -> dict:
     res = analyse(t, v, v_max, rise)
     from ..ros.mw import name as middleware
 
-    res.update({"middleware": middleware(),
-                "speed_mode": f"{args.speed_control}/{args.pid_timing}/{'lockstep' if args.lockstep else 'free'}",
+    res.update({"middleware": middleware(), "simulator": "simtwo" if simtwo else "standin",
+                "speed_mode": ("simtwo/free" if simtwo else
+                               f"{args.speed_control}/{args.pid_timing}/{'lockstep' if args.lockstep else 'free'}"),
                 "speed_samples": int(len(t)), "speed_reference_max_mps": v_max, "speed_rise_s": rise,
                 "speed_rmse_target_met": res["speed_rmse_mps"] <= 0.01})
     ok = np.isfinite(g)
@@ -163,6 +189,26 @@ def run(args, out_dir: Path | None) -> dict:
         np.savetxt(out_dir / "speed.csv", np.column_stack([t, v, g, hermite_reference(t - P / 2, v_max, rise)]),
                    delimiter=",", header="t_s,odom_v_mps,ground_truth_v_mps,reference_mid_interval_mps", comments="")
     return res
+
+
+def _run_on_simtwo(procs, node, env, field: str, bridge_port: int, sim_port: int, start: list, last_t: list,
+                   settle: float, length: float) -> None:
+    """Start the real SimTwo, teleport the robot to the start pose, set ``start[0]`` (the reference's start
+    in simulation time) and wait until the reference has run ``length`` s; then stop SimTwo."""
+    from ..ros.mw import api
+    from ..ros.processes import wait_until
+
+    procs.raf("sim", "--field", field, "simtwo", "run", "--port", str(sim_port), "--bridge",
+              f"127.0.0.1:{bridge_port}", "--no-camera", env=env, may_exit=True)
+    wait_until(lambda: last_t[0] > 0.5, 150, "SimTwo streaming (odom)", procs.check)
+    r = node.call("sim/set_robot_pose", api().srv_types().SetRobotPose, timeout=15.0, x=START_POSE[0], y=START_POSE[1],
+                  theta=START_POSE[2])
+    if not r.success:
+        raise RuntimeError(f"SimTwo: the teleport to the start pose failed: {r.message}")
+    start[0] = last_t[0] + settle
+    wait_until(lambda: last_t[0] >= start[0] + length + 0.2, 60 + 2 * (settle + length), "the reference run",
+               procs.check)
+    procs.stop("sim")
 
 
 def _figure(path: Path, t, v, g, v_max, rise, res) -> None:
