@@ -226,3 +226,47 @@ def test_cached_frame_encoder_gives_the_codecs_bytes(field, robot):
     f.ranges[[0, 5, 359]] = [-1.0, 1e-5, 123456.7]  # no return, exponent and rounding formats
     assert enc.encode(f) == f.encode()
     sim.close()
+
+
+def test_replies_are_read_only_between_gui_turns_and_the_first_wins(field, robot, bridge):
+    """reply_timing simtwo: a script call in the same GUI turn as the previous one reads nothing (the replies
+    wait), and of the replies read together the first is applied (SimTwo's ReadUDPData + control.pas)."""
+    from robotatfactory.sim import Simulator
+    from robotatfactory.sim.camera import GuiIteration
+
+    sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, competition=False))
+    # turns: steps 1-40, a catch-up turn 41-120 (the calls before steps 41 and 81 both in it), then 121-160
+    sim._turns = iter([GuiIteration(0.0, 0, 40, 0.0, None), GuiIteration(0.0, 40, 80, 0.0, None),
+                       GuiIteration(0.0, 120, 40, 0.0, None), GuiIteration(0.0, 160, 40, 0.0, None)])
+    got = []
+    for _ in range(4):
+        got.append(sim.replies_readable())
+        sim.step_cycle(Command(0.0, 0.0, False))
+    assert got == [True, True, False, True]
+    every = Simulator(field, robot, SimConfig(camera=False, lidar=False, competition=False,
+                                              reply_timing="every_cycle"))
+    assert all(every.replies_readable() for _ in range(5))
+
+    runner = make_runner(field, robot, bridge)
+    runner.open()
+    try:
+        for v in (0.1, 0.2, 0.3):
+            bridge.sendto(Command(v, 0.0, False, 5).encode(), runner.address)
+        time.sleep(0.2)
+        runner._drain(first_wins=True)
+        c = runner.counters
+        assert runner.command.v == 0.1 and (c.commands, c.applied, c.superseded) == (3, 1, 2)
+        for v in (0.4, 0.5):
+            bridge.sendto(Command(v, 0.0, False, 6).encode(), runner.address)
+        time.sleep(0.2)
+        runner._drain()  # every_cycle: the newest wins
+        assert runner.command.v == 0.5 and c.applied == 2
+    finally:
+        runner.close()
+
+
+def test_reply_timing_is_checked():
+    from robotatfactory.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="reply_timing"):
+        SimConfig(reply_timing="sometimes")

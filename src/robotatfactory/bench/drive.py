@@ -14,8 +14,9 @@ Figures, flat, with units; ``run`` gives min / median / max over ``--repeats``:
 
 - rates: SensorFrames per second of simulation and of wall time, the simulator's clock against the wall;
 - replies applied: the share of cycles in which the simulator applied a new reply. SimTwo: control.pas's
-  status line (``frames N, replies applied A``); the stand-in: ``raf sim``'s status line (``sent N cmd M``:
-  valid commands received per frame sent; it applies the newest before each cycle);
+  status line (``frames N, replies applied A``); the stand-in: ``raf sim``'s status line (``sent N ... applied
+  A``: cycles that got a new command per frame sent; with its default ``--reply-timing simtwo`` only the first
+  script call of a GUI turn reads, as SimTwo's);
 - camera: frames per wall second, and how long after the SensorFrame before it each arrives (median, p90: an
   upper bound of its latency);
 - LIDAR: sweeps per second (a sweep = a new set of ranges), returns per sweep inside the robot's outline (the
@@ -89,7 +90,7 @@ def default_drive() -> tuple[Segment, ...]:
 class _StandIn:
     """``raf sim`` as a subprocess: real time, free running, SimTwo-like defaults, field simtwo2022."""
 
-    status_re = re.compile(r"sent (\d+) cmd (\d+)")
+    status_re = re.compile(r"sent (\d+) cmd \d+ applied (\d+)")
 
     def __init__(self, camera: bool, seed: int = 0, extra: tuple = ()):
         from ..proc import free_port
@@ -119,7 +120,7 @@ class _StandIn:
             raise RuntimeError(f"raf sim exited with {self.proc.returncode}:\n{self.log_text()[-3000:]}")
 
     def status(self) -> list[tuple[int, int]]:
-        """(frames sent, commands received) of each status line so far."""
+        """(frames sent, cycles that applied a new command) of each status line so far."""
         return [tuple(map(int, m)) for m in self.status_re.findall(self.log_text())]
 
     def stop(self) -> None:

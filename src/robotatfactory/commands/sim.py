@@ -40,6 +40,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="when camera frames are rendered: simtwo (default: as SimTwo's GUI loop, at the ends of "
                         "17 ms physics chunks chosen by a wall clock, not a grid of simulation time) or grid "
                         "(the idealisation: every 1/15 s of simulation time); docs/simulator.md")
+    g.add_argument("--reply-timing", choices=("simtwo", "every_cycle"), default="simtwo",
+                   help="free-running: when the controller's replies are read: simtwo (default: only at the first "
+                        "script call of each GUI turn of that same loop, and of several replies read at once the "
+                        "first is applied, as SimTwo's ReadUDPData) or every_cycle (the idealisation: the newest "
+                        "reply before every cycle); docs/simulator.md")
     srv = g.add_mutually_exclusive_group()
     srv.add_argument("--server-port", type=int, default=SERVER_UDP_PORT,
                      help=f"UDP port of the factory-state server (default {SERVER_UDP_PORT}, on --host)")
@@ -169,7 +174,7 @@ def run(args) -> int:
                        beacons=args.beacons,
                        camera=not args.no_camera and not snapshot, round_no=args.round_no, parts=args.parts,
                        processing_delay=args.processing_delay, start_after=args.start_after,
-                       camera_timing=args.camera_timing,
+                       camera_timing=args.camera_timing, reply_timing=args.reply_timing,
                        lidar_update=args.lidar_update, lidar_self_hits=not args.no_lidar_self_hits,
                        speed_control=args.speed_control, simtwo_pid_timing=args.pid_timing,
                        magnet=args.magnet)

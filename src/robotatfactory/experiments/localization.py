@@ -73,6 +73,7 @@ IDEAL_SIM_OPTIONS = (
     ("--lockstep", None, "lockstep: the simulator waits for the reply to each frame"),
     ("--lockstep-timeout", "2.0", "lockstep timeout"),
     ("--camera-timing", "grid", "camera frames rendered on the k/15 s grid of simulation time"),
+    ("--reply-timing", "every_cycle", "the newest reply read before every cycle"),
     ("--lidar-update", "per_ray", "each LIDAR ray delivered as soon as it is measured"),
     ("--no-lidar-self-hits", None, "LIDAR rays pass through the robot's own wheels"),
     ("--speed-control", "ideal_pi", "the project's own speed PI with feed-forward every 1 ms"),

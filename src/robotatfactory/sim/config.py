@@ -28,6 +28,7 @@ LIDAR_UPDATES = ("sweep", "per_ray")
 SPEED_CONTROLS = ("simtwo", "simtwo_per_cycle", "ideal_pi")
 PID_TIMINGS = ("script_enabled", "scene_enabled", "script_holds_voltage")
 MAGNETS = ("force", "weld")
+REPLY_TIMINGS = ("simtwo", "every_cycle")
 MAX_ROBOTS = 4  # robots in one scene (raf sim --robots)
 
 
@@ -93,6 +94,11 @@ class SimConfig:
     # -- camera timing (sim/camera.py RenderCadence): "simtwo" = when SimTwo's GUI loop renders (ends of 17 ms
     # physics chunks on a seeded wall clock, every 4th render published); "grid" = the idealisation k/15 s
     camera_timing: str = "simtwo"
+    # -- replies (sim/runner.py): "simtwo" = SimTwo's script reads UDP only when its GUI loop handled messages
+    # since the previous script call (a catch-up burst's later calls read nothing) and, reading several
+    # replies at once, applies the first (ReadUDPData's concatenation, first label wins); "every_cycle" =
+    # the newest reply before every cycle (the idealisation). Free-running only: lockstep waits for each reply
+    reply_timing: str = "simtwo"
     # --- SimTwo fidelity of physics and sensors (defaults = SimTwo; see the docstring) ---
     lidar_update: str = "sweep"
     lidar_self_hits: bool = True
@@ -119,6 +125,7 @@ class SimConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError(f"seed {self.seed!r}: must be a non-negative integer")
         for name, allowed in (("lidar_update", LIDAR_UPDATES), ("speed_control", SPEED_CONTROLS),
+                              ("reply_timing", REPLY_TIMINGS),
                               ("simtwo_pid_timing", PID_TIMINGS), ("magnet", MAGNETS)):
             if getattr(self, name) not in allowed:
                 raise ConfigError(f"{name} {getattr(self, name)!r}: expected one of {', '.join(allowed)}")

@@ -183,6 +183,9 @@ class RunnerCounters:
     frames_sent: int = 0
     send_errors: int = 0
     commands: int = 0  # valid commands received
+    applied: int = 0  # cycles that got a new valid command (reply_timing simtwo: at most one per script call)
+    replies_deferred: int = 0  # script calls that could not read (a GUI catch-up turn's later calls)
+    superseded: int = 0  # valid commands read together with an earlier one, which won (SimTwo: first wins)
     replies: int = 0  # valid commands whose Seq answered the frame just sent
     stale: int = 0  # valid commands answering an older frame
     rejected: int = 0  # malformed + foreign + version
@@ -230,6 +233,7 @@ class SimRunner:
         self._pub = None
         self.server = None
         self.command = Command.stop()
+        self._first_wins = self._applied_here = False  # _drain's state (one script call's reading)
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), 0.0)  # (wall, simulation) times pacing counts from; set by run()
         self._opened = False
@@ -439,8 +443,14 @@ class SimRunner:
                             now - self._controller_seen, *src)
             self.controller = src
         self._controller_seen = now
-        self._command_sim_time = self.sim.time
         c.commands += 1
+        if self._first_wins and self._applied_here:
+            c.superseded += 1
+            return False
+        self._command_sim_time = self.sim.time
+        if not self._applied_here:
+            c.applied += 1
+        self._applied_here = True
         self.command = cmd
         if expect_seq is not None and cmd.seq >= 0 and cmd.seq < expect_seq:
             c.stale += 1
@@ -465,10 +475,13 @@ class SimRunner:
                                                "stopping the robot (V = W = 0, magnet kept)")
             self.command = Command(0.0, 0.0, self.command.magnet, -1)
 
-    def _drain(self, expect_seq: int | None = None) -> bool:
-        """Read every queued datagram; True if the reply to ``expect_seq`` was among them."""
+    def _drain(self, expect_seq: int | None = None, first_wins: bool = False) -> bool:
+        """Read every queued datagram; True if the reply to ``expect_seq`` was among them. ``first_wins``: of
+        several valid commands, the first is applied (SimTwo: ReadUDPData concatenates them and control.pas
+        takes each label's first occurrence); the others are counted in ``superseded``."""
         got = False
         sock = self._sock
+        self._first_wins, self._applied_here = first_wins, False
         while True:
             try:
                 data, addr = sock.recvfrom(RECV_BUFFER)
@@ -581,7 +594,7 @@ class SimRunner:
         rep = self.report()
         score = f" | {rep.short()}" if rep is not None else ""
         held = f" holding part {sim.held}" if sim.held is not None else ""
-        return (f"t={sim.time:8.2f}s rtf {rtf:5.2f}x | sent {c.frames_sent} cmd {c.commands} "
+        return (f"t={sim.time:8.2f}s rtf {rtf:5.2f}x | sent {c.frames_sent} cmd {c.commands} applied {c.applied} "
                 f"rejected {c.rejected} timeouts {c.timeouts} | camera {c.camera_frames} | "
                 f"V={self.command.v:+.3f} W={self.command.w:+.3f} S={int(self.command.magnet)}{held}{score}")
 
@@ -605,8 +618,6 @@ class SimRunner:
                 if not self.control.may_run:
                     self._wait_paused()
                     continue
-                if not c.lockstep:
-                    self._drain()
                 self._check_command_age()
                 frame = sim.step_cycle(self.command)
                 self.counters.cycles += 1
@@ -617,6 +628,11 @@ class SimRunner:
                     break
                 self._publish(sim.take_frames())
                 self._pace(sim.time)  # realtime: the SensorFrame at its own time, after the cycle's frames
+                if not c.lockstep:  # the script call, in control.pas's order: the replies so far, then the frame
+                    if sim.replies_readable():  # (so a reply to this frame is applied in the next cycle but one)
+                        self._drain(first_wins=sim.config.reply_timing == "simtwo")
+                    else:
+                        self.counters.replies_deferred += 1
                 self._send(frame)
                 done = self.control.cycle_done()
                 if c.lockstep and not self._wait_reply(frame.seq):

@@ -195,6 +195,11 @@ class Simulator:
         self._camera_name = names.robot_camera
         self._cadence = RenderCadence(config.camera_timing, self.dt, cam.render_fps, cam.decimation, config.seed)
         self._schedule = self._cadence.frames()
+        # replies: the same GUI loop's turns (the same seed: the same turns as the camera's), see replies_readable
+        self._turns = (RenderCadence("simtwo", self.dt, cam.render_fps, cam.decimation, config.seed).iterations()
+                       if config.reply_timing == "simtwo" else None)
+        self._turn = None  # the GUI turn of the latest script call: (index, last physics step)
+        self._call_turn = -1
         self._next_frame: ScheduledFrame = next(self._schedule)
         self._frames: list[CameraFrame] = []
         self._renderer: Renderer | None = None
@@ -823,6 +828,23 @@ class Simulator:
         self.render_times.append(time.perf_counter() - t0)
         self._frames.append(CameraFrame(index=sf.index, tick=sf.tick, tick_time=sf.tick_time, time=self.time,
                                         rgb_bottom_up=rgb, wall=sf.wall))
+
+    def replies_readable(self) -> bool:
+        """Whether the script call before the next cycle can read the replies that came since the previous
+        call (``reply_timing="simtwo"``): SimTwo's script reads UDP from its GUI thread's message handling, so
+        only when a GUI turn ended between the two calls; the later calls of one catch-up turn read nothing
+        (docs/simtwo.md). The call before physics step ``b + 1`` runs in the turn with ``first_step <= b <
+        first_step + steps`` (:class:`~.camera.GuiIteration`). Always True for ``"every_cycle"``. Call once
+        per cycle, before :meth:`step_cycle`."""
+        if self._turns is None:
+            return True
+        step = self._step
+        while self._turn is None or self._turn[1] <= step:
+            it = next(self._turns)
+            self._turn = ((self._turn[0] + 1) if self._turn is not None else 0, it.first_step + it.steps)
+        readable = self._turn[0] != self._call_turn
+        self._call_turn = self._turn[0]
+        return readable
 
     def take_frames(self) -> list[CameraFrame]:
         """Camera frames rendered since the last call, oldest first (publish them before the next frame)."""
