@@ -122,8 +122,8 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(middl
                 truth[hashlib.sha1(f.bgr().tobytes()).digest()] = f.time
             super()._publish(frames)
 
-        def _drain(self, expect_seq=None):  # the robot turns (every frame differs); the bridge's replies
-            super()._drain(expect_seq)  # are read and counted, not obeyed
+        def _drain(self, expect_seq=None, first_wins=False):  # the robot turns (every frame differs); the
+            super()._drain(expect_seq, first_wins)  # bridge's replies are read and counted, not obeyed
             self.command = turn
             return False
 

@@ -25,8 +25,9 @@ from robotatfactory.simtwo import Command, SensorFrame
 # differently, so the images differ); it was ea4f1236bf33...c9d0c92. Recomputed again when the parts' floor
 # friction became per direction (no roll/pitch resistance, the feet's yaw torque): it was 8f571a435ee7...edc3c.
 # Recomputed when the wheels got SimTwo's contact 1.4 mm inside the tyre (robot_simtwo.json contact_inset): it was
-# 5187ca31c35a...96a4d4.
-ONE_ROBOT_DIGEST = "c9ce62ef5e18a5c0f3c0b0d1e6bdc0356201ae054fa55b53d5a68b256de216f5"
+# 5187ca31c35a...96a4d4. Recomputed when the frames got the optional Parts labels (the parts' ground truth, as
+# control.pas sends it); with report_parts=False the run still gives the previous c9ce62ef5e18...de216f5.
+ONE_ROBOT_DIGEST = "739df7913eefed913251d164cf61d292cd2aa5239088d737d302d06911d81bea"
 
 A = (-0.65, 0.33, 0.0)  # a free stretch of the field (rules2026) along y = 0.33
 B = (-0.15, 0.33, math.pi)

@@ -225,6 +225,7 @@ def test_cached_frame_encoder_gives_the_codecs_bytes(field, robot):
         assert enc.encode(f) == f.encode()
     f.ranges[[0, 5, 359]] = [-1.0, 1e-5, 123456.7]  # no return, exponent and rounding formats
     assert enc.encode(f) == f.encode()
+    assert len(f.parts) == 4 and b"PartsN\r\n4\r\n" in enc.encode(f)  # the round's parts, as control.pas sends
     sim.close()
 
 

@@ -99,6 +99,8 @@ class SimConfig:
     # replies at once, applies the first (ReadUDPData's concatenation, first label wins); "every_cycle" =
     # the newest reply before every cycle (the idealisation). Free-running only: lockstep waits for each reply
     reply_timing: str = "simtwo"
+    # -- the SensorFrame's optional Parts labels (the parts' ground truth, as simtwo/control.pas sends them)
+    report_parts: bool = True
     # --- SimTwo fidelity of physics and sensors (defaults = SimTwo; see the docstring) ---
     lidar_update: str = "sweep"
     lidar_self_hits: bool = True

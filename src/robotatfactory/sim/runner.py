@@ -43,7 +43,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..simtwo import Command, ProtocolError
 from ..simtwo.labels import format_real
-from ..simtwo.messages import LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, encode_ranges
+from ..simtwo.messages import LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, encode_parts, encode_ranges
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT, bind_udp
 
 log = logging.getLogger(__name__)
@@ -170,11 +170,13 @@ class CachedFrameEncoder:
 
     def encode(self, frame) -> bytes:
         ranges = np.asarray(frame.ranges, dtype=np.float64)
-        return (self._TEMPLATE % (
+        text = self._TEMPLATE % (
             PROTOCOL_VERSION, int(frame.seq), int(frame.time_ms), int(frame.enc_delta[0]), int(frame.enc_delta[1]),
             int(frame.enc_total[0]), int(frame.enc_total[1]), format_real(frame.x), format_real(frame.y),
-            format_real(frame.theta), int(frame.contact), int(frame.magnet), len(ranges), self._ranges(ranges),
-        )).encode("ascii")
+            format_real(frame.theta), int(frame.contact), int(frame.magnet), len(ranges), self._ranges(ranges))
+        if frame.parts:  # the optional labels, after the LIDAR as SensorFrame.encode writes them
+            text += f"PartsN\r\n{len(frame.parts)}\r\n\r\nParts\r\n{encode_parts(frame.parts)}\r\n\r\n"
+        return text.encode("ascii")
 
 
 @dataclass

@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402
 from ..field import Field  # noqa: E402
 from ..robot import RobotSpec  # noqa: E402
 from ..simtwo import Command, SensorFrame  # noqa: E402
+from ..simtwo.teleport import part_heading, spare_part_xy  # noqa: E402
 from . import scene as sc  # noqa: E402
 from .camera import CameraFrame, RenderCadence, Renderer, ScheduledFrame  # noqa: E402
 from .config import SimConfig  # noqa: E402
@@ -735,9 +736,27 @@ class Simulator:
         frame = SensorFrame(
             seq=self.seq, time_ms=self.time_ms, enc_delta=(el.delta, er.delta), enc_total=(el.total, er.total),
             x=x, y=y, theta=th, contact=self.contact, magnet=self.magnet_on,
-            ranges=self._lidar.ranges.copy() if self._lidar is not None else np.empty(0))
+            ranges=self._lidar.ranges.copy() if self._lidar is not None else np.empty(0),
+            parts=self._parts_truth() if self.config.report_parts else ())
         self.seq += 1
         return frame
+
+    def _parts_truth(self) -> tuple:
+        """The SensorFrame's optional ``Parts``, as simtwo/control.pas reports SimTwo's ``Part1..PartN``: part k
+        at index k - 1, SimTwo's heading (the plate's + pi/2); ids up to the highest, the absent ones (an
+        empty incoming slot) where SimTwo's scene keeps its spare parts, off the field."""
+        ids = self.parts.ids
+        if not ids:
+            return ()
+        out, spare = [], 0
+        for pid in range(1, max(ids) + 1):
+            if pid in self.parts.qadr:
+                x, y, facing = self.parts.pose(self.data, pid)
+                out.append((x, y, part_heading(facing)))
+            else:
+                out.append((*spare_part_xy(spare), 0.0))
+                spare += 1
+        return tuple(out)
 
     def _teleport(self, tp) -> None:
         pid = int(tp.part_id)

@@ -27,6 +27,14 @@ DEFAULT_REPEATS = 5
 # z = part_pos_z = 0.0021 m; their plate is on the part's -y side (PartBlue.xml 'Plate', y = -part_depth/2)
 SIMTWO_PART_Z = 0.0021
 SIMTWO_PART_PREFIX = "Part"
+#: where a scene's parts that a round does not use stand (off the field, 0.2 m apart in x): raf simtwo run's
+#: scene copy puts SimTwo's spare robots PartN there, and the stand-in reports its absent parts there
+SPARE_PART_XY = (1.5, 1.2)
+
+
+def spare_part_xy(k: int) -> tuple[float, float]:
+    """Where the k-th spare part (0, 1, ...) stands."""
+    return SPARE_PART_XY[0] + 0.2 * k, SPARE_PART_XY[1]
 
 
 def part_heading(facing: float) -> float:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..simtwo.ports import BRIDGE_UDP_PORT, LOCALHOST, SIMTWO_UDP_PORT
-from ..simtwo.teleport import SIMTWO_PART_PREFIX, SIMTWO_PART_Z, part_heading
+from ..simtwo.teleport import SIMTWO_PART_PREFIX, SIMTWO_PART_Z, part_heading, spare_part_xy
 
 ROOT = Path(__file__).resolve().parents[3]
 SIMTWO_DIR = ROOT / "simtwo"
@@ -75,7 +75,6 @@ class PartPlacement:
 #: SimTwo's part bodies by colour
 PART_FILES = {"R": "PartRed.xml", "G": "PartGreen.xml", "B": "PartBlue.xml"}
 #: where a part the round does not use waits: outside the field, beyond the walls
-SPARE_PART_XY = (1.5, 1.2)
 
 
 def round_parts(field, incoming) -> list[PartPlacement]:
@@ -85,8 +84,8 @@ def round_parts(field, incoming) -> list[PartPlacement]:
     spare = 0
     for number, part in enumerate(incoming, start=1):
         if part is None:
-            x, y = SPARE_PART_XY
-            out.append(PartPlacement("B", x + 0.2 * spare, y, 0.0))
+            x, y = spare_part_xy(spare)
+            out.append(PartPlacement("B", x, y, 0.0))
             spare += 1
             continue
         slot = field.slot("incoming", number)
