@@ -16,7 +16,8 @@ over the repeats in adjacent columns:
 Per figure: ``{figure}_{simulator}_min/_median/_max``, the difference of the medians (SimTwo - stand-in),
 the larger of the two ranges (``_spread``) and ``_beyond_spread``: the difference is larger than that spread
 (with one run per simulator there is no spread: every difference counts). Every key says which simulator
-produced it; the stand-in runs in its default (SimTwo-like) mode. The real SimTwo needs about one core and
+produced it. Like with like: both on SimTwo's field (``simtwo2022``), both free-running, the stand-in in its
+default (SimTwo-like) mode and with SimTwo's wheels (the localization's added wheel error off). The real SimTwo needs about one core and
 runs in real time: the whole comparison takes about an hour with the defaults; ``--parts`` and ``--repeats``
 make it shorter (the suite runs ``--parts drive,speed,competition --repeats 1 --seeds 1``).
 """
@@ -95,6 +96,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seeds", type=int, default=3, help="competition seeds 0..N-1 per round (default 3)")
     parser.add_argument("--route", default="reference", choices=("reference", "second"),
                         help="the localization's route (default reference), one lap")
+    parser.add_argument("--calibration", default="auto", choices=("auto", "none"),
+                        help="the localization's camera: auto (raf calibrate on a calibration drive first, default) "
+                             "or none (the robot file's nominal camera: shorter)")
 
 
 def _choice(text: str, allowed, option: str) -> list[str]:
@@ -129,12 +133,15 @@ def measure_speed(simulator: str, field: str, out_dir: Path | None, k: int) -> l
     return [speed.run(experiment_args(speed, field, "--simulator", simulator, "--no-lockstep"), None)]
 
 
-def measure_localization(simulator: str, field: str, out_dir: Path | None, k: int, route: str) -> list[dict]:
+def measure_localization(simulator: str, field: str, out_dir: Path | None, k: int, route: str,
+                         calibration: str = "auto") -> list[dict]:
     from . import localization as loc
 
     sub = out_dir / f"localization_{simulator}_{k}" if out_dir else None
+    # the stand-in's wheels as SimTwo's scene builds them (no extra calibration error: SimTwo has none either)
     args = experiment_args(loc, field, "--simulator", simulator, "--route", route, "--laps", "1", "--no-rviz",
-                           "--no-tf-tree")
+                           "--no-tf-tree", "--calibration", calibration,
+                           *(["--wheel-error", "0,0"] if simulator == "standin" else []))
     res = loc.run(args, sub)
     prefix = f"{loc.REAL if simulator == 'simtwo' else 'simtwo'}_"
     out = {}
@@ -149,7 +156,7 @@ def measure_localization(simulator: str, field: str, out_dir: Path | None, k: in
 def measure_competition(simulator: str, field: str, out_dir: Path | None, rounds: list[int], seeds: int) -> list[dict]:
     from .competition import _full_job
 
-    return [_full_job(r, s, out_dir, False, None, simulator) for r in rounds for s in range(seeds)]
+    return [_full_job(r, s, out_dir, False, field, simulator) for r in rounds for s in range(seeds)]
 
 
 # ------------------------------------------------------------------------------------------ the table
@@ -206,7 +213,9 @@ def run(args, out_dir: Path | None) -> dict:
     field = getattr(args, "field", None)
     from ..field import DEFAULT_FIELD
 
-    field = field or DEFAULT_FIELD
+    from ..simtwo_linux.scene import field_for_simtwo
+
+    field = field_for_simtwo(field or DEFAULT_FIELD)  # both on SimTwo's scene's field (simtwo2022)
     values: dict = {}
     timing: dict = {}
     for part in parts:
@@ -220,14 +229,15 @@ def run(args, out_dir: Path | None) -> dict:
                 for k in range(args.repeats):
                     print(f"[compare] {part} on {sim}: run {k + 1} of {args.repeats}", flush=True)
                     if part == "localization":
-                        got += measure_localization(sim, field, out_dir, k, args.route)
+                        got += measure_localization(sim, field, out_dir, k, args.route, args.calibration)
                     else:
                         got += {"drive": measure_drive, "speed": measure_speed}[part](sim, field, out_dir, k)
             values.setdefault(part, {})[sim] = got
             timing[f"{part}_{sim}_wall_s"] = round(time.monotonic() - t0, 1)
     out = summarise(values, parts, sims)
     out.update(timing)
-    out["stand_in_mode"] = "raf sim defaults (SimTwo-like), free-running (no lockstep) in every part"
+    out["stand_in_mode"] = ("raf sim defaults (SimTwo-like), free-running (no lockstep) in every part, field "
+                            f"{field}, no added wheel error")
     text = table(out, parts, sims)
     print(text, flush=True)
     if out_dir is not None:
