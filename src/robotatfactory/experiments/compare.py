@@ -17,9 +17,12 @@ Per figure: ``{figure}_{simulator}_min/_median/_max``, the difference of the med
 the larger of the two ranges (``_spread``) and ``_beyond_spread``: the difference is larger than that spread
 (with one run per simulator there is no spread: every difference counts). Every key says which simulator
 produced it. Like with like: both on SimTwo's field (``simtwo2022``), both free-running, the stand-in in its
-default (SimTwo-like) mode and with SimTwo's wheels (the localization's added wheel error off). The real SimTwo needs about one core and
-runs in real time: the whole comparison takes about an hour with the defaults; ``--parts`` and ``--repeats``
-make it shorter (the suite runs ``--parts drive,speed,competition --repeats 1 --seeds 1``).
+default (SimTwo-like) mode and with SimTwo's wheels (the localization's added wheel error off). The ROS
+experiments run as processes of their own (``raf experiment NAME --out DIR``: a ROS 1 node is initialised once
+per process); a failed run is counted (``failed_runs``, ``failures``) and the comparison goes on. The real
+SimTwo needs about one core and runs in real time: the whole comparison takes about an hour with the defaults;
+``--parts``, ``--repeats`` and ``--calibration none`` make it shorter (the suite runs ``--repeats 1 --seeds 1
+--calibration none``: tests/test_simtwo_compare.py).
 """
 from __future__ import annotations
 
@@ -126,23 +129,41 @@ def measure_drive(simulator: str, field: str, out_dir: Path | None, k: int) -> l
     return [drive.one_run(simulator)]
 
 
-def measure_speed(simulator: str, field: str, out_dir: Path | None, k: int) -> list[dict]:
-    from . import speed
+def run_experiment(name: str, field: str, out: Path, *argv: str, timeout: float = 3600.0) -> dict:
+    """``raf experiment NAME ARGV --out OUT`` in a process of its own (a ROS 1 node can be initialised once per
+    process: each experiment gets a fresh one); its results.json. A failed run raises RuntimeError with the
+    end of its output."""
+    import json
+    import subprocess
 
+    from ..ros.processes import raf_cmd
+
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "experiment.log"
+    with open(log, "w") as f:
+        proc = subprocess.run(raf_cmd("--field", field, "experiment", name, *argv, "--out", str(out)), stdout=f,
+                              stderr=subprocess.STDOUT, timeout=timeout)
+    try:
+        return json.loads((out / "results.json").read_text())
+    except (OSError, ValueError):
+        tail = log.read_text(errors="replace").strip().splitlines()[-3:]
+        raise RuntimeError(f"raf experiment {name} failed (exit {proc.returncode}): {' | '.join(tail)}") from None
+
+
+def measure_speed(simulator: str, field: str, out_dir: Path, k: int) -> list[dict]:
     # free-running on both: SimTwo cannot wait for a reply (the stand-in's lockstep is an idealisation)
-    return [speed.run(experiment_args(speed, field, "--simulator", simulator, "--no-lockstep"), None)]
+    return [run_experiment("speed", field, out_dir / f"speed_{simulator}_{k}", "--simulator", simulator,
+                           "--no-lockstep")]
 
 
-def measure_localization(simulator: str, field: str, out_dir: Path | None, k: int, route: str,
+def measure_localization(simulator: str, field: str, out_dir: Path, k: int, route: str,
                          calibration: str = "auto") -> list[dict]:
     from . import localization as loc
 
-    sub = out_dir / f"localization_{simulator}_{k}" if out_dir else None
     # the stand-in's wheels as SimTwo's scene builds them (no extra calibration error: SimTwo has none either)
-    args = experiment_args(loc, field, "--simulator", simulator, "--route", route, "--laps", "1", "--no-rviz",
-                           "--no-tf-tree", "--calibration", calibration,
-                           *(["--wheel-error", "0,0"] if simulator == "standin" else []))
-    res = loc.run(args, sub)
+    res = run_experiment("localization", field, out_dir / f"localization_{simulator}_{k}", "--simulator", simulator,
+                         "--route", route, "--laps", "1", "--no-rviz", "--no-tf-tree", "--calibration", calibration,
+                         *(["--wheel-error", "0,0"] if simulator == "standin" else []))
     prefix = f"{loc.REAL if simulator == 'simtwo' else 'simtwo'}_"
     out = {}
     for key, v in res.items():
@@ -216,26 +237,36 @@ def run(args, out_dir: Path | None) -> dict:
     from ..simtwo_linux.scene import field_for_simtwo
 
     field = field_for_simtwo(field or DEFAULT_FIELD)  # both on SimTwo's scene's field (simtwo2022)
+    import tempfile
+
+    work = out_dir if out_dir is not None else Path(tempfile.mkdtemp(prefix="raf-compare-"))
     values: dict = {}
     timing: dict = {}
+    failures: list[str] = []
     for part in parts:
         for sim in sims:
             t0 = time.monotonic()
             got: list[dict] = []
             if part == "competition":
                 print(f"[compare] {part} on {sim}: rounds {rounds}, {args.seeds} seed(s)", flush=True)
-                got = measure_competition(sim, field, out_dir, rounds, args.seeds)
+                got = measure_competition(sim, field, work, rounds, args.seeds)
             else:
                 for k in range(args.repeats):
                     print(f"[compare] {part} on {sim}: run {k + 1} of {args.repeats}", flush=True)
-                    if part == "localization":
-                        got += measure_localization(sim, field, out_dir, k, args.route, args.calibration)
-                    else:
-                        got += {"drive": measure_drive, "speed": measure_speed}[part](sim, field, out_dir, k)
+                    try:
+                        if part == "localization":
+                            got += measure_localization(sim, field, work, k, args.route, args.calibration)
+                        else:
+                            got += {"drive": measure_drive, "speed": measure_speed}[part](sim, field, work, k)
+                    except Exception as e:  # noqa: BLE001 - a failed run is reported, the comparison goes on
+                        failures.append(f"{part} on {sim}, run {k + 1}: {type(e).__name__}: {e}")
+                        print(f"[compare] {failures[-1]}", flush=True)
             values.setdefault(part, {})[sim] = got
             timing[f"{part}_{sim}_wall_s"] = round(time.monotonic() - t0, 1)
     out = summarise(values, parts, sims)
     out.update(timing)
+    out["failed_runs"] = len(failures)
+    out["failures"] = "; ".join(failures)
     out["stand_in_mode"] = ("raf sim defaults (SimTwo-like), free-running (no lockstep) in every part, field "
                             f"{field}, no added wheel error")
     text = table(out, parts, sims)
