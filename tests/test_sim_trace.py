@@ -47,6 +47,8 @@ def test_trace_follows_the_run_and_the_run_ends_after_the_maximum(field, robot, 
     mid = trace.pose_at((a.t + b.t) / 2)
     assert mid[0] == pytest.approx((a.pose[0] + b.pose[0]) / 2)
     assert trace.pose_at(rec[-1].t + 1.0) is None and trace.pose_at(rec[10].t) == rec[10].pose
+    # a stamp a rounding error past the last cycle (the trace keeps 4 decimals) or before the first: their poses
+    assert trace.pose_at(rec[-1].t + 5e-10) == rec[-1].pose and trace.pose_at(rec[0].t - 5e-10) == rec[0].pose
 
 
 def test_a_trace_cut_short_keeps_its_records_and_bad_lines_are_named(tmp_path):

@@ -25,14 +25,15 @@ SAME = {
     "spin_fast_truth_over_odom_turn": 0.025,  # 1.020-1.021 vs 1.004-1.024 (one disturbed SimTwo run: 1.004)
     "odom_error_mm_per_m": 20.0,  # 25-28 vs 20-24 mm/m
     "speed_rmse_mps": 12.0,  # mm/s
-    "ekf_position_rmse_m": 8.0,  # mm
-    "ekf_heading_rmse_deg": 1.0,
+    "ekf_position_rmse_m": 8.0,  # mm: 0.37 vs 2.2 with the nominal camera
+    "ekf_heading_rmse_deg": 1.5,  # 0.16 vs 0.80 deg with the nominal camera
 }
 #: figure -> (stand-in's range, SimTwo's range): named differences, each side within its own measured range
 NAMED = {
     "replies_applied_share": ((0.95, 1.0), (0.40, 0.85)),  # SimTwo's GUI loop under software GL: docs/simtwo.md
     "straight_odom_over_truth": ((1.0, 1.035), (0.99, 1.01)),  # the stand-in's slip from rest (~2 %)
-    "points": ((4, 4), (1, 4)),  # round 1 (4 parts): the agent on SimTwo, docs/simtwo.md
+    "points": ((4, 4), (0, 4)),  # round 1: the stand-in scores the maximum; the agent on SimTwo: docs/simtwo.md
+    "picks_attempted": ((4, 6), (2, 40)),  # SimTwo: the agent gets the first part at least, then retries
 }
 
 

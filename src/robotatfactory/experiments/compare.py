@@ -81,7 +81,9 @@ COMPETITION_FIGURES = (
     ("points", "round points", "-", 1.0),
     ("max_score", "maximum score reached (1 = yes)", "-", 1.0),
     ("last_score_s", "last scoring delivery", "s", 1.0),
+    ("picks_attempted", "picks attempted", "-", 1.0),
     ("pick_failures", "failed picks", "-", 1.0),
+    ("parts_knocked_out", "parts knocked out of a slot", "-", 1.0),
     ("pose_error_docking_max_m", "pose error while docking, max", "mm", 1000.0),
 )
 FIGURES = {"drive": DRIVE_FIGURES, "speed": SPEED_FIGURES, "localization": LOCALIZATION_FIGURES,

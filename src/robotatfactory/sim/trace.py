@@ -97,6 +97,8 @@ class Trace:
         i = bisect.bisect_left(times, t)
         if i < len(rec) and abs(times[i] - t) < 1e-9:
             return rec[i].pose
+        if i == 0 or i == len(rec):  # within the tolerance just outside the first or the last cycle
+            return rec[0].pose if i == 0 else rec[-1].pose
         a, b = rec[i - 1], rec[i]
         u = (t - a.t) / (b.t - a.t)
         dth = wrap_angle(b.pose[2] - a.pose[2])
