@@ -84,6 +84,19 @@ def _apply_overlay(base: dict, overlay: dict) -> dict:
         if bad:
             raise FieldError(f"field overlay: marker {mid}: unknown keys {sorted(bad)}")
         m.update(values)
+    # markers the base has and this field does not show (e.g. SimTwo's mirrored 62-65: no detector finds them)
+    gone = {int(i) for i in overlay.get("remove_ids", [])}
+    if gone - set(by_id):
+        raise FieldError(f"field overlay removes markers {sorted(gone - set(by_id))}, which the base field lacks")
+    raw["markers"] = [m for m in raw["markers"] if m["id"] not in gone]
+    slots = {f"{s['zone']}_{s['number']}": s for s in raw["slots"]}
+    for name, values in overlay.get("slot_overrides", {}).items():
+        if name not in slots:
+            raise FieldError(f"field overlay overrides slot {name!r}, which the base field lacks")
+        bad = set(values) - {"xy", "facing_deg"}
+        if bad:
+            raise FieldError(f"field overlay: slot {name!r}: unknown keys {sorted(bad)}")
+        slots[name].update(values)
     boxes = {b["name"]: b for b in raw["static_boxes"]}
     for name, values in overlay.get("box_overrides", {}).items():
         if name not in boxes:
