@@ -23,6 +23,8 @@ installed into a fresh copy of the scene (docs/simtwo.md, "SimTwo on Linux").
                                                        frames to 127.0.0.1:9810, camera tcp 9899) until Ctrl-C
   raf simtwo run --free-ports                          free ports (printed), for a run beside others
   raf simtwo info                                      where the build is, its patches, the tools
+  raf simtwo field                                     what SimTwo built (walls, markers, slots, start pose,
+                                                       read back from SimTwo) against the simtwo2022 field
 
 Then: raf --field simtwo2022 bridge (the same ports), or raf up --simulator simtwo for the whole stack."""
 
@@ -62,6 +64,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--keep", metavar="DIR", help="run in DIR, a new or empty folder, and keep it (the scene copy, "
                                                  "simtwo.log, xvfb.log)")
     sub.add_parser("info", help="the build's folder, patches and tools")
+    f = sub.add_parser("field", help="what SimTwo built against the field model (one SimTwo start)",
+                       description="Run simtwo/linux/field_dump.pas in SimTwo's scene: every obstacle SimTwo built, "
+                                   "the robots' start poses, a part set down at each slot, LIDAR sweeps and camera "
+                                   "frames in front of the warehouses and machines; compare them with the field "
+                                   "model (simtwo2022 unless --field names another) and list each difference "
+                                   "with its size. Exit 1 when there are differences beyond the tolerances.")
+    f.add_argument("--keep", metavar="DIR", help="run in DIR, a new or empty folder, and keep it")
 
 
 def _progress(msg: str) -> None:
@@ -94,7 +103,30 @@ def run(args) -> int:
         for p in b.patches():
             print(f"patch:   {p.parent.name}/{p.name}")
         return 0
+    if args.action == "field":
+        return _field(args, b)
     return _run(args, b)
+
+
+def _field(args, b) -> int:
+    from pathlib import Path
+
+    from ..field import load_field
+    from ..simtwo_linux import fielddump
+    from ..simtwo_linux.run import SimTwoError
+    from ..simtwo_linux.scene import field_for_simtwo
+
+    build = b.require()
+    fld = load_field(field_for_simtwo(args.field))
+    try:
+        dump = fielddump.run_dump(fld, build, keep=Path(args.keep) if args.keep else None, progress=_progress)
+    except (SimTwoError, TimeoutError) as e:
+        print(f"raf simtwo field: {e}", flush=True)
+        return 1
+    rep = fielddump.compare(dump, fld, fielddump.scene_dir(build))
+    print(f"field {fld.name} against SimTwo's {fielddump.DEFAULT_SCENE}:")
+    print(fielddump.format_report(rep), flush=True)
+    return 1 if rep.differences else 0
 
 
 def _sigterm(_sig, _frame):
