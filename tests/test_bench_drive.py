@@ -46,3 +46,23 @@ def test_standin_drive_one_short_run():
     # SimTwo turns 2.1 % more on the spot than its encoders say; the stand-in does so by default
     assert 1.01 <= r["spin_truth_over_odom_turn"] <= 1.035
     assert r["clearance_min_m"] > 0.005
+
+
+def test_standin_carry_one_short_run():
+    """Pick and carry on the stand-in: Part1 placed in front of the magnet through the control channel, pulled
+    in, carried through a straight and a fast half turn on the spot and straight on; figures from the frames'
+    Parts. (SimTwo's figures on the whole carry drive: docs/benchmarks.md.)"""
+    S = drive.Segment
+    plan = (S("settle", 2.8, 0, 0), S("straight", 1.0, 0.2, 0), S("pause", 0.5, 0, 0),
+            S("spin_fast", math.pi / 1.5, 0, -1.5), S("after_spin", 1.0, 0.2, 0), S("stop", 0.5, 0, 0))
+    r = drive.one_run("standin", camera=False, plan=plan, carry=True)
+    print({k: round(v, 4) for k, v in r.items() if "part" in k or "carry" in k or "clearance" in k})
+    assert r["carry_gripped"] == 1.0 and 0.0 < r["carry_pull_in_s"] < 1.0  # pulled in from 12 mm off the face
+    # the plate against the face: 2 mm beyond held_x (the 2 mm plate); SimTwo's sits at 7 mm (its face 5 mm further on)
+    assert r["carry_grip_along_mm"] == pytest.approx(2.0, abs=0.5)
+    assert abs(r["carry_grip_across_mm"]) < 1.0 and abs(r["carry_grip_rot_deg"]) < 0.5
+    assert r["straight_part_across_max_mm"] < 1.0  # a straight moves nothing
+    # the fast half turn slides it along the face (SimTwo: 5-8 mm on the whole drive) but does not turn it
+    assert 2.0 < r["spin_fast_part_across_max_mm"] < 12.0 and r["carry_part_rot_max_deg"] < 3.0
+    assert r["carry_part_along_max_mm"] < 4.0 and r["carry_lost"] == 0.0 and "carry_lost_at_s" not in r
+    assert r["clearance_min_m"] > 0.01 and r["carry_part_clearance_min_m"] > 0.01

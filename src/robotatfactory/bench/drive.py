@@ -26,6 +26,20 @@ Figures, flat, with units; ``run`` gives min / median / max over ``--repeats``:
 - odometry (the encoders' totals through DiffDriveOdometry) against the ground truth, per segment: distance
   ratio for straights, turn error, position error per metre driven, for turns on the spot the truth's turn
   over the encoders'; and over the whole drive.
+
+``--carry`` (:func:`carry_drive`, ``one_run(carry=True)``): pick and carry, the same segments with a part on the
+magnet. The robot starts 75 mm east of the scene's start pose (:data:`CARRY_START`; the stand-in: ``--start-pose``,
+SimTwo: a teleport of the robot), so that the held part's outline stays on the board and clear of the ribs
+through both spins. During the longer settle, Part1 is teleported (SimTwo: the Command's teleport labels,
+TpTarget ``Part1``, as the bridge's ``sim/place_part`` does; the stand-in: its control channel's
+``place_part``, as the bridge does there) :data:`CARRY_GAP_M` short of where a held part sits, plate towards the
+robot, and the magnet is switched on (S = 1) in the same reply; it stays on to the end. From the frames'
+``Parts`` (part 1, SimTwo's heading: the plate's + pi/2) and the robot's ground truth, per segment and over the
+carry (settle's end -> stop's end): the part's offset from where a held part sits (``held_x`` = the magnet's
+face + the part's depth / 2 ahead of base_link, as ``competition/live.py``), along and across (mm), its rotation
+against the robot (deg), max and final; lost = more than :data:`CARRY_LOST_M` from the held position
+(``carry_lost`` 0/1, ``carry_lost_at_s`` after settle's end). The robot's and the part's outlines' clearance of the
+field's boxes, the other parts and the board's edge (the part's feet) over the drive.
 """
 from __future__ import annotations
 
@@ -55,6 +69,17 @@ V = 0.2  # m/s on straights and arcs
 ARC_W = 0.5  # rad/s on arcs: radius 0.4 m
 SPIN_SLOW, SPIN_FAST = 0.5, 1.5  # rad/s, turns on the spot
 STATUS_EVERY = 125  # control.pas's status line every 125 cycles (5 s)
+# the carry: start 75 mm east of the scene's start pose (-0.725, -0.4): a held part reaches 0.15 m from the axle,
+# and the fast spin (clockwise, through west) would take its feet off the board's west edge (x = -0.84)
+CARRY_START = (-0.65, -0.4, math.pi / 2)
+CARRY_PART = 1  # SimTwo's Part1 (incoming slot 1), SensorFrame.parts[0]
+# the part is placed this far beyond the held position, plate towards the robot: SimTwo's solenoid face is 5 mm
+# further ahead than the stand-in's and its plate 0.5 mm thicker (measured: a part held 7 mm beyond held_x, the
+# stand-in's 2 mm), so at 6 mm SimTwo's plate overlapped the face by 1.5 mm and ODE threw the part away at
+# 0.3 m/s; at 12 mm it is 5 mm (SimTwo) or 10 mm (stand-in) clear of the face, within the ray's 15 mm beyond it
+CARRY_GAP_M = 0.012
+CARRY_PLACE_S = 1.5  # s after the first frame: the part's teleport and the magnet on (the robot at rest by then)
+CARRY_LOST_M = 0.025  # m from the held position: lost
 
 
 @dataclass(frozen=True)
@@ -86,34 +111,63 @@ def default_drive() -> tuple[Segment, ...]:
             Segment("stop", 1.5, 0, 0))
 
 
+def carry_drive() -> tuple[Segment, ...]:
+    """:func:`default_drive` with a longer settle (the part is placed at CARRY_PLACE_S and pulled in), from
+    CARRY_START: the same segments, 75 mm further east."""
+    plan = default_drive()
+    return (Segment("settle", 4.0, 0, 0),) + plan[1:]
+
+
 # ------------------------------------------------------------------------------------------ the simulators
 class _StandIn:
     """``raf sim`` as a subprocess: real time, free running, SimTwo-like defaults, field simtwo2022."""
 
     status_re = re.compile(r"sent (\d+) cmd \d+ applied (\d+)")
 
-    def __init__(self, camera: bool, seed: int = 0, extra: tuple = ()):
+    def __init__(self, camera: bool, seed: int = 0, extra: tuple = (), carry: bool = False):
         from ..proc import free_port
 
-        self.camera, self.seed, self.extra = camera, seed, tuple(extra)
+        self.camera, self.seed, self.extra, self.carry = camera, seed, tuple(extra), carry
         self.bridge_port = free_port(socket.SOCK_DGRAM)
         self.camera_port = free_port()
+        self.control_port = free_port(socket.SOCK_DGRAM) if carry else None
         self.tmp = Path(tempfile.mkdtemp(prefix="raf-bench-drive-"))
         self.proc: subprocess.Popen | None = None
         self.ready_s = None
+        self.placed: dict | None = None  # the control channel's answer to place_part
 
     def start(self) -> None:
         from ..proc import free_port
 
         cmd = [sys.executable, "-m", "robotatfactory", "--field", FIELD, "sim", "--realtime",
                "--port", str(free_port(socket.SOCK_DGRAM)), "--bridge", f"127.0.0.1:{self.bridge_port}",
-               "--no-server", "--no-control", "--seed", str(self.seed), "--status-every", "1", *self.extra]
+               "--no-server", "--seed", str(self.seed), "--status-every", "1"]
+        if self.carry:  # all four parts in their incoming slots, as SimTwo's scene; the control channel places one
+            cmd += ["--control-port", str(self.control_port), "--parts", "BBBB",
+                    "--start-pose=" + ",".join(f"{a:.6f}" for a in CARRY_START)]
+        else:
+            cmd += ["--no-control"]
+        cmd += list(self.extra)
         cmd += ["--camera-bind", f"tcp://127.0.0.1:{self.camera_port}"] if self.camera else ["--no-camera"]
         self._log = open(self.tmp / "sim.log", "wb")
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True)
 
     def log_text(self) -> str:
         return (self.tmp / "sim.log").read_text(errors="replace")
+
+    def place_part(self, pid: int, x: float, y: float, facing: float) -> None:
+        """The bridge's sim/place_part on the stand-in: the control channel's place_part, in a thread (the
+        request waits for the next cycle boundary; the bench's replies must not)."""
+        from ..sim.control import ControlClient
+
+        def place():
+            try:
+                self.placed = ControlClient(("127.0.0.1", self.control_port), timeout=2.0).request(
+                    "place_part", part=pid, x=x, y=y, facing=facing)
+            except ConnectionError as e:
+                self.placed = {"ok": False, "message": str(e)}
+
+        threading.Thread(target=place, daemon=True).start()
 
     def check(self) -> None:
         if self.proc is not None and self.proc.poll() is not None:
@@ -216,13 +270,39 @@ def outline(robot, step: float = 0.005) -> np.ndarray:
                            np.stack([np.full_like(ys, x0), ys], 1), np.stack([np.full_like(ys, x1), ys], 1)])
 
 
-def clearance(field, robot, poses) -> float:
+def part_outline(part, step: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
+    """A part's outline (points every ``step`` m: its body, depth along local x with the plate's side at +x,
+    width along y) and its feet (the body's lower corners, 5 mm in, SimTwo's), in the part's frame with the
+    plate facing +x (the stand-in's ``facing`` convention; SimTwo's heading is facing + pi/2)."""
+    hx, hy = part.depth / 2, part.width / 2
+    xs = np.linspace(-hx, hx, int(math.ceil(2 * hx / step)) + 1)
+    ys = np.linspace(-hy, hy, int(math.ceil(2 * hy / step)) + 1)
+    pts = np.concatenate([np.stack([xs, np.full_like(xs, -hy)], 1), np.stack([xs, np.full_like(xs, hy)], 1),
+                          np.stack([np.full_like(ys, -hx), ys], 1), np.stack([np.full_like(ys, hx), ys], 1)])
+    r = 0.005
+    feet = np.array([(sx * (hx - r), sy * (hy - r)) for sx in (-1, 1) for sy in (-1, 1)])
+    return pts, feet
+
+
+def part_boxes(part, poses) -> list:
+    """Parts at (x, y, facing) as boxes (cx, cy, hx, hy, yaw) for :func:`clearance`'s ``boxes``."""
+    return [(x, y, part.depth / 2, part.width / 2, f) for x, y, f in poses]
+
+
+def clearance(field, robot, poses, boxes=(), shape=None) -> float:
     """The least distance (m) over the poses (x, y, theta) between the robot's outline and any box of the field
     (negative: inside it), or between its floor contacts (the wheels' outer edges, the caster) and the board's
-    edge (SimTwo's field is a 1 mm board with no walls round it: only what touches the floor can leave it)."""
-    pts = outline(robot)
-    y1 = robot.track / 2 + robot.wheel.get("width", 0.0) / 2
-    feet = np.array([(0.0, y1), (0.0, -y1), (robot.caster["x"], 0.0)])
+    edge (SimTwo's field is a 1 mm board with no walls round it: only what touches the floor can leave it).
+    ``boxes``: more obstacles, (cx, cy, hx, hy, yaw) each (other parts: :func:`part_boxes`); ``shape``: (outline,
+    feet) instead of the robot's (a part: :func:`part_outline`, poses with its facing)."""
+    if shape is None:
+        pts = outline(robot)
+        y1 = robot.track / 2 + robot.wheel.get("width", 0.0) / 2
+        feet = np.array([(0.0, y1), (0.0, -y1), (robot.caster["x"], 0.0)])
+    else:
+        pts, feet = shape
+    obstacles = [(b.center[0], b.center[1], b.size[0] / 2, b.size[1] / 2, b.yaw) for b in field.boxes]
+    obstacles += list(boxes)
     best = math.inf
     for x, y, th in poses:
         c, s = math.cos(th), math.sin(th)
@@ -230,11 +310,11 @@ def clearance(field, robot, poses) -> float:
         fx, fy = x + feet[:, 0] * c - feet[:, 1] * s, y + feet[:, 0] * s + feet[:, 1] * c
         best = min(best, float(np.min(fx - field.floor.x[0])), float(np.min(field.floor.x[1] - fx)),
                    float(np.min(fy - field.floor.y[0])), float(np.min(field.floor.y[1] - fy)))
-        for b in field.boxes:
-            bc, bs = math.cos(b.yaw), math.sin(b.yaw)
-            px = (wx - b.center[0]) * bc + (wy - b.center[1]) * bs
-            py = -(wx - b.center[0]) * bs + (wy - b.center[1]) * bc
-            qx, qy = np.abs(px) - b.size[0] / 2, np.abs(py) - b.size[1] / 2
+        for cx, cy, hx, hy, yaw in obstacles:
+            bc, bs = math.cos(yaw), math.sin(yaw)
+            px = (wx - cx) * bc + (wy - cy) * bs
+            py = -(wx - cx) * bs + (wy - cy) * bc
+            qx, qy = np.abs(px) - hx, np.abs(py) - hy
             d = np.where((qx < 0) & (qy < 0), np.maximum(qx, qy), np.hypot(np.maximum(qx, 0), np.maximum(qy, 0)))
             best = min(best, float(np.min(d)))
     return best
@@ -242,8 +322,11 @@ def clearance(field, robot, poses) -> float:
 
 # ------------------------------------------------------------------------------------------ one run
 def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None = None, seed: int = 0,
-            standin_args: tuple = ()) -> dict:
-    """One drive on ``simulator``; the figures of the module's docstring (keys with units)."""
+            standin_args: tuple = (), carry: bool = False, trace: str | Path | None = None) -> dict:
+    """One drive on ``simulator``; the figures of the module's docstring (keys with units). ``carry``: with
+    Part1 on the magnet (:func:`carry_drive` unless ``plan`` is given; its first segment must rest for longer
+    than CARRY_PLACE_S + the pull-in). ``trace``: write every frame's ground truth (robot, parts, encoders,
+    magnet) and segment as JSON Lines there, to look at a run afterwards."""
     import zmq
 
     from ..field import load_field
@@ -251,11 +334,16 @@ def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None 
     from ..localization.odometry import DiffDriveOdometry
     from ..robot import load_robot
     from ..simtwo import Command, SensorFrame
+    from ..simtwo.teleport import SIMTWO_PART_PREFIX, SIMTWO_PART_Z, TeleportSender, part_heading
 
     if simulator not in SIMULATORS:
         raise ValueError(f"simulator {simulator!r}: one of {SIMULATORS}")
-    plan = tuple(plan or default_drive())
-    sim = _StandIn(camera, seed, standin_args) if simulator == "standin" else _SimTwo(camera)
+    plan = tuple(plan or (carry_drive() if carry else default_drive()))
+    if carry and (plan[0].kind != "rest" or plan[0].seconds < CARRY_PLACE_S + 1.0):
+        raise ValueError(f"a carry plan starts with a rest of at least {CARRY_PLACE_S + 1.0} s")
+    sim = _StandIn(camera, seed, standin_args, carry) if simulator == "standin" else _SimTwo(camera)
+    # SimTwo: the teleports (the robot to CARRY_START, then Part1) ride on the replies, as the bridge sends them
+    teleports = TeleportSender() if carry and simulator == "simtwo" else None
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", sim.bridge_port))
     sock.settimeout(2.0)
@@ -281,6 +369,8 @@ def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None 
     out: dict = {}
     frames = []  # (arrival, SensorFrame)
     marks: dict[str, tuple] = {}  # segment -> (odometry pose, truth pose, unwrapped yaws, truth path) at its end
+    ends: dict[str, int] = {}  # segment -> the index in frames of its last frame
+    magnet, placed = False, None  # the carry: the magnet's command; (sim time, x, y, facing) of the part's teleport
     yaw = [0.0, 0.0]
     path = 0.0
     last = None
@@ -302,10 +392,16 @@ def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None 
             out["streaming_s"] = sim.ready_s
         status0 = len(sim.status())
         seg_end, i = time.monotonic() + plan[0].seconds, 0
+        if teleports is not None:
+            teleports.request(*CARRY_START)
         while i < len(plan):
             f = SensorFrame.decode(data)
             now = time.monotonic()
             frames.append((now, f))
+            if (carry and placed is None and f.time - frames[0][1].time >= CARRY_PLACE_S
+                    and (teleports is None or math.hypot(f.x - CARRY_START[0], f.y - CARRY_START[1]) < 0.02)):
+                placed = _place_carried(sim, teleports, robot, f, SIMTWO_PART_Z, SIMTWO_PART_PREFIX, part_heading)
+                magnet = True
             o = odo.update(f.enc_total[0], f.enc_total[1], f.time)
             pose_o, pose_g = (o.x, o.y, o.theta), (f.x, f.y, f.theta)
             if last is not None:
@@ -314,12 +410,17 @@ def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None 
                 path += math.hypot(pose_g[0] - last[1][0], pose_g[1] - last[1][1])
             last = (pose_o, pose_g)
             if now >= seg_end:
+                if carry and placed is None:
+                    raise RuntimeError(f"{simulator}: the robot not at the carry's start {CARRY_START[:2]} by the "
+                                       f"end of {plan[0].name} but at ({f.x:.3f}, {f.y:.3f}): no teleport support?")
                 marks[plan[i].name] = (pose_o, pose_g, tuple(yaw), path)
+                ends[plan[i].name] = len(frames) - 1
                 i += 1
                 if i < len(plan):
                     seg_end += plan[i].seconds
             seg = plan[min(i, len(plan) - 1)]
-            sock.sendto(Command(seg.v, seg.w, False, f.seq).encode(), addr)
+            reply = Command(seg.v, seg.w, magnet, f.seq).encode()
+            sock.sendto(reply + teleports.labels() if teleports is not None else reply, addr)
             if i < len(plan):
                 data, addr = sock.recvfrom(65535)
         # the replies-applied share from the simulator's status lines (at least two after the drive began)
@@ -336,10 +437,120 @@ def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None 
         stop.set()
         sock.close()
         sim.stop()
+    field = load_field(FIELD)
+    if trace is not None:
+        _write_trace(trace, frames, plan, ends)
     out.update(_rates(frames, cam_times, camera))
-    out.update(_lidar(frames, robot, load_field(FIELD), plan, marks))
+    out.update(_lidar(frames, robot, field, plan, marks, carry))
     out.update(_odometry(plan, marks))
-    out["clearance_min_m"] = clearance(load_field(FIELD), robot, [(f.x, f.y, f.theta) for _, f in frames[::5]])
+    poses = [(f.x, f.y, f.theta) for _, f in frames[::5]]
+    if not carry:
+        out["clearance_min_m"] = clearance(field, robot, poses)
+        return out
+    if simulator == "standin" and not (sim.placed or {}).get("ok"):
+        raise RuntimeError(f"the stand-in did not place part {CARRY_PART}: {sim.placed}")
+    # the other parts where they stood at the start (as obstacles); the carried one from the frames
+    others = [(x, y, th - math.pi / 2) for k, (x, y, th) in enumerate(frames[0][1].parts) if k != CARRY_PART - 1]
+    obstacles = part_boxes(field.part, others)
+    start = ends[plan[0].name]
+    out["clearance_min_m"] = clearance(field, robot, poses[start // 5:], obstacles)
+    out["carry_part_clearance_min_m"] = clearance(
+        field, robot, [(p[0], p[1], p[2] - math.pi / 2) for _, f in frames[start::5] for p in f.parts[:1]],
+        obstacles, part_outline(field.part))
+    out.update(_carry(frames, plan, ends, robot, field, placed))
+    return out
+
+
+def _write_trace(path, frames, plan, ends) -> None:
+    import json
+
+    seg_of = []
+    for s in plan:
+        seg_of += [s.name] * (ends.get(s.name, len(frames) - 1) + 1 - len(seg_of))
+    with open(path, "w", encoding="utf-8") as fh:
+        for k, (wall, f) in enumerate(frames):
+            fh.write(json.dumps({"seq": f.seq, "t": f.time, "wall": round(wall - frames[0][0], 4),
+                                 "seg": seg_of[k] if k < len(seg_of) else plan[-1].name,
+                                 "pose": [f.x, f.y, f.theta], "enc": list(f.enc_total), "magnet": f.magnet,
+                                 "contact": f.contact, "parts": [list(p) for p in f.parts]}) + "\n")
+
+
+def _place_carried(sim, teleports, robot, f, part_z, prefix, part_heading):
+    """Put the carried part CARRY_GAP_M short of where a held part sits in front of the robot's ground truth
+    ``f`` (a SensorFrame), plate towards the robot: SimTwo by a teleport in the next replies, the stand-in by its
+    control channel. Returns (sim time, x, y, facing)."""
+    from ..field import load_field
+
+    d = held_x(robot, load_field(FIELD)) + CARRY_GAP_M
+    x, y, facing = f.x + d * math.cos(f.theta), f.y + d * math.sin(f.theta), f.theta + math.pi
+    if teleports is not None:
+        teleports.request(x, y, part_heading(facing), part_z, f"{prefix}{CARRY_PART}")
+    else:
+        sim.place_part(CARRY_PART, x, y, math.remainder(facing, 2 * math.pi))
+    return f.time, x, y, facing
+
+
+def held_x(robot, field) -> float:
+    """Where a held part's centre sits, m ahead of base_link: the magnet's face + the part's depth / 2 (as
+    competition/live.py's LiveReferee.held_x)."""
+    return float(robot.electromagnet["x"]) + field.part.depth / 2
+
+
+def carry_offsets(frames, robot, field) -> np.ndarray:
+    """Per frame: sim time (s), the carried part's offset from the held position along and across the robot
+    (m, in base_link), its rotation against the robot (rad; 0: plate flat on the face), and its distance from the
+    held position (m). From the SensorFrame's ground truth and Parts (SimTwo's heading: the plate's + pi/2)."""
+    hx = held_x(robot, field)
+    rows = []
+    for _, f in frames:
+        if len(f.parts) < CARRY_PART:
+            rows.append((f.time, np.nan, np.nan, np.nan, np.nan))
+            continue
+        px, py, ph = f.parts[CARRY_PART - 1]
+        c, s = math.cos(f.theta), math.sin(f.theta)
+        dx, dy = px - f.x, py - f.y
+        along, across = dx * c + dy * s - hx, -dx * s + dy * c
+        rot = math.remainder((ph - math.pi / 2) - (f.theta + math.pi), 2 * math.pi)
+        rows.append((f.time, along, across, rot, math.hypot(along, across)))
+    return np.array(rows, dtype=float)
+
+
+def _carry(frames, plan, ends, robot, field, placed) -> dict:
+    """The carry's figures (module docstring): the grip at settle's end, per segment and over the carry."""
+    a = carry_offsets(frames, robot, field)
+    t, along, across, rot, dist = a.T
+    out = {}
+    i0 = ends[plan[0].name]
+    k = np.flatnonzero(t >= placed[0])
+    # pulled in: the first frame from which the part stays within 1 mm (along) of where it rests at settle's end
+    after = np.arange(k[0], i0 + 1)
+    off = np.abs(along[after] - along[i0]) > 0.001
+    out["carry_pull_in_s"] = float(t[after[np.flatnonzero(off)[-1] + 1]] - placed[0]) if off.any() else 0.0
+    out["carry_grip_along_mm"] = 1000 * float(along[i0])
+    out["carry_grip_across_mm"] = 1000 * float(across[i0])
+    out["carry_grip_rot_deg"] = math.degrees(float(rot[i0]))
+    out["carry_gripped"] = float(dist[i0] < 0.01)
+
+    def figures(prefix, lo, hi):
+        sl = slice(lo + 1, hi + 1)
+        out[f"{prefix}_part_along_max_mm"] = 1000 * float(np.nanmax(np.abs(along[sl])))
+        out[f"{prefix}_part_across_max_mm"] = 1000 * float(np.nanmax(np.abs(across[sl])))
+        out[f"{prefix}_part_rot_max_deg"] = math.degrees(float(np.nanmax(np.abs(rot[sl]))))
+        out[f"{prefix}_part_along_mm"] = 1000 * float(along[hi])
+        out[f"{prefix}_part_across_mm"] = 1000 * float(across[hi])
+        out[f"{prefix}_part_rot_deg"] = math.degrees(float(rot[hi]))
+
+    names = [s.name for s in plan]
+    for prev, seg in zip(names[:-1], names[1:]):
+        figures(seg, ends[prev], ends[seg])
+    figures("carry", i0, ends[names[-1]])
+    lost = np.flatnonzero(dist[i0 + 1:ends[names[-1]] + 1] > CARRY_LOST_M)
+    out["carry_lost"] = float(lost.size > 0)
+    if lost.size:
+        j = i0 + 1 + int(lost[0])
+        out["carry_lost_at_s"] = float(t[j] - t[i0])
+        seg = next(n for n in names[1:] if ends[n] >= j)
+        out[f"carry_lost_in_{seg}"] = 1.0
     return out
 
 
@@ -373,8 +584,10 @@ def _rates(frames, cam_times, camera: bool) -> dict:
     return out
 
 
-def _lidar(frames, robot, field, plan, marks) -> dict:
-    """Sweeps per second, self hits per sweep, range error against the field's boxes at the truth pose."""
+def _lidar(frames, robot, field, plan, marks, carry: bool = False) -> dict:
+    """Sweeps per second, self hits per sweep, range error against the field's boxes at the truth pose.
+    ``carry``: returns in front of the magnet where the held part stands (even turned by 30 deg) are left out of
+    the error."""
     from ..sim.sensors import simtwo_ray_steps
     from ..simtwo.selfhits import Footprint
 
@@ -413,6 +626,9 @@ def _lidar(frames, robot, field, plan, marks) -> dict:
         oy = y + lid.xyz[0] * np.sin(th) + lid.xyz[1] * np.cos(th)
         expect = cast(boxes, ox, oy, np.cos(th + angles), np.sin(th + angles))
         use = ok & ~fp.contains(hx, hy) & np.isfinite(expect) & (expect < 1.5)
+        if carry:
+            ex, part = float(robot.electromagnet["x"]), field.part
+            use &= ~((hx > ex - 0.01) & (hx < ex + part.depth + 0.05) & (np.abs(hy) < part.width / 2 + 0.025))
         err = (r - expect)[use]
         at_rest = any(a <= tr[0] and tr[-1] <= b for a, b in rest_spans)
         (err_rest if at_rest else err_moving).append(err)
@@ -469,6 +685,11 @@ def add_arguments(parser) -> None:
                              "others measure SimTwo too)")
     parser.add_argument("--repeats", type=int, default=2, help="runs (default 2)")
     parser.add_argument("--no-camera", action="store_true", help="without the camera")
+    parser.add_argument("--carry", action="store_true",
+                        help="pick and carry: Part1 teleported in front of the magnet, switched on, the same "
+                             "segments from 75 mm further east; adds the part's offset, rotation and losses")
+    parser.add_argument("--trace-dir", default=None, metavar="DIR",
+                        help="write each run's frames (ground truth, parts, encoders) to DIR/drive_<sim>_<k>.jsonl")
     parser.add_argument("--sim-arg", action="append", default=[], metavar="ARG",
                         help="an extra argument for raf sim (stand-in only; repeat, e.g. --sim-arg=--pid-timing "
                              "--sim-arg=scene_enabled)")
@@ -486,10 +707,25 @@ def summarise(runs: list[dict], head: dict) -> dict:
     return out
 
 
+def _trace_path(args, k: int):
+    if not getattr(args, "trace_dir", None):
+        return None
+    d = Path(args.trace_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    return d / f"{'carry' if args.carry else 'drive'}_{args.simulator}_{k + 1}.jsonl"
+
+
 def run(args) -> dict:
     runs = []
     for k in range(args.repeats):
         print(f"[bench drive] {args.simulator}: run {k + 1} of {args.repeats}", flush=True)
-        runs.append(one_run(args.simulator, not args.no_camera, seed=k, standin_args=tuple(args.sim_arg)))
-    return summarise(runs, {"simulator": args.simulator, "camera": not args.no_camera,
+        runs.append(one_run(args.simulator, not args.no_camera, seed=k, standin_args=tuple(args.sim_arg),
+                            carry=args.carry, trace=_trace_path(args, k)))
+        if args.carry:
+            r = runs[-1]
+            lost = [n[len("carry_lost_in_"):] for n in r if n.startswith("carry_lost_in_")]
+            print(f"[bench drive]   carry: grip along {r['carry_grip_along_mm']:.1f} mm, max across "
+                  f"{r['carry_part_across_max_mm']:.1f} mm, max rotation {r['carry_part_rot_max_deg']:.1f} deg, "
+                  + (f"lost in {lost[0]} at {r['carry_lost_at_s']:.2f} s" if lost else "held"), flush=True)
+    return summarise(runs, {"simulator": args.simulator, "camera": not args.no_camera, "carry": args.carry,
                             "sim_args": " ".join(args.sim_arg) if args.simulator == "standin" else ""})
