@@ -392,7 +392,7 @@ def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None 
         if sim.ready_s is not None:
             out["streaming_s"] = sim.ready_s
         status0 = len(sim.status())
-        # segments last so many wall seconds; the carry's so many simulated seconds (SimTwo runs 8-11 % faster
+        # segments last so many wall seconds; the carry's so many simulated seconds (SimTwo runs 6-11 % faster
         # than the wall clock: timed by the wall its drive overshot each segment, drifted 10-18 cm east of the
         # stand-in's route, put the held part's feet 1-3 cm over the board's south edge and in one run of three
         # caught machine A's rib with it)
