@@ -35,7 +35,7 @@ from typing import Callable
 from ..proc import free_port, stop_process
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
 from .build import Build
-from .scene import DEFAULT_SCENE, SceneSettings, install
+from .scene import DEFAULT_SCENE, HOT_CPU, SceneSettings, install
 
 #: the virtual screen: wide enough for the Cameras window beside the others (scene.CAMERAS_WINDOW)
 SCREEN = "2400x1200x24"
@@ -110,6 +110,14 @@ class SimTwoRun:
         """SimTwo's editor messages and the script's WriteLn lines so far (patch 11)."""
         return [line for line in self.log_text().splitlines() if line.startswith(("SimTwo: ", "script: "))]
 
+    def scene_ini(self) -> dict:
+        """The ini lines this run writes into the scene copy: SimTwo's Hot CPU with the camera open
+        (:data:`~.scene.HOT_CPU`), then ``extra_ini`` (which may override it)."""
+        out = {"config_Params.ini": dict(HOT_CPU)} if self.camera else {}
+        for name, values in self.extra_ini.items():
+            out.setdefault(name, {}).update(values)
+        return out
+
     # ---- start -----------------------------------------------------------------------------------------
     def start(self, timeout: float = 90.0) -> "SimTwoRun":
         if self.workdir is None:
@@ -119,7 +127,7 @@ class SimTwoRun:
         self.workdir.mkdir(parents=True, exist_ok=True)
         try:
             settings = SceneSettings(udp_port=self.ports.udp, bridge_host=self.bridge_host,
-                                     bridge_port=self.ports.bridge, extra_ini=self.extra_ini, parts=self.parts)
+                                     bridge_port=self.ports.bridge, extra_ini=self.scene_ini(), parts=self.parts)
             if self.script is not None:
                 settings.script = Path(self.script)
             install(self.build.simtwo_dir, self.scene_dir, settings, self.scene)

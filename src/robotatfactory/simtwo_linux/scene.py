@@ -30,10 +30,15 @@ SIMTWO_FIELD = "simtwo2022"
 
 #: where the Cameras window goes on the virtual screen (right of every window SimTwo's scene opens)
 CAMERAS_WINDOW = {"FCameras_Left": "1700", "FCameras_Top": "0"}
-#: headless, nobody looks at the main viewer: a small one renders faster, so SimTwo's GUI loop (which also
-#: receives the bridge's replies) turns more often (replies in 58-67 % of the cycles instead of 55 % with the
-#: camera on); the physics and the camera's image do not depend on it
-VIEWER_WINDOW = {"FViewer_Width": "160", "FViewer_Height": "120"}
+#: headless, nobody looks at the main viewer: a small one renders faster, and SimTwo's GUI thread renders it
+#: beside the camera's (a render took 8 ms at 160 x 120, 3.6 ms at 32 x 24: the camera 5.9-6.2 frames/s
+#: instead of 5.0-5.2); the physics and the camera's image do not depend on it
+VIEWER_WINDOW = {"FViewer_Width": "32", "FViewer_Height": "24"}
+#: headless with the camera open: SimTwo's "Hot CPU" (Params, CBHotCPU: no Sleep(1) before each cadencer
+#: step). With the camera the GUI loop never idles (its renders keep it busy), so the sleep only delays each
+#: step: the camera 6.7-7.3 frames/s instead of 5.9-6.2, SimTwo's GUI thread at 0.66 cores either way.
+#: Without the camera the loop does idle, and Hot CPU would spin a core (0.98 instead of 0.66): off then
+HOT_CPU = {"CBHotCPU_Checked": "1"}
 
 
 def field_for_simtwo(name: str) -> str:
