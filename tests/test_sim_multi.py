@@ -319,8 +319,8 @@ def test_teleport_labels_move_that_robot_or_a_part_once(field, robot):
     send(Teleport(1, 0.5, 0.1, 0.0))  # the same TpId again (the bridge repeats it): applied once
     assert sim.units[1].pose == moved
     pid = sim.parts.ids[0]
-    send(Teleport(2, 0.1, 0.45, 0.5, 0.0021, f"Part{pid}"))
-    assert sim.part_pose(pid)[:2] == pytest.approx((0.1, 0.45), abs=1e-6)
+    send(Teleport(2, 0.1, 0.45, 0.5, 0.0021, f"Part{pid}"))  # TpTh: SimTwo's heading, the plate's + pi/2
+    assert sim.part_pose(pid) == pytest.approx((0.1, 0.45, 0.5 - math.pi / 2), abs=1e-6)
     send(Teleport(3, 0.0, 0.0, 0.0, 0.0, "AGV7"))  # unknown target: ignored
     assert r2.teleports == 2 and r2.command.v == 0.0
     assert runner.runners[0].teleports == 0

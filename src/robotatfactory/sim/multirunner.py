@@ -24,7 +24,7 @@ import time
 
 from ..errors import ConfigError
 from ..simtwo import ProtocolError
-from ..simtwo.teleport import Teleport
+from ..simtwo.teleport import Teleport, plate_facing
 from .runner import RunnerConfig, RunResult, SimRunner
 
 PORT_STRIDE = 10  # robot k's ports: robot 1's + PORT_STRIDE * (k - 1)
@@ -85,7 +85,8 @@ class UnitRunner(SimRunner):
         if not target:
             sim.set_pose(tp.x, tp.y, tp.theta)
         elif target.startswith("Part") and target[4:].isdigit() and int(target[4:]) in sim.parts.qadr:
-            sim.place_part(int(target[4:]), tp.x, tp.y, tp.theta)
+            # TpTh is SimTwo's heading of the part (the plate's + pi/2); place_part takes the plate's
+            sim.place_part(int(target[4:]), tp.x, tp.y, plate_facing(tp.theta))
         else:
             self._rlog.warn("teleport-target", f"teleport {tp.id}: unknown target {target!r} ignored (no TpTarget: "
                                                "this robot; Part1..N: a part)")

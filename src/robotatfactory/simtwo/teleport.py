@@ -43,6 +43,11 @@ def part_heading(facing: float) -> float:
     return math.remainder(facing + math.pi / 2, 2 * math.pi)
 
 
+def plate_facing(heading: float) -> float:
+    """The inverse of :func:`part_heading`: the plate's heading of a part whose SimTwo heading is ``heading``."""
+    return math.remainder(heading - math.pi / 2, 2 * math.pi)
+
+
 @dataclass(frozen=True)
 class Teleport:
     id: int
