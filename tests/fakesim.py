@@ -135,7 +135,9 @@ class FakeSim:
                 prev = (self.step * n * dt_ns) // period_ns
                 self.step += 1
                 t = self.step / 1000
-                ds, dth = self.v * 0.001, self.w * 0.001
+                # the wheel speeds from V, W over the wheels' spacing (control.pas), the turn about the track the
+                # robot really turns with (robot_simtwo.json odometry_track: SimTwo's robot turns 2.1 % more)
+                ds, dth = self.v * 0.001, r * (wr - wl) / self.robot.odometry_track * 0.001
                 self.x += ds * math.cos(self.theta + dth / 2)
                 self.y += ds * math.sin(self.theta + dth / 2)
                 self.theta = math.remainder(self.theta + dth, 2 * math.pi)

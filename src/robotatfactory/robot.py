@@ -126,6 +126,14 @@ class RobotSpec:
     contact: dict
     electromagnet: dict
     simtwo_pid: dict | None = None  # SimTwo's own speed controller's gains (CalcPID), see data/robot_simtwo.json
+    #: the track dead reckoning turns with (m): the wheels' effective separation, measured; None: ``track``
+    odometry_track_m: float | None = None
+
+    @property
+    def odometry_track(self) -> float:
+        """The track odometry integrates turns with: ``odometry_track_m`` when the robot file measured one
+        (SimTwo's robot turns about a shorter track than its wheels' spacing: docs/simtwo.md), else ``track``."""
+        return float(self.odometry_track_m) if self.odometry_track_m else self.track
 
     @property
     def metres_per_tick(self) -> float:
@@ -160,4 +168,5 @@ def load_robot(name_or_path: str = "simtwo") -> RobotSpec:
         base=raw["base"], wheel=raw["wheel"], caster=raw["caster"], motor=raw["motor"],
         speed_controller=raw["speed_controller"], camera=CameraSpec(**cam), lidar=LidarSpec(**lid),
         contact=raw["contact"], electromagnet=raw["electromagnet"], simtwo_pid=raw.get("simtwo_pid"),
+        odometry_track_m=raw.get("odometry_track"),
     )

@@ -365,7 +365,7 @@ def one_run(simulator: str = "standin", camera: bool = True, plan: tuple | None 
             sub.close()
 
     robot = load_robot()
-    odo = DiffDriveOdometry(robot)
+    odo = DiffDriveOdometry(robot, track=robot.track)  # the nominal track: the simulators' physics compared
     t0 = time.monotonic()
     out: dict = {}
     frames = []  # (arrival, SensorFrame)

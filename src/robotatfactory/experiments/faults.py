@@ -526,7 +526,8 @@ def reference_odometry(truth: np.ndarray, robot, start_index: int = 0) -> tuple[
     loss-free result."""
     from ..localization.odometry import DiffDriveOdometry
 
-    odo = DiffDriveOdometry(wheel_radius=robot.wheel_radius, track=robot.track, ticks_per_rev=robot.ticks_per_rev)
+    odo = DiffDriveOdometry(wheel_radius=robot.wheel_radius, track=robot.odometry_track,
+                            ticks_per_rev=robot.ticks_per_rev)
     odo.reset(baseline=(0, 0), t=0.0)
     rows = truth[start_index:]
     rows = rows[np.argsort(rows[:, 1], kind="stable")]

@@ -62,7 +62,7 @@ class DiffDriveOdometry:
                  ticks_per_rev: int | None = None, slip_var_per_m: float = 1e-4,
                  x: float = 0.0, y: float = 0.0, theta: float = 0.0):
         r = wheel_radius if wheel_radius is not None else robot.wheel_radius
-        b = track if track is not None else robot.track
+        b = track if track is not None else robot.odometry_track
         n = ticks_per_rev if ticks_per_rev is not None else robot.ticks_per_rev
         if not (r > 0 and b > 0 and n > 0):
             raise ValueError(f"wheel_radius {r}, track {b} and ticks_per_rev {n} must all be > 0")

@@ -93,7 +93,8 @@ class Bridge:
                                cfg.reorder_window)
         self.camera = None  # CameraLink: the camera half runs in its own process (camera_node)
         self.clock = SimClock()
-        self.odo = DiffDriveOdometry(wheel_radius=cfg.wheel_radius, track=cfg.track, ticks_per_rev=cfg.ticks_per_rev,
+        self.odo = DiffDriveOdometry(wheel_radius=cfg.wheel_radius, track=cfg.odometry_track,
+                                     ticks_per_rev=cfg.ticks_per_rev,
                                      slip_var_per_m=cfg.slip_var_per_m)
         self.sweeps: WholeSweepAssembler | PerRayAssembler | None = None  # LIDAR sweeps (simtwo.scan)
         self.self_filter: SelfFilter | None = None  # the LIDAR's hits on its own robot -> NaN (simtwo.selfhits)

@@ -76,7 +76,7 @@ def default_params(robot: RobotSpec | None = None) -> dict:
             "control_period": r.control_period, "physics_step": r.physics_step,
             "wheel_radius": r.wheel_radius, "track": r.track, "ticks_per_rev": r.ticks_per_rev,
         },
-        "odometry": {"slip_var_per_m": 1e-4},
+        "odometry": {"slip_var_per_m": 1e-4, "track": r.odometry_track},
         "lidar": {
             "enabled": True, "xyz": list(lid.xyz), "fov_deg": lid.fov_deg, "range_min": lid.range_min,
             "range_max": lid.range_max, "period": lid.period, "mode": "sweep", "update": "sweep",
@@ -275,6 +275,7 @@ class BridgeConfig:
     track: float
     ticks_per_rev: int
     slip_var_per_m: float
+    odometry_track: float  # m: the track odometry turns with (the robot file's measured one; geometry/track: TF)
     lidar_enabled: bool
     lidar_xyz: tuple[float, float, float]
     lidar_fov_deg: float
@@ -418,6 +419,7 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
         track=_real(p, ("geometry", "track"), 0.0, 10.0, lo_open=True),
         ticks_per_rev=_int(p, ("geometry", "ticks_per_rev"), 1, 10 ** 9),
         slip_var_per_m=_real(p, ("odometry", "slip_var_per_m"), 0.0),
+        odometry_track=_real(p, ("odometry", "track"), 0.0, 10.0, lo_open=True),
         lidar_enabled=_bool(p, ("lidar", "enabled")),
         lidar_xyz=_xyz(p, ("lidar", "xyz")),
         lidar_fov_deg=_real(p, ("lidar", "fov_deg"), 0.0, 360.0, lo_open=True),

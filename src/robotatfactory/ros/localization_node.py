@@ -55,10 +55,10 @@ class LocalizationNode:
         nc = cfg.node
         self.loc = FrameLocalizer(self.field, self.robot, cfg.detector, cfg.pose, nc.methods())
         ekf_cfg = cfg.ekf
-        if abs(ekf_cfg.track_m - self.robot.track) > 1e-12:
+        if abs(ekf_cfg.track_m - self.robot.odometry_track) > 1e-12:
             from dataclasses import replace
 
-            ekf_cfg = replace(ekf_cfg, track_m=self.robot.track)
+            ekf_cfg = replace(ekf_cfg, track_m=self.robot.odometry_track)
         self.ekf = Ekf(ekf_cfg)
         self.beacon_xy = np.array(self.field.beacons, dtype=float).reshape(-1, 2)
         self.laser_xy = tuple(self.robot.lidar.xyz[:2])
