@@ -251,31 +251,10 @@ def service_names() -> set[str]:
     return set(rosservice.get_service_list())
 
 
-_CLIENTS: dict = {}
-
-
 def call_service(name: str, srv_type, timeout: float = 30.0, **fields):
-    """Call a service with the request's fields as keywords; the response (ROS 1: rospy.ServiceProxy; ROS 2:
-    a client's call_async, waited for while the test node spins in its thread)."""
-    if middleware() != "ros2":
-        import rospy
-
-        rospy.wait_for_service(name, timeout=timeout)
-        return rospy.ServiceProxy(name, srv_type)(srv_type._request_class(**fields))
-    node = test_node()
-    key = (name, srv_type)
-    cli = _CLIENTS.get(key)
-    if cli is None:
-        cli = _CLIENTS[key] = node.node.create_client(srv_type, name, callback_group=node.group)
-    if not cli.wait_for_service(timeout_sec=timeout):
-        raise TimeoutError(f"the service {name} is not offered within {timeout} s")
-    fut = cli.call_async(srv_type.Request(**fields))
-    done = threading.Event()
-    fut.add_done_callback(lambda _f: done.set())
-    if not done.wait(timeout):
-        cli.remove_pending_request(fut)
-        raise TimeoutError(f"{name}: no response within {timeout} s")
-    return fut.result()
+    """Call a service with the request's fields as keywords; the response (the test node's ``call``: ROS 1
+    rospy's ServiceProxy; ROS 2 a client's call_async, waited for while the test node spins in its thread)."""
+    return test_node().call(name, srv_type, timeout, **fields)
 
 
 def node_names() -> list[str]:
