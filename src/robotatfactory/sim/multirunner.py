@@ -180,14 +180,19 @@ class MultiRunner:
                     reason = "duration"
                     break
                 for r in runners:
-                    if not c.lockstep:
-                        r._drain()
                     r._check_command_age()
                 frames = sim.step_all([r.command for r in runners])
                 for r in runners:
                     r.counters.cycles += 1
                     r._publish(r.sim.take_frames())
                 runners[0]._pace(sim.time)
+                if not c.lockstep:  # the script calls, as SimRunner's: the replies so far, then the frames
+                    readable = sim.replies_readable()  # one GUI loop for the whole scene
+                    for r in runners:
+                        if readable:
+                            r._drain(first_wins=sim.config.reply_timing == "simtwo")
+                        else:
+                            r.counters.replies_deferred += 1
                 for r, f in zip(runners, frames):
                     r._send(f)
                 if c.lockstep:
