@@ -94,10 +94,15 @@ def test_options_resolve_to_a_plan(tmp_path):
 
 
 def test_mode_and_route_appear_in_every_target_key():
-    from robotatfactory.experiments.localization import MODES, TARGETS
+    from robotatfactory.experiments.localization import MODES, REAL, TARGETS
 
-    assert all(k.split("_")[0] in MODES and k.split("_")[1] in ("reference", "second") for k in TARGETS)
+    def mode_route(k):  # (mode, route) of a key: REAL ("real_simtwo", the real SimTwo) has an underscore
+        m = REAL if k.startswith(REAL + "_") else k.split("_")[0]
+        return m, k[len(m) + 1:].split("_")[0]
+
+    assert all(mode_route(k)[0] in (*MODES, REAL) and mode_route(k)[1] in ("reference", "second") for k in TARGETS)
     assert "simtwo_second_ekf_position_rmse_m" in TARGETS and "ideal_reference_ekf_accepted_fixes_over_5cm" in TARGETS
+    assert "real_simtwo_second_ekf_position_rmse_m" in TARGETS
 
 
 def test_xwd_reader(tmp_path):
