@@ -34,7 +34,9 @@ SAME = {
 NAMED = {
     "camera_frames_per_s": ((13.5, 15.5), (4.0, 9.0)),  # 14.4 vs 6.4-7.2: SimTwo renders in software here
     "straight_odom_over_truth": ((1.0, 1.035), (0.99, 1.01)),  # the stand-in's slip from rest (~2 %)
-    "points": ((4, 4), None),  # round 1: the stand-in scores the maximum; on SimTwo not yet (docs/simtwo.md)
+    # round 1: the stand-in scored the maximum in 3 of 3 compare runs and 3 of 4 once in CI (2026-11-26: a part
+    # left short in the outgoing warehouse, as on SimTwo); SimTwo 2-4 (docs/simtwo.md, "The agent on SimTwo")
+    "points": ((3, 4), (1, 4)),
     "picks_attempted": ((4, 6), (2, 40)),  # SimTwo: the agent gets the first part at least, then retries
 }
 
