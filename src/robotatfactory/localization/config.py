@@ -1,6 +1,7 @@
-"""Settings of the localization (``config/localization.yaml``): detector, pose estimators, EKF, LIDAR beacons
-and the ROS node's wiring. Plain Python (no ROS): the node passes its private parameters (a nested dict) to
-:func:`from_dict`; ``raf localize``, the bench and the experiment load the YAML file with :func:`load_config`.
+"""Settings of the localization (``config/localization.yaml``): detector, pose estimators, EKF, LIDAR beacons,
+LIDAR scan matching and the ROS node's wiring. Plain Python (no ROS): the node passes its private parameters (a
+nested dict) to :func:`from_dict`; ``raf localize``, the bench and the experiment load the YAML file with
+:func:`load_config`.
 Unknown keys and bad values raise :class:`~robotatfactory.errors.ConfigError` naming them.
 """
 from __future__ import annotations
@@ -17,6 +18,7 @@ from .detect import DetectorConfig
 from .ekf import EkfConfig
 from .lidar import BeaconConfig
 from .markerpose import PoseConfig
+from .scanmatch import ScanMatchConfig
 
 ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_FILE = ROOT / "config" / "localization.yaml"
@@ -88,6 +90,7 @@ class LocalizationConfig:
     pose: PoseConfig = dc_field(default_factory=PoseConfig)
     ekf: EkfConfig = dc_field(default_factory=EkfConfig)
     beacons: BeaconConfig = dc_field(default_factory=BeaconConfig)
+    scan_match: ScanMatchConfig = dc_field(default_factory=ScanMatchConfig)
     node: NodeConfig = dc_field(default_factory=NodeConfig)
     topics: dict = dc_field(default_factory=lambda: dict(DEFAULT_TOPICS))
     frames: dict = dc_field(default_factory=lambda: dict(DEFAULT_FRAMES))
@@ -144,6 +147,7 @@ def from_dict(d: dict | None) -> LocalizationConfig:
         pose=_section(PoseConfig, d.get("pose"), "pose"),
         ekf=_section(EkfConfig, d.get("ekf"), "ekf"),
         beacons=_section(BeaconConfig, d.get("beacons"), "beacons"),
+        scan_match=_section(ScanMatchConfig, d.get("scan_match"), "scan_match"),
         node=_section(NodeConfig, d.get("node"), "node"),
     )
     for key, defaults, target in (("topics", DEFAULT_TOPICS, cfg.topics), ("frames", DEFAULT_FRAMES, cfg.frames)):
@@ -158,6 +162,7 @@ def from_dict(d: dict | None) -> LocalizationConfig:
                 raise ConfigError(f"{key}/{k} must be a non-empty string, got {v!r}")
             target[k] = v
     cfg.node.check()
+    cfg.scan_match.check()
     if cfg.calibration:
         from .calibration import load_calibration
 

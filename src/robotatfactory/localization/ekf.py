@@ -6,7 +6,10 @@
   variance proportional to its length (``wheel_sigma_per_sqrt_m``), plus a little per radian turned (slip)
   and per second (bumps).
 - **Updates** from camera pose fixes (:meth:`Ekf.pose_fix`, z = (x, y, heading) of base_link with its
-  covariance) and from LIDAR beacons (:meth:`Ekf.beacons`, range/bearing to known cylinder centres).
+  covariance), from LIDAR scans matched to the map (:meth:`Ekf.pose_fix` with ``source=SCAN``: no
+  uncertainty limit, since its covariance is honest along a wall it cannot see along; never initialises or
+  re-initialises the filter; counted as ``scan_*``) and from LIDAR beacons (:meth:`Ekf.beacons`,
+  range/bearing to known cylinder centres).
 - **Late measurements**: the filter keeps the inputs and states of the last ``history_s`` seconds. A
   measurement stamped t is applied at t: the filter goes back to the state before t, splits the odometry
   increment that spans t (constant twist), applies the measurement, and replays the later inputs. A
@@ -41,6 +44,9 @@ from . import reasons
 from .geometry import between2, compose2, se2_log, split_increment, wrap_angle
 
 CHI2_3_999 = 16.266  # chi-square, 3 dof, 99.9 %
+#: the source of a pose fix from LIDAR scan matching (:mod:`.scanmatch`): matched from the filter's own pose,
+#: so it corrects the filter but never initialises or re-initialises it, nor counts as a camera fix
+SCAN = "scan"
 CHI2_2_999 = 13.816
 
 
@@ -312,7 +318,8 @@ class Ekf:
         else:
             ns, res = self._update_beacons(s, rec)
         if res is not None and not self._replaying:
-            self.counts[res.reason or "accepted"] += 1
+            key = res.reason or "accepted"
+            self.counts[f"scan_{key}" if isinstance(rec, _Pose) and rec.source == SCAN else key] += 1
         self._log.append((t, rec))
         self._states.append(ns)
         self._results.append(res)
@@ -420,12 +427,15 @@ class Ekf:
 
     def _update_pose(self, s: FilterState, m: _Pose) -> tuple[FilterState, UpdateResult]:
         c = self.cfg
-        if c.max_fix_sigma_xy_m > 0 and math.sqrt(max(np.linalg.eigvalsh(m.R[:2, :2]))) > c.max_fix_sigma_xy_m:
+        camera = m.source != SCAN
+        if camera and c.max_fix_sigma_xy_m > 0 and \
+                math.sqrt(max(np.linalg.eigvalsh(m.R[:2, :2]))) > c.max_fix_sigma_xy_m:
             return s, UpdateResult(False, reasons.UNCERTAIN)
         if s.x is None:
-            if not self._confident(m.R):
+            if not camera or not self._confident(m.R):
                 return s, UpdateResult(False, "waiting_for_confident_fix")
-            return FilterState(self._wrap(m.z), self._bound(m.R), s.t, s.t, 0), UpdateResult(True, reasons.REINITIALISED)
+            return (FilterState(self._wrap(m.z), self._bound(m.R), s.t, s.t, 0),
+                    UpdateResult(True, reasons.REINITIALISED))
         v = self._velocity_at(m.t)
         R = m.R + np.outer(v, v) * c.stamp_sigma_s ** 2
         nu = m.z - s.x
@@ -440,6 +450,8 @@ class Ekf:
         if not math.isfinite(d2):
             return s, UpdateResult(False, reasons.NUMERICAL)
         if d2 > c.gate_pose_chi2:
+            if not camera:  # a scan fix is matched from the filter's own pose: it never re-initialises it
+                return s, UpdateResult(False, reasons.GATED, d2)
             confident = self._confident(m.R)
             outage = (s.t - s.last_fix_t) > c.reinit_after_s
             run = s.gated_run + 1 if confident else s.gated_run
@@ -453,6 +465,8 @@ class Ekf:
         P = IKH @ s.P @ IKH.T + K @ R @ K.T  # Joseph form
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
             return s, UpdateResult(False, reasons.NUMERICAL, d2)
+        if not camera:  # the camera's outage clock and gated run are the camera's: a scan fix leaves them
+            return replace(s, x=self._wrap(x), P=self._bound(P)), UpdateResult(True, None, d2, 1)
         return FilterState(self._wrap(x), self._bound(P), s.t, s.t, 0), UpdateResult(True, None, d2, 1)
 
     def _update_beacons(self, s: FilterState, m: _Beacons) -> tuple[FilterState, UpdateResult]:

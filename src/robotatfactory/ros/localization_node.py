@@ -33,10 +33,11 @@ from ..errors import ConfigError
 from ..field import load_field
 from ..localization import reasons
 from ..localization.config import LocalizationConfig, from_dict, robot_for
-from ..localization.ekf import Ekf
+from ..localization.ekf import SCAN, Ekf
 from ..localization.geometry import inv, matrix_se2, se2_matrix
 from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
+from ..localization.scanmatch import ScanLocalizer
 from . import messages as rm
 from .cli import publish_every, spin_node
 from .mw import QoS, api
@@ -62,6 +63,7 @@ class LocalizationNode:
         self.ekf = Ekf(ekf_cfg)
         self.beacon_xy = np.array(self.field.beacons, dtype=float).reshape(-1, 2)
         self.laser_xy = tuple(self.robot.lidar.xyz[:2])
+        self.scan_matcher = ScanLocalizer(self.field, self.robot, cfg.scan_match) if cfg.scan_match.enabled else None
         self.lock = threading.RLock()
         self.counts: Counter = Counter()
         self._last_warn: dict[str, float] = {}
@@ -96,13 +98,15 @@ class LocalizationNode:
             node.subscribe(t["image"], Image, self._guard(self.on_image), QoS.SENSOR, 1, large=True),
             node.subscribe(t["camera_info"], CameraInfo, self._guard(self.on_camera_info), QoS.SENSOR, 1),
         ]
-        if nc.use_lidar and len(self.beacon_xy):
+        self.use_beacons = bool(nc.use_lidar and len(self.beacon_xy))
+        if self.use_beacons or self.scan_matcher is not None:
             self.subs.append(node.subscribe(t["scan"], LaserScan, self._guard(self.on_scan), QoS.SENSOR, 5))
         self._diag_thread = threading.Thread(target=self._diag_loop, name="raf-localize-diag", daemon=True)
         self._diag_thread.start()
         node.info(f"localization: field {self.field.name}, camera fixes by '{nc.filter_method}', camera_pose "
                       f"by '{nc.camera_pose_method}', {len(self.beacon_xy)} LIDAR beacons "
-                      f"{'used' if nc.use_lidar else 'ignored'}; waiting for "
+                      f"{'used' if nc.use_lidar else 'ignored'}, scan matching "
+                      f"{'on' if self.scan_matcher is not None else 'off'}; waiting for "
                       f"{'odometry' if nc.initial_pose == 'start' else 'a confident camera fix'}")
         return self
 
@@ -166,6 +170,8 @@ class LocalizationNode:
             if self._odom is not None and t < self._odom[0] - 1.0:  # the simulation restarted
                 self.node.warn("localization: odometry went back in time: restarting the filter")
                 self.ekf = Ekf(self.ekf.cfg)
+                if self.scan_matcher is not None:
+                    self.scan_matcher.reset()
                 self.counts["restarts"] += 1
                 self._odom = None  # (else every later message looks older still and restarts it again)
             if self._odom is not None and t <= self._odom[0]:
@@ -177,6 +183,8 @@ class LocalizationNode:
                 self.ekf.initialise(t, (sp.x, sp.y, sp.theta), np.diag(
                     [s.initial_sigma_xy ** 2, s.initial_sigma_xy ** 2, math.radians(s.initial_sigma_theta_deg) ** 2]))
             self.ekf.odometry_pose(t, pose)
+            if self.scan_matcher is not None:
+                self.scan_matcher.add_odom(t, pose)
             finished = self.ekf.pop_finished_fixes()
             self._odom = (t, pose)
             self.counts["odom"] += 1
@@ -313,17 +321,33 @@ class LocalizationNode:
                 return
         angles = msg.angle_min + msg.angle_increment * np.arange(n)
         ranges = np.asarray(msg.ranges, dtype=float)
-        obs = extract_beacons(ranges, angles, self.cfg.beacons, range_min=msg.range_min,
-                              range_max=msg.range_max if msg.range_max > 0 else np.inf)
+        range_max = msg.range_max if msg.range_max > 0 else np.inf
         self.counts["scans"] += 1
         t0 = rm.stamp_to_s(msg.header.stamp)
         dt = msg.time_increment if math.isfinite(msg.time_increment) and msg.time_increment > 0 else 0.0
+        if self.scan_matcher is not None:
+            self._match_scan(ranges, angles, t0, dt, msg.range_min, range_max)
+        if not self.use_beacons:
+            return
+        obs = extract_beacons(ranges, angles, self.cfg.beacons, range_min=msg.range_min, range_max=range_max)
         for o in obs:
             with self.lock:
                 r = self.ekf.beacons(t0 + o.index * dt, [o.as_tuple()], self.beacon_xy, self.laser_xy)
             self.counts["beacons_seen"] += 1
             if r.accepted:
                 self.counts["beacons_used"] += 1
+
+    def _match_scan(self, ranges, angles, t0: float, dt: float, range_min: float, range_max: float) -> None:
+        with self.lock:
+            pose, t_filter = self.ekf.pose(), self.ekf.t
+            fix = self.scan_matcher.fix(ranges, angles, t0, dt, t_filter, pose, range_min, range_max)
+            if fix.ok:
+                r = self.ekf.pose_fix(fix.t, fix.pose, fix.cov, source=SCAN)
+                self.counts["scan_fixes"] += 1
+                if not r.accepted and r.reason not in ("pending",):
+                    self.counts[f"scan_fix_{r.reason}"] += 1
+            else:
+                self.counts[f"scan_unmatched_{fix.reason}"] += 1
 
     # ------------------------------------------------------------------ diagnostics
     def _diag_loop(self) -> None:
@@ -367,8 +391,10 @@ class LocalizationNode:
         vals.update({f"filter_{k}": v for k, v in ec.items()})
         vals.update({"odom_messages": c.get("odom", 0), "scans": c.get("scans", 0),
                      "beacons_seen": c.get("beacons_seen", 0), "beacons_used": c.get("beacons_used", 0),
+                     "scan_fixes": c.get("scan_fixes", 0),
                      "restarts": c.get("restarts", 0)})
-        vals.update({k: v for k, v in c.items() if k.startswith("callback_error") or k.startswith("bad_")})
+        vals.update({k: v for k, v in c.items()
+                     if k.startswith(("callback_error", "bad_", "scan_unmatched_", "scan_fix_"))})
         st2 = rm.diagnostic_status(f"{name}: filter", level, text, "ekf", dict(sorted(vals.items())), ".4g")
         arr.status = [st1, st2]
         return arr

@@ -1,0 +1,174 @@
+"""LIDAR scan matching against the field's map (robotatfactory.localization.scanmatch) and its use by the EKF."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from robotatfactory.bench.drive import cast, field_boxes
+from robotatfactory.errors import ConfigError
+from robotatfactory.field import load_field
+from robotatfactory.localization.config import from_dict
+from robotatfactory.localization.ekf import SCAN, Ekf
+from robotatfactory.localization.scanmatch import FieldMap, OdomHistory, ScanLocalizer, ScanMatchConfig, deskew
+from robotatfactory.robot import load_robot
+
+N = 360
+ANGLES = np.arange(N) * 2 * math.pi / N
+
+
+@pytest.fixture(scope="module")
+def world():
+    fld, robot = load_field("simtwo2022"), load_robot()
+    return fld, robot, ScanLocalizer(fld, robot), field_boxes(fld, robot.lidar.xyz[2])
+
+
+def _scan(boxes, pose, rng, extra=()):
+    """Ranges from the laser at ``pose`` (the LIDAR sits on base_link's origin) with the LIDAR's noise model;
+    ``extra``: more boxes (cx, cy, hx, hy, cos, sin) the map does not have."""
+    x, y, th = pose
+    d = cast(list(boxes) + list(extra), np.full(N, x), np.full(N, y), np.cos(ANGLES + th), np.sin(ANGLES + th))
+    with np.errstate(invalid="ignore", over="ignore"):
+        r = d + rng.normal(0, 1, N) * 0.001524 * np.exp(1.3103 * np.minimum(d, 6.0))
+    r[~np.isfinite(d)] = np.inf
+    return r
+
+
+def _free_poses(boxes, rng, n):
+    out = []
+    while len(out) < n:
+        p = (rng.uniform(-0.75, 0.75), rng.uniform(-0.45, 0.45), rng.uniform(-math.pi, math.pi))
+        d = cast(boxes, np.full(N, p[0]), np.full(N, p[1]), np.cos(ANGLES), np.sin(ANGLES))
+        if d.min() > 0.12:
+            out.append(p)
+    return out
+
+
+def test_matches_random_poses_to_a_millimetre_with_honest_covariance(world):
+    fld, robot, sl, boxes = world
+    rng = np.random.default_rng(1)
+    errs, nees, fails = [], [], 0
+    for pose in _free_poses(boxes, rng, 60):
+        prior = (pose[0] + rng.normal(0, 0.015), pose[1] + rng.normal(0, 0.015), pose[2] + rng.normal(0, 0.03))
+        _, pts = sl.returns(_scan(boxes, pose, rng), ANGLES)
+        f = sl.map.match(pts, prior, sl.cfg, sigma=sl.sigma(pts))
+        if not f.ok:
+            fails += 1
+            continue
+        e = np.array([f.pose[0] - pose[0], f.pose[1] - pose[1], math.remainder(f.pose[2] - pose[2], 2 * math.pi)])
+        errs.append(e)
+        nees.append(float(e @ np.linalg.solve(f.cov, e)))
+    e = np.abs(np.array(errs))
+    assert fails <= 3, f"{fails} of 60 scans found no fix"
+    assert np.percentile(np.hypot(e[:, 0], e[:, 1]), 95) < 0.003
+    assert np.percentile(np.degrees(e[:, 2]), 95) < 0.3
+    assert max(nees) < 16.3  # chi-square 3 dof, 99.9 %: no fix is more certain than it is right
+
+
+def test_a_rib_is_not_matched_by_its_back_face(world):
+    """Across a 2 cm rib both faces are at signed distance 0: a prior 1.5-2 cm off must not snap to the far face."""
+    fld, robot, sl, boxes = world
+    rng = np.random.default_rng(2)
+    pose = (0.62, -0.35, -math.pi / 2)  # in front of the outgoing warehouse's ribs, facing them
+    _, pts = sl.returns(_scan(boxes, pose, rng), ANGLES)
+    for dx in (-0.02, -0.015, 0.015, 0.02):
+        f = sl.map.match(pts, (pose[0] + dx, pose[1], pose[2]), sl.cfg, sigma=sl.sigma(pts))
+        assert f.ok and abs(f.pose[0] - pose[0]) < 0.003, (dx, f)
+
+
+def test_things_not_in_the_map_are_left_out(world):
+    """Two parts standing near the robot (boxes the map does not have) do not pull the fix."""
+    fld, robot, sl, boxes = world
+    rng = np.random.default_rng(3)
+    pose = (0.0, -0.3, 0.3)
+    parts = [(0.15, -0.2, 0.03, 0.045, 1.0, 0.0), (-0.1, -0.45, 0.03, 0.045, 1.0, 0.0)]
+    _, pts = sl.returns(_scan(boxes, pose, rng, parts), ANGLES)
+    f = sl.map.match(pts, (pose[0] + 0.01, pose[1] - 0.01, pose[2] + 0.02), sl.cfg, sigma=sl.sigma(pts))
+    assert f.ok and math.hypot(f.pose[0] - pose[0], f.pose[1] - pose[1]) < 0.003
+    assert f.inliers < f.points  # the parts' returns were counted out
+
+
+def test_returns_on_the_robot_and_a_held_part_are_ignored(world):
+    fld, robot, sl, boxes = world
+    r = np.full(N, 0.5)
+    r[0] = 0.12  # straight ahead: on a held part (the magnet's face at 0.08 m, the part 0.06 m deep)
+    r[90] = 0.05  # to the left: on the robot's wheel
+    r[10] = np.nan
+    idx, _ = sl.returns(r, ANGLES)
+    assert 0 not in idx and 90 not in idx and 10 not in idx and 20 in idx
+
+
+def test_deskew_puts_a_moving_sweep_back_together():
+    """A robot driving 0.2 m/s and turning 1 rad/s past a wall: the raw sweep smears the wall by over 1 cm,
+    the deskewed one puts every return on it."""
+    rays_t = np.linspace(0.0, 0.2, 50)
+    odo = np.stack([0.2 * rays_t, np.zeros_like(rays_t), 1.0 * rays_t], axis=1)
+    wall_x = 0.5
+    pts = []
+    for (x, y, th) in odo:  # each ray hits the wall x = 0.5 at world y = 0.1
+        dx, dy = wall_x - x, 0.1 - y
+        c, s = math.cos(th), math.sin(th)
+        pts.append((c * dx + s * dy, -s * dx + c * dy))
+    pts = np.array(pts)
+    ref = tuple(odo[25])
+    out = deskew(pts, odo, ref, (0.0, 0.0, 0.0))
+    c, s = math.cos(ref[2]), math.sin(ref[2])
+    world_x = ref[0] + c * out[:, 0] - s * out[:, 1]
+    assert np.max(np.abs(world_x - wall_x)) < 1e-9
+    raw_x = ref[0] + c * pts[:, 0] - s * pts[:, 1]
+    assert np.max(np.abs(raw_x - wall_x)) > 0.01
+
+
+def test_odom_history_interpolates_and_refuses_times_before_it():
+    h = OdomHistory(keep_s=1.0)
+    for k in range(50):
+        h.add(k * 0.04, (k * 0.01, 0.0, 0.0))
+    p = h.at(np.array([1.0, 1.02]))
+    assert p is not None and abs(p[0, 0] - 0.25) < 1e-9 and abs(p[1, 0] - 0.255) < 1e-9
+    assert h.at(np.array([0.0])) is None  # older than the history kept
+
+
+def test_a_scan_fix_corrects_the_filter_but_never_initialises_it():
+    ekf = Ekf()
+    R = np.diag([1e-6, 1e-6, 1e-6])
+    r = ekf.pose_fix(0.0, (0.0, 0.0, 0.0), R, source=SCAN)
+    assert not r.accepted and not ekf.initialised
+    ekf.initialise(0.0, (0.0, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-3]))
+    ekf.odometry_pose(0.0, (0.0, 0.0, 0.0))
+    ekf.odometry_pose(0.04, (0.0, 0.0, 0.0))
+    r = ekf.pose_fix(0.04, (0.005, 0.0, 0.01), R, source=SCAN)
+    assert r.accepted and abs(ekf.pose()[0] - 0.005) < 0.001
+    # far off: gated, and however many in a row, never re-initialising (a camera fix may)
+    for k in range(10):
+        ekf.odometry_pose(0.08 + 0.04 * k, (0.0, 0.0, 0.0))
+        r = ekf.pose_fix(0.08 + 0.04 * k, (0.3, 0.0, 0.0), R, source=SCAN)
+        assert not r.accepted
+    assert abs(ekf.pose()[0]) < 0.01
+    assert ekf.counts["scan_gated"] == 10 and ekf.counts["scan_accepted"] == 1
+
+
+def test_a_wall_alone_constrains_only_what_it_can():
+    """Returns on one long straight face: the fix is certain across it and in heading, uncertain along it."""
+    fld = load_field("simtwo2022")
+    m = FieldMap(fld, 0.05)
+    pose = (0.47, -0.2, -math.pi / 2)  # facing the outgoing warehouse's back wall (y = -0.57)
+    ys = np.full(80, -0.57)
+    xs = np.linspace(0.25, 0.70, 80)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    dx, dy = xs - pose[0], ys - pose[1]
+    pts = np.stack([c * dx + s * dy, -s * dx + c * dy], axis=1)
+    cfg = ScanMatchConfig(min_points=20)
+    f = m.match(pts, (pose[0] + 0.01, pose[1] + 0.005, pose[2] + 0.01), cfg, sigma=np.full(80, 0.003))
+    assert f.ok
+    sx, sy = math.sqrt(f.cov[0, 0]), math.sqrt(f.cov[1, 1])
+    assert sy < 0.003 and sx > 0.1
+    assert abs(f.pose[1] - pose[1]) < 0.002 and abs(f.pose[2] - pose[2]) < 0.002
+
+
+def test_settings_are_checked():
+    with pytest.raises(ConfigError, match="scan_match/outlier_m"):
+        from_dict({"scan_match": {"outlier_m": 0}})
+    with pytest.raises(ConfigError, match="scan_match/nope"):
+        from_dict({"scan_match": {"nope": 1}})
+    assert from_dict({"scan_match": {"enabled": False}}).scan_match.enabled is False
