@@ -31,6 +31,11 @@ Parts (``--parts``, all by default):
 
 Each figure comes with its target; ``raf experiment`` reports the ``*_target_met`` keys (it exits non-zero
 when one is missed, see commands/experiment.py).
+
+Simulator. ``--simulator standin`` (the default) runs ``raf sim``; ``--simulator simtwo`` runs the real SimTwo
+(``raf simtwo run``, field ``simtwo2022``) behind the same proxy: fuzz, loss and restarts, with the keys
+prefixed ``real_simtwo_``. What SimTwo cannot do (no ``--fast``, no lockstep: no soak; no start pose option:
+teleports; its own command timeout and log line) is in :mod:`._faults_simtwo` and in the result.
 """
 from __future__ import annotations
 
@@ -52,9 +57,11 @@ from pathlib import Path
 import numpy as np
 
 from ..simtwo import Command, ProtocolError
+from . import _faults_simtwo as simtwo_side
 
 NAME = "faults"
-HELP = "fault campaign (issue 10): fuzz, loss, restarts and soak on the real raf sim, bridge and localization"
+HELP = ("fault campaign (issue 10): fuzz, loss, restarts and soak on the real raf sim, bridge and localization "
+        "(--simulator simtwo: fuzz, loss and restarts on the real SimTwo)")
 TARGETS = {
     "fuzz_crashes": "0",
     "fuzz_odom_from_forged_or_foreign": "0",
@@ -72,14 +79,18 @@ TARGETS = {
     "soak_rss_growth_max_pct": "< 5 % after warm-up",
     "soak_queue_lag_late_s": "<= 1 s (simulation): odom and images keep up, no growing queue",
 }
+TARGETS.update({f"{simtwo_side.MODE}_{k}": v for k, v in list(TARGETS.items())
+                if k not in simtwo_side.TARGETS_NOT_APPLICABLE})
 EXIT_STATUS_FROM_TARGETS = True  # raf experiment faults exits 1 when a target is missed
 LOCAL = "127.0.0.1"
 PERIOD = 0.04
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--parts", default="fuzz,loss,restarts,soak",
-                        help="comma-separated parts to run (default fuzz,loss,restarts,soak)")
+    parser.add_argument("--parts", default=None,
+                        help="comma-separated parts to run (default fuzz,loss,restarts,soak; with --simulator "
+                             "simtwo fuzz,loss,restarts)")
+    parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin", help=simtwo_side.HELP)
     parser.add_argument("--fuzz-datagrams", type=int, default=1_000_000, help="datagrams of fuzz (default 1e6)")
     parser.add_argument("--fuzz-seconds", type=float, default=60.0,
                         help="wall seconds the fuzz is spread over (default 60)")
@@ -540,7 +551,7 @@ def reference_odometry(truth: np.ndarray, robot, start_index: int = 0) -> tuple[
 # ------------------------------------------------------------------------------------------------ the rig
 
 class Rig:
-    """roscore + bridge (+ localization) + proxy + raf sim, started and restarted on demand."""
+    """roscore + bridge (+ localization) + proxy + raf sim (or SimTwo), started and restarted on demand."""
 
     def __init__(self, args, log_dir: Path, camera: bool = False, localize: bool = False, fast: bool = False,
                  lockstep: bool = False, start_pose: str = "0.0,0.0,1.5708"):
@@ -555,6 +566,9 @@ class Rig:
         self.cam = f"tcp://{LOCAL}:{free_port()}"
         self.proxy = Proxy((LOCAL, self.bport), seed=args.seed)
         self.watch = None
+        self.simtwo = getattr(args, "simulator", "standin") == "simtwo"
+        self.simtwo_keep: Path | None = None  # SimTwo: the folder of the running one (its log)
+        self.sim_start_s = 180.0 if self.simtwo else 90.0  # wall s to the first frame (SimTwo: 5-30 s)
 
     def start_bridge(self):
         cmd = ["--field", self.args.field, "bridge", "--port", str(self.bport), "--sim-host", LOCAL,
@@ -566,6 +580,11 @@ class Rig:
         return self.procs.start("localize", _raf("--field", self.args.field, "localize"))
 
     def start_sim(self, extra=()):
+        if self.simtwo:
+            self.simtwo_keep = simtwo_side.keep_dir(self.procs)
+            cam_port = int(self.cam.rsplit(":", 1)[1]) if self.camera else None
+            return self.procs.start("sim", simtwo_side.command(self.args.field, self.sport, self.proxy.port,
+                                                               cam_port, self.simtwo_keep))
         cmd = ["--field", self.args.field, "sim", "--port", str(self.sport), "--bridge", f"{LOCAL}:{self.proxy.port}",
                "--no-server", "--status-every", "5", "--seed", str(self.args.seed), f"--start-pose={self.start_pose}"]
         cmd += ["--camera-bind", self.cam] if self.camera else ["--no-camera"]
@@ -587,8 +606,21 @@ class Rig:
         _wait(lambda: self.watch.cmd.get_num_connections() > 0, 60, "the bridge subscribing to cmd_vel",
               self.check)
         self.start_sim()
-        _wait(lambda: len(self.watch.odom) > 5, 90, "odom from the bridge", self.check)
+        _wait(lambda: len(self.watch.odom) > 5, self.sim_start_s, "odom from the bridge", self.check)
+        if self.simtwo:
+            self.place()
         return self
+
+    def place(self) -> None:
+        """SimTwo (no start pose option): the robot teleported to ``start_pose``."""
+        simtwo_side.teleport(self.start_pose)
+
+    def kill_sim(self) -> None:
+        """The simulator killed: ``raf sim`` with SIGKILL; SimTwo itself with SIGKILL (then its runner)."""
+        if self.simtwo:
+            simtwo_side.kill(self.procs, self.simtwo_keep)
+        else:
+            self.procs.kill("sim")
 
     def check(self) -> None:
         for name in ("bridge", "sim", "localize"):
@@ -766,12 +798,13 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
         time.sleep(2.0)
         d0 = _wait_diag(w)
         # -- the simulator (and its camera publisher) killed and restarted
-        rig.procs.kill("sim")
+        rig.kill_sim()
         n_frames = len(px.frames)
         t_kill = time.monotonic()
         time.sleep(1.0)
         rig.start_sim()
-        _wait(lambda: len(px.frames) > n_frames, 90, "the restarted simulator's first frame", rig.check)
+        _wait(lambda: len(px.frames) > n_frames, rig.sim_start_s, "the restarted simulator's first frame",
+              rig.check)
         with px.lock:
             t_first = px.frames[n_frames][0]
 
@@ -790,19 +823,26 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
         with w.lock:
             first_after = [o for o in w.odom if o[0] > t_first][:1]
         out["restart_sim_first_odom_stamp_s"] = first_after[0][1] / 1000 if first_after else -1.0
+        if rig.simtwo:
+            rig.place()  # the restarted SimTwo put the robot back at its scene's start
         # -- the bridge killed and restarted
         time.sleep(1.0)
         n_rep = len(px.replies)
+        n_timeouts = len(simtwo_side.timeout_ages_s(rig.simtwo_keep))
         rig.procs.kill("bridge")
         t_kill = time.monotonic()
         with px.lock:
             last_rep = px.replies[-1] if px.replies else None
         time.sleep(2.0)
         truth = px.truth()
-        out.update(_stop_after_last_command(truth, px, t_kill))
+        # SimTwo's script applies a reply in the cycle after the frame it answers
+        out.update(_stop_after_last_command(truth, px, t_kill, applied_after=1 if rig.simtwo else 0))
         import re
 
-        ages = re.findall(r"no valid command for ([0-9.]+) s", rig.procs.log("sim"))
+        if rig.simtwo:  # control.pas's line, in ms, once per timeout; the first after the kill
+            ages = simtwo_side.timeout_ages_s(rig.simtwo_keep)[n_timeouts:][:1]
+        else:
+            ages = [float(a) for a in re.findall(r"no valid command for ([0-9.]+) s", rig.procs.log("sim"))]
         # the simulator's own record: the age of its last command when its timeout replaced it by V = W = 0
         out["restart_bridge_stop_s"] = float(ages[-1]) if ages else float("nan")
         rig.start_bridge()
@@ -840,19 +880,20 @@ def _wait_diag(w: Watch, after: float | None = None, timeout: float = 10.0) -> d
     return w.stream_diag()
 
 
-def _stop_after_last_command(truth: np.ndarray, px: Proxy, t_kill: float) -> dict:
+def _stop_after_last_command(truth: np.ndarray, px: Proxy, t_kill: float, applied_after: int = 0) -> dict:
     """From the frames the simulator sent after the bridge died: when (simulation time, after the last command
     it got) its command timeout stopped the wheels (the first cycle whose encoder counts do not move), and
-    when the robot was at rest."""
+    when the robot was at rest. ``applied_after``: frames after the last reply's arrival the simulator applies
+    it from (``raf sim``: 0, from the last frame before it; SimTwo: 1, from the next frame's cycle)."""
     with px.lock:
         reps = [r for r in px.replies if r[0] <= t_kill]
     if not reps:
         return {"restart_bridge_stop_s": float("nan")}
     t_last_rep = reps[-1][0]
-    before = truth[truth[:, 0] <= t_last_rep]
-    after = truth[truth[:, 0] > t_last_rep]
+    n_before = int(np.sum(truth[:, 0] <= t_last_rep)) + applied_after
+    before, after = truth[:n_before], truth[n_before:]
     t_cmd = before[-1, 2] / 1000  # the simulator applied the last command from this frame's time on
-    stop_t = rest_t = float("nan")
+    rest_t = float("nan")
     prev = before[-1]
     for r in after:
         dl, dr = r[3] - prev[3], r[4] - prev[4]
@@ -997,14 +1038,15 @@ def _part_child(name: str, opts: dict, log_dir: str, q) -> None:
         q.put({"ok": PARTS[name](argparse.Namespace(**opts), Path(log_dir), load_robot())})
     except BaseException as e:  # noqa: BLE001 - reported to the parent, which decides
         q.put({"error": f"{type(e).__name__}: {e}"})
-        raise SystemExit(1)
+        raise SystemExit(1) from None
 
 
 def part_timeout(name: str, args) -> float:
     """Wall seconds a part may take before it is stopped (generous: a loaded machine is slow)."""
     sim_s = args.soak_sim_seconds if args.soak_sim_seconds is not None else args.soak_minutes * 60
-    return 240 + {"fuzz": 3 * args.fuzz_seconds + args.fuzz_datagrams / 2000, "loss": 3 * args.loss_seconds,
-                  "restarts": 120, "soak": 2 * sim_s}[name]
+    simtwo_starts = {"restarts": 2}.get(name, 1) if getattr(args, "simulator", "standin") == "simtwo" else 0
+    return 240 + 150 * simtwo_starts + {"fuzz": 3 * args.fuzz_seconds + args.fuzz_datagrams / 2000,
+                                        "loss": 3 * args.loss_seconds, "restarts": 120, "soak": 2 * sim_s}[name]
 
 
 def run_part(name: str, args, log_dir: Path) -> dict:
@@ -1058,16 +1100,23 @@ def run(args, out_dir: Path | None) -> dict:
     from ..errors import ConfigError
     from ..robot import load_robot
 
-    parts = [p.strip() for p in args.parts.split(",") if p.strip()]
+    simtwo = getattr(args, "simulator", "standin") == "simtwo"
+    parts_arg = args.parts or (",".join(simtwo_side.PARTS) if simtwo else ",".join(PARTS))
+    parts = [p.strip() for p in parts_arg.split(",") if p.strip()]
     for p in parts:
         if p not in PARTS:
             raise ConfigError(f"--parts: unknown part {p!r}; choose from {', '.join(PARTS)}")
+    if simtwo:
+        from ..simtwo_linux.scene import field_for_simtwo
+
+        simtwo_side.check_parts(parts)
+        args.field = field_for_simtwo(args.field)  # SimTwo's scene is not the rules' field
     if args.fuzz_datagrams < 0 or not 0 <= args.fuzz_inband <= 1:
         raise ConfigError("--fuzz-datagrams must be >= 0 and --fuzz-inband within 0..1")
     if not (0 <= args.drop < 1 and 0 <= args.dup < 1 and 0 <= args.reorder < 1
             and args.drop + args.dup + args.reorder < 1):
         raise ConfigError("--drop, --dup and --reorder are shares within 0..1 (their sum below 1)")
-    robot = load_robot()
+    load_robot()  # a broken robot spec fails here, before any process starts
     log_dir = (out_dir / "logs") if out_dir is not None else Path(tempfile.mkdtemp(prefix="raf-exp-faults-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     res: dict = {}
@@ -1082,6 +1131,8 @@ def run(args, out_dir: Path | None) -> dict:
             res[f"{p}_completed_target_met"] = False
             print(f"faults: {p} failed: {e} (logs in {log_dir})", file=sys.stderr, flush=True)
         res[f"{p}_wall_s"] = round(time.monotonic() - t0, 1)
+    if simtwo:
+        res = simtwo_side.result(res)
     print(table(res))
     if out_dir is not None:
         (out_dir / "faults_table.md").write_text(table(res) + "\n")
