@@ -172,3 +172,23 @@ def test_settings_are_checked():
     with pytest.raises(ConfigError, match="scan_match/nope"):
         from_dict({"scan_match": {"nope": 1}})
     assert from_dict({"scan_match": {"enabled": False}}).scan_match.enabled is False
+
+
+def test_a_scan_waits_for_the_odometry_of_its_last_ray(world):
+    """The scan can arrive before the odometry of the cycle that carried it: it is matched only once odometry
+    reaches its last ray (a pose held from an earlier cycle would smear the sweep's end), then once."""
+    fld, robot, _, boxes = world
+    sl = ScanLocalizer(fld, robot)
+    rng = np.random.default_rng(4)
+    pose = (0.47, -0.3, -math.pi / 2)
+    r = _scan(boxes, pose, rng)
+    for k in range(3):  # at rest, odometry up to 0.08 s
+        sl.add_odom(k * 0.04, (0.0, 0.0, 0.0))
+    assert sl.add_scan(r, ANGLES, 0.0, 0.2 / N) is None
+    assert sl.fix_pending(0.08, pose) is None  # the last usable ray after 0.15 s: not covered yet
+    sl.add_odom(0.24, (0.0, 0.0, 0.0))
+    f = sl.fix_pending(0.24, pose)
+    assert f is not None and f.ok and abs(f.t - 0.1) < 0.002
+    assert math.hypot(f.pose[0] - pose[0], f.pose[1] - pose[1]) < 0.003
+    assert sl.fix_pending(0.24, pose) is None  # matched once
+    assert sl.add_scan(np.full(N, np.inf), ANGLES, 0.2, 0.2 / N).reason == "too_few_returns"

@@ -115,7 +115,7 @@ def _udp_port() -> int:
 
 
 def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path: bool = False,
-                    field_name: str | None = None, simulator: str = "standin") -> dict:
+                    field_name: str | None = None, simulator: str = "standin", localize: tuple[str, ...] = ()) -> dict:
     """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
     :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``).
 
@@ -149,7 +149,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         env = graph.env()
         procs.raf("bridge", *field_args, "bridge", "--port", str(bridge_port), "--camera",
                   f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", env=env)
-        procs.raf("localize", *field_args, "localize", env=env)
+        procs.raf("localize", *field_args, "localize", *[a for s in localize for a in ("--set", s)], env=env)
         procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
                   *(["--format", "bag"] if mw == "ros1" else []), env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run

@@ -118,6 +118,9 @@ def add_arguments(parser) -> None:
                         help="bare_truth: bring the late pose forward by its delay at odometry's speeds and on through "
                              "the commands in flight, as raf agent does (agent/predict.py; default: the late pose as "
                              "it is)")
+    parser.add_argument("--localize", metavar="NAME=VALUE", action="append", default=[],
+                        help="full_stack: a setting of raf localize (its --set, repeatable), e.g. "
+                             "scan_match/enabled=false; checked before any run starts")
     parser.add_argument("--agent", metavar="NAME=VALUE", action="append", default=[],
                         help="a RoundAgent setting (repeatable; one of " + ", ".join(AGENT_SETTINGS)
                              + "; smooth=0: stop and turn at every corner, the earlier behaviour; carry_arcs=0: turn on the spot "
@@ -339,14 +342,14 @@ def _job(spec):
 
 
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None,
-              simulator: str = "standin") -> dict:
+              simulator: str = "standin", localize: tuple[str, ...] = ()) -> dict:
     from ._competition_full import SimStartError, play_full_stack
 
     tries = 3
     while True:
         tries -= 1
         try:
-            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator)
+            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize)
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
                 return _failed(round_no, seed, e)
@@ -605,6 +608,14 @@ def run(args, out_dir: Path | None) -> dict:
     jobs = max(1, int(args.jobs))
     if simulator == "simtwo":
         jobs = 1  # the real SimTwo needs about a core: one run at a time on a 2-core machine
+    localize = tuple(getattr(args, "localize", None) or ())
+    if localize:
+        if not mode.endswith("full_stack"):
+            raise ConfigError("--localize: only the whole stack (full_stack) runs raf localize")
+        from ..localization.config import load_config
+        from ..settings import parse_set
+
+        load_config(overrides=parse_set(list(localize)))  # a bad name or value: ConfigError now, not in each run
     if mode.endswith("full_stack"):  # realtime: each run is its own private graph; --jobs of them at once (threads)
         if drive or agent_options or sim_options or any(noise) or delay or cmd_delay:
             raise ConfigError("--drive, --agent, --sim, --pose-noise, --pose-delay and --cmd-delay are not passed to the whole "
@@ -616,7 +627,8 @@ def run(args, out_dir: Path | None) -> dict:
             from concurrent.futures import ThreadPoolExecutor
 
             with ThreadPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
-                runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[5], field_name, simulator), specs))
+                runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[5], field_name, simulator,
+                                                          localize), specs))
     elif jobs == 1 or len(specs) == 1:
         runs = [_job(s) for s in specs]
     else:

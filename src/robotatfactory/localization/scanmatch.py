@@ -37,7 +37,7 @@ class ScanMatchConfig:
     body_margin_m: float = 0.02    # returns within the robot's outline (and a held part's) grown by this: ignored
     min_points: int = 30           # fewest returns on mapped surfaces for a fix
     min_inlier_share: float = 0.5  # and at least this share of the usable returns
-    outlier_m: float = 0.03        # a return farther than this (or 3 sigma) from every mapped surface after the
+    outlier_m: float = 0.015       # a return farther than this (or 3 sigma) from every mapped surface after the
                                    # fit is something the map does not have (a part, a robot): left out
     huber_m: float = 0.005         # robust weight: returns farther than this (or 1 sigma) count less (m)
     sigma_m: float = 0.003         # least error of one return (the map's and the mount's), m; the LIDAR's range
@@ -303,8 +303,8 @@ def body_box(robot, part=None, margin: float = 0.02) -> tuple[float, float, floa
 
 class ScanLocalizer:
     """Scans to fixes: the returns in base_link at the sweep's middle (deskewed with odometry), matched from
-    the filter's pose carried to that time by odometry. The caller feeds odometry (:meth:`add_odom`) and asks
-    for a fix per scan (:meth:`fix`)."""
+    the filter's pose carried to that time by odometry. The caller feeds odometry (:meth:`add_odom`) and
+    scans (:meth:`add_scan`), and asks for the fix once the odometry covers the scan (:meth:`fix_pending`)."""
 
     def __init__(self, field, robot, cfg: ScanMatchConfig | None = None):
         self.cfg = cfg or ScanMatchConfig()
@@ -314,12 +314,14 @@ class ScanLocalizer:
         self.body = body_box(robot, field.part, self.cfg.body_margin_m)
         self.noise = (float(getattr(lid, "noise_a", 0.0) or 0.0), float(getattr(lid, "noise_b", 0.0) or 0.0))
         self.odom = OdomHistory()
+        self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (ray times, returns in the laser frame)
 
     def add_odom(self, t: float, pose: tuple[float, float, float]) -> None:
         self.odom.add(t, pose)
 
     def reset(self) -> None:
         self.odom.clear()
+        self._pending = None
 
     def sigma(self, pts_laser: np.ndarray) -> np.ndarray:
         """Each return's error: the LIDAR's range noise at its range and ``sigma_m`` (m)."""
@@ -346,20 +348,36 @@ class ScanLocalizer:
         keep = ~((bx >= x0) & (bx <= x1) & (np.abs(by) <= hw))
         return idx[keep], pts[keep]
 
-    def fix(self, ranges, angles, t0: float, dt: float, filter_t: float, filter_pose, range_min: float = 0.0,
-            range_max: float = math.inf) -> ScanFix:
-        """A fix from one scan whose ray ``i`` was measured at ``t0 + i * dt``, given the filter's pose
-        ``filter_pose`` at ``filter_t`` (both on the odometry's clock)."""
-        if filter_pose is None:
-            return ScanFix(False, reason="no_prior")
+    def add_scan(self, ranges, angles, t0: float, dt: float, range_min: float = 0.0,
+                 range_max: float = math.inf) -> ScanFix | None:
+        """Take a scan whose ray ``i`` was measured at ``t0 + i * dt``; it is matched (:meth:`fix_pending`)
+        once odometry covers its last ray (a scan can arrive before the odometry of the same cycle). A newer
+        scan replaces one still waiting. Returns a ScanFix (not ok) when the scan cannot be used at all."""
         idx, pts = self.returns(ranges, angles, range_min, range_max)
         if len(idx) < self.cfg.min_points:
+            self._pending = None
             return ScanFix(False, reason="too_few_returns", points=len(idx))
-        times = t0 + idx * dt
+        self._pending = (t0 + idx * dt, pts)
+        return None
+
+    def ready(self) -> bool:
+        """A scan waits and odometry reaches its last ray."""
+        last = self.odom.latest
+        return self._pending is not None and last is not None and last[0] >= self._pending[0][-1] - 1e-6
+
+    def fix_pending(self, filter_t: float, filter_pose) -> ScanFix | None:
+        """The waiting scan's fix, given the filter's pose ``filter_pose`` at ``filter_t`` (the odometry's
+        clock); None while no scan is ready."""
+        if not self.ready():
+            return None
+        times, pts = self._pending
+        self._pending = None
+        if filter_pose is None:
+            return ScanFix(False, reason="no_prior")
         t_ref = float(0.5 * (times[0] + times[-1]))
         odo = self.odom.at(np.concatenate([times, [t_ref, filter_t]]))
         if odo is None:
-            return ScanFix(False, reason="no_odometry", points=len(idx))
+            return ScanFix(False, reason="no_odometry", points=len(times))
         ray_odom, ref_odom, filt_odom = odo[:-2], odo[-2], odo[-1]
         body = deskew(pts, ray_odom, tuple(ref_odom), self.laser_pose)
         # the filter's pose carried back (or on) to t_ref by odometry: map<-base(t_ref) = map<-odom * odom<-base

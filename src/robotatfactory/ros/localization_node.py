@@ -11,8 +11,8 @@ rejection counts by reason. Every callback survives bad input: it is counted, lo
 skipped.
 
 QoS: images, camera_info and scans are sensor data (ROS 2: best effort, which also matches reliable
-publishers); odometry and every output (the debug image too) are reliable. Each callback runs one message at a time, as rospy's
-one thread per subscription does (ROS 2's executor would otherwise run two images at once).
+publishers); odometry and every output (the debug image too) are reliable. Each callback runs one message at a
+time, as rospy's one thread per subscription does (ROS 2's executor would otherwise run two images at once).
 """
 from __future__ import annotations
 
@@ -185,6 +185,7 @@ class LocalizationNode:
             self.ekf.odometry_pose(t, pose)
             if self.scan_matcher is not None:
                 self.scan_matcher.add_odom(t, pose)
+                self._match_scan()
             finished = self.ekf.pop_finished_fixes()
             self._odom = (t, pose)
             self.counts["odom"] += 1
@@ -326,7 +327,11 @@ class LocalizationNode:
         t0 = rm.stamp_to_s(msg.header.stamp)
         dt = msg.time_increment if math.isfinite(msg.time_increment) and msg.time_increment > 0 else 0.0
         if self.scan_matcher is not None:
-            self._match_scan(ranges, angles, t0, dt, msg.range_min, range_max)
+            with self.lock:
+                rejected = self.scan_matcher.add_scan(ranges, angles, t0, dt, msg.range_min, range_max)
+                if rejected is not None:
+                    self.counts[f"scan_unmatched_{rejected.reason}"] += 1
+                self._match_scan()
         if not self.use_beacons:
             return
         obs = extract_beacons(ranges, angles, self.cfg.beacons, range_min=msg.range_min, range_max=range_max)
@@ -337,17 +342,18 @@ class LocalizationNode:
             if r.accepted:
                 self.counts["beacons_used"] += 1
 
-    def _match_scan(self, ranges, angles, t0: float, dt: float, range_min: float, range_max: float) -> None:
-        with self.lock:
-            pose, t_filter = self.ekf.pose(), self.ekf.t
-            fix = self.scan_matcher.fix(ranges, angles, t0, dt, t_filter, pose, range_min, range_max)
-            if fix.ok:
-                r = self.ekf.pose_fix(fix.t, fix.pose, fix.cov, source=SCAN)
-                self.counts["scan_fixes"] += 1
-                if not r.accepted and r.reason not in ("pending",):
-                    self.counts[f"scan_fix_{r.reason}"] += 1
-            else:
-                self.counts[f"scan_unmatched_{fix.reason}"] += 1
+    def _match_scan(self) -> None:
+        """The waiting scan's fix, once odometry covers it (called with the lock held)."""
+        fix = self.scan_matcher.fix_pending(self.ekf.t, self.ekf.pose())
+        if fix is None:
+            return
+        if fix.ok:
+            r = self.ekf.pose_fix(fix.t, fix.pose, fix.cov, source=SCAN)
+            self.counts["scan_fixes"] += 1
+            if not r.accepted and r.reason not in ("pending",):
+                self.counts[f"scan_fix_{r.reason}"] += 1
+        else:
+            self.counts[f"scan_unmatched_{fix.reason}"] += 1
 
     # ------------------------------------------------------------------ diagnostics
     def _diag_loop(self) -> None:
