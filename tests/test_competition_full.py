@@ -70,3 +70,13 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
     assert 0.0 <= runs[0]["command_delay_median_s"] <= 0.12
     assert (tmp_path / "round1_seed0_full_stack.png").stat().st_size > 10_000
     assert sum(text.startswith("picked") for _, text, _, _ in runs[0]["events"]) == 4
+
+
+def test_localize_settings_are_checked_before_any_run():
+    """--localize NAME=VALUE reaches the whole stack's raf localize; a bad one is refused at once, and outside
+    the whole stack it is refused too (the bare mode runs no raf localize)."""
+    for extra, msg in ((["--localize", "scan_match/nope=1"], "scan_match/nope"),
+                       (["--localize", "scan_match/enabled=false", "--mode", "bare_truth"], "only the whole stack")):
+        r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "competition", "--rounds", "1",
+                            "--seeds", "1", *extra], capture_output=True, text=True, timeout=60)
+        assert r.returncode != 0 and msg in r.stderr, r.stderr[-1000:]
