@@ -153,9 +153,10 @@ def run_experiment(name: str, field: str, out: Path, *argv: str, timeout: float 
 
 
 def measure_speed(simulator: str, field: str, out_dir: Path, k: int) -> list[dict]:
-    # free-running on both: SimTwo cannot wait for a reply (the stand-in's lockstep is an idealisation)
+    # free-running on both (the default: SimTwo cannot wait for a reply, the stand-in's --lockstep is an
+    # idealisation), the bare loop (--lead-ms 0), so that the lags compare the two simulators' loops
     return [run_experiment("speed", field, out_dir / f"speed_{simulator}_{k}", "--simulator", simulator,
-                           "--no-lockstep")]
+                           "--lead-ms", "0")]
 
 
 def measure_localization(simulator: str, field: str, out_dir: Path, k: int, route: str,

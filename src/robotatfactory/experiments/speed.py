@@ -1,17 +1,33 @@
 """``raf experiment speed``: the paper's first validation (its figure 5), through ROS (1 or 2).
 
 A private graph (ROS 1: a roscore on a free port; ROS 2: a domain id of its own; ``raf --middleware ros2
-experiment speed`` runs it on ROS 2), the stand-in simulator (``raf sim --lockstep``, real time, no camera),
+experiment speed`` runs it on ROS 2), a simulator (by default the stand-in, ``raf sim`` in real time, no camera),
 the bridge (``raf bridge``) and a small node in this process that sends, on ``cmd_vel``, a linear speed
 reference: a cubic Hermite spline from 0 to 0.3 m/s in 1 s (zero slope at both ends), then held. The speed
 measured from the encoders (``odom`` twist, the mean over each 40 ms cycle) is recorded against the
 reference.
 
-Timing. The node answers each ``odom`` (stamp T, the end of a cycle) with the reference for the cycle
-after next's start, r(T + P): the bridge puts it in its reply to the next SensorFrame (sent at T + P), and
-the simulator applies it during (T + P, T + 2P], a zero-order hold sampled at the start of the interval
-(what a real 25 Hz controller does). The measured speed at stamp T is the mean over (T - P, T], so it is
-compared with the reference at the middle of that interval, r(T - P/2).
+Timing. The node answers each ``odom`` (stamp T, the end of a cycle) with the reference r(T + P + lead). The
+bridge replies to every SensorFrame at once with the newest ``cmd_vel``, so the node's answer to the frame at
+T goes out in the reply to the frame at T + P. Free-running (the default, as SimTwo runs) the simulator reads
+that reply in its next script call, at T + 2P, and applies it during (T + 2P, T + 3P]; with ``--lockstep``
+it waits for the reply and applies it during (T + P, T + 2P], one cycle earlier. Then the wheels' speed
+controller (SimTwo's CalcPID, or the stand-in's copy of it) takes its own time to follow. The measured speed
+at stamp T is the mean over (T - P, T], so it is compared with the reference at the middle of that interval,
+r(T - P/2).
+
+Lead. ``--lead-ms`` (default 60, :data:`DEFAULT_LEAD_MS`) is a feed-forward a controller that knows its loop
+can apply: the reference is sent that much further ahead, r(T + P + lead). Where the bare loop's lag
+(``--lead-ms 0``: 61 ms on the stand-in, 54-63 ms on SimTwo) comes from, measured on the stand-in
+(docs/benchmarks.md, "The paper's speed test"): 40 ms are the extra cycle of the free-running loop (the
+answer to the frame at T is applied during (T + 2P, T + 3P], not (T + P, T + 2P]: free-running with
+``--lead-ms 40`` gives the lockstep figures to the digit), 20 ms the zero-order hold (the reference is
+sampled at the start of the 40 ms it is held for and compared at its middle: P/2), and 1 ms (SimTwo: -5
+to +2 ms) the wheels' speed controller (CalcPID with ``simtwo_pid``; its feed-forward kf makes it follow
+within the cycle). The default is the first two, P + P/2, known from the loop's structure and not fitted
+to a run; with
+``--lockstep`` the loop has no extra cycle and ``--lead-ms 20`` is its match. The result reports the lead
+(``speed_lead_ms``).
 
 Figures: RMS and maximum error over the run, and the lag (the time shift of the reference that best
 matches the measurement, found on a 1 ms grid). Target: RMS error <= 0.01 m/s.
@@ -19,17 +35,19 @@ matches the measurement, found on a 1 ms grid). Target: RMS error <= 0.01 m/s.
 Simulator. ``--simulator standin`` (the default) runs ``raf sim``; ``--simulator simtwo`` runs the real SimTwo
 (``raf simtwo run``, its camera closed, the field ``simtwo2022``): the experiment teleports the robot to the
 start pose through the bridge's ``sim/set_robot_pose`` and starts the reference ``--settle`` s after it is
-there. SimTwo runs free in real time (no lockstep; ``--no-lockstep`` is implied) and applies a reply only in
-the cycles its GUI loop lets it (docs/simtwo.md); the result ``simulator`` names which one ran.
+there. SimTwo runs free in real time (it cannot wait for a reply: ``--lockstep`` is refused) and applies a
+reply only in the cycles its GUI loop lets it (docs/simtwo.md); the result ``simulator`` names which one ran.
 
-Mode. By default the stand-in runs its SimTwo-like drive: SimTwo's own speed controller (CalcPID with the
-robot's ``simtwo_pid`` gains, set once, switched on by the script: 0 V for 9 ms after each script call);
-``--speed-control`` and ``--pid-timing`` select the others (``raf sim`` options of the same names). The
-result ``speed_mode`` names the mode. ``--lockstep`` (the runner waits for each reply, deterministic
-timing: an idealisation SimTwo cannot do) is on by default; ``--no-lockstep`` runs the simulator free.
+Mode. By default the stand-in runs free in real time with its SimTwo-like drive: SimTwo's own speed
+controller (CalcPID with the robot's ``simtwo_pid`` gains, set once, switched on by the script: 0 V for 9 ms
+after each script call); ``--speed-control`` and ``--pid-timing`` select the others (``raf sim`` options of
+the same names). ``--lockstep`` (the runner waits for each reply, deterministic timing: an idealisation
+SimTwo cannot do) is a named option, off by default. The result ``speed_mode`` names the mode
+(``<speed control>/<pid timing>/free|lockstep``; ``simtwo/free`` on the real SimTwo).
 """
 from __future__ import annotations
 
+import argparse
 import math
 import socket
 import tempfile
@@ -42,10 +60,15 @@ import numpy as np
 from ..sim.config import PID_TIMINGS, SPEED_CONTROLS
 
 NAME = "speed"
-HELP = "the paper's figure 5: a 0 -> 0.3 m/s cubic Hermite speed reference through ROS cmd_vel, encoder speed vs reference"
+HELP = ("the paper's figure 5: a 0 -> 0.3 m/s cubic Hermite speed reference through ROS cmd_vel, encoder speed vs "
+        "reference")
 TARGETS = {"speed_rmse_mps": "<= 0.01 m/s (issue 4)"}
 
 P = 0.04  # s, control period
+#: ms: the feed-forward lead's default, P + P/2: the free-running loop's extra cycle (the reply is read in the
+#: script call after the one it answers) and the zero-order hold's half period; the wheels' speed controller
+#: adds a few ms (1 on the stand-in, -5..+2 on SimTwo) that are left in (docs/benchmarks.md, "The paper's speed test")
+DEFAULT_LEAD_MS = 1000 * (P + P / 2)
 START_POSE = (-0.7, 0.35, 0.0)  # m, m, rad: 1.2 m free ahead on both fields (rules2026, simtwo2022)
 
 
@@ -66,8 +89,15 @@ def add_arguments(parser) -> None:
                         help="the simulator's wheel speed controller (raf sim --speed-control; default simtwo)")
     parser.add_argument("--pid-timing", choices=PID_TIMINGS,
                         default="script_enabled", help="raf sim --pid-timing (default script_enabled)")
-    parser.add_argument("--no-lockstep", dest="lockstep", action="store_false",
-                        help="run the simulator free instead of waiting for each reply")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="idealisation (stand-in only): the simulator waits for each reply (default: free-running "
+                             "in real time, as SimTwo)")
+    parser.add_argument("--no-lockstep", dest="lockstep", action="store_false", default=False,
+                        help=argparse.SUPPRESS)  # the default since issue 19; kept so that older commands run
+    parser.add_argument("--lead-ms", type=float, default=DEFAULT_LEAD_MS,
+                        help="feed-forward lead: answer each odom at T with the reference at T + 40 ms + LEAD "
+                             f"(default {DEFAULT_LEAD_MS:g}: the free-running loop's extra cycle and the zero-order "
+                             "hold's half period; 0: the bare loop; 20 matches --lockstep)")
     parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
                         help="standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, free-running, "
                              "field simtwo2022, teleported to the start pose)")
@@ -101,9 +131,17 @@ def run(args, out_dir: Path | None) -> dict:
     from ..ros.mw.base import stamp_ns
     from ..ros.processes import ExperimentNode, Procs, wait_until
 
+    from ..errors import ConfigError
+
     v_max, rise, hold = args.v_max, args.rise, args.hold
     duration = args.settle + rise + hold
     simtwo = getattr(args, "simulator", "standin") == "simtwo"
+    lockstep = bool(getattr(args, "lockstep", False))
+    lead = float(getattr(args, "lead_ms", DEFAULT_LEAD_MS)) / 1000.0
+    if simtwo and lockstep:
+        raise ConfigError("--lockstep: the real SimTwo cannot wait for a reply (it runs free); leave it out")
+    if not -0.2 <= lead <= 0.5:
+        raise ConfigError(f"--lead-ms {args.lead_ms:g}: expected -200..500 ms")
     field = args.field
     if simtwo:
         from ..simtwo_linux.scene import field_for_simtwo
@@ -133,7 +171,8 @@ def run(args, out_dir: Path | None) -> dict:
             T = ns * 1e-9
             t_start = start[0]
             tw = Twist()
-            tw.linear.x = float(hermite_reference(T + P - t_start, v_max, rise)) if T + P >= t_start else 0.0
+            ahead = T + P + lead - t_start  # the reference the wheels should follow when this answer acts
+            tw.linear.x = float(hermite_reference(ahead, v_max, rise)) if math.isfinite(ahead) else 0.0
             pub.publish(tw)
             with lock:
                 last_t[0] = T
@@ -152,7 +191,7 @@ def run(args, out_dir: Path | None) -> dict:
         else:
             procs.raf("sim", "--field", field, "sim", "--port", str(sim_port), "--bridge", f"127.0.0.1:{port}",
                       "--no-camera", "--no-server",
-                      *(["--lockstep", "--lockstep-timeout", "2.0"] if args.lockstep else []),
+                      *(["--lockstep", "--lockstep-timeout", "2.0"] if lockstep else []),
                       "--realtime", f"--start-pose={START_POSE[0]},{START_POSE[1]},{START_POSE[2]}", "--speed-control",
                       args.speed_control, "--pid-timing", args.pid_timing, "--seed", str(args.seed), "--duration",
                       f"{duration + 0.2:.2f}", "--status-every", "1", env=env, may_exit=True)
@@ -177,7 +216,8 @@ def run(args, out_dir: Path | None) -> dict:
 
     res.update({"middleware": middleware(), "simulator": "simtwo" if simtwo else "standin",
                 "speed_mode": ("simtwo/free" if simtwo else
-                               f"{args.speed_control}/{args.pid_timing}/{'lockstep' if args.lockstep else 'free'}"),
+                               f"{args.speed_control}/{args.pid_timing}/{'lockstep' if lockstep else 'free'}"),
+                "speed_lead_ms": round(lead * 1000, 3),
                 "speed_samples": int(len(t)), "speed_reference_max_mps": v_max, "speed_rise_s": rise,
                 "speed_rmse_target_met": res["speed_rmse_mps"] <= 0.01})
     ok = np.isfinite(g)
