@@ -22,11 +22,38 @@ installed into a fresh copy of the scene (docs/simtwo.md, "SimTwo on Linux").
   raf simtwo run                                       RobotFactoryPro2022 on the default ports (UDP 9808 in,
                                                        frames to 127.0.0.1:9810, camera tcp 9899) until Ctrl-C
   raf simtwo run --free-ports                          free ports (printed), for a run beside others
+  raf simtwo run --robot robot.json                    the scene's camera set to the robot file's (fx = fy,
+                                                       centred principal point, pitch, mount)
   raf simtwo info                                      where the build is, its patches, the tools
   raf simtwo field                                     what SimTwo built (walls, markers, slots, start pose,
                                                        read back from SimTwo) against the simtwo2022 field
 
 Then: raf --field simtwo2022 bridge (the same ports), or raf up --simulator simtwo for the whole stack."""
+
+
+ROBOT_HELP = ("a robot file (the JSON raf sim --robot takes) whose camera the scene's AGV.xml gets: focal length "
+              "from fx at 96 dpi, pitch, mount height and forward offset; refused when GLScene cannot render it "
+              "(fx != fy, principal point off the centre, distortion, roll). Only the camera: SimTwo's wheels, "
+              "motors and LIDAR stay the scene's")
+
+
+def robot_camera(path: str | None):
+    """The camera of robot file ``path`` checked for SimTwo's scene (None without a file); ConfigError says
+    what GLScene cannot render."""
+    if not path:
+        return None
+    from ..errors import ConfigError
+    from ..robot import load_robot
+    from ..simtwo_linux.scene import camera_refusals
+
+    try:
+        cam = load_robot(path).camera
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ConfigError(f"--robot {path}: {e}") from None
+    why = camera_refusals(cam)
+    if why:
+        raise ConfigError(f"--robot {path}: SimTwo's camera cannot render it: " + "; ".join(why))
+    return cam
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -55,6 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--seed", type=int, default=0, help="seed of the round's draw (default 0)")
     r.add_argument("--parts", metavar="RGBX", help="the incoming parts, slot 1 first (overrides the draw)")
     r.add_argument("--script", metavar="FILE", help="another scene script instead of simtwo/control.pas")
+    r.add_argument("--robot", metavar="FILE", help=ROBOT_HELP)
     r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
     r.add_argument("--ready-timeout", type=float, default=90.0, metavar="S",
                    help="how long SimTwo may take until its script streams (default 90)")
@@ -71,6 +99,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                    "model (simtwo2022 unless --field names another) and list each difference "
                                    "with its size. Exit 1 when there are differences beyond the tolerances.")
     f.add_argument("--keep", metavar="DIR", help="run in DIR, a new or empty folder, and keep it")
+    f.add_argument("--robot", metavar="FILE", help=ROBOT_HELP + "; the camera frames are compared with its "
+                                                                "projection")
 
 
 def _progress(msg: str) -> None:
@@ -116,14 +146,21 @@ def _field(args, b) -> int:
     from ..simtwo_linux.run import SimTwoError
     from ..simtwo_linux.scene import field_for_simtwo
 
+    cam = robot_camera(args.robot)  # refused before anything starts
     build = b.require()
     fld = load_field(field_for_simtwo(args.field))
     try:
-        dump = fielddump.run_dump(fld, build, keep=Path(args.keep) if args.keep else None, progress=_progress)
+        dump = fielddump.run_dump(fld, build, keep=Path(args.keep) if args.keep else None, progress=_progress,
+                                  robot_camera=cam)
     except (SimTwoError, TimeoutError) as e:
         print(f"raf simtwo field: {e}", flush=True)
         return 1
-    rep = fielddump.compare(dump, fld, fielddump.scene_dir(build))
+    robot = None
+    if args.robot:
+        from ..robot import load_robot
+
+        robot = load_robot(args.robot)
+    rep = fielddump.compare(dump, fld, fielddump.scene_dir(build), robot=robot)
     print(f"field {fld.name} against SimTwo's {fielddump.DEFAULT_SCENE}:")
     print(fielddump.format_report(rep), flush=True)
     return 1 if rep.differences else 0
@@ -141,6 +178,7 @@ def _run(args, b) -> int:
     from ..errors import ConfigError
     from ..simtwo_linux.run import Ports, SimTwoError, SimTwoRun
 
+    cam = robot_camera(args.robot)  # refused before anything starts
     build = b.require()  # a BuildError (a user error: raf prints it) when it is not built
     ports = Ports.free() if args.free_ports else Ports()
     host = "127.0.0.1"
@@ -170,7 +208,7 @@ def _run(args, b) -> int:
                           "there and keeps them)")
     sim = SimTwoRun(build, ports, scene=args.scene, parts=parts, ready_line=f"script: {args.ready_line}",
                     camera=not args.no_camera, bridge_host=host, script=Path(args.script) if args.script else None,
-                    workdir=workdir, keep=workdir is not None, progress=_progress)
+                    workdir=workdir, keep=workdir is not None, progress=_progress, robot_camera=cam)
     signal.signal(signal.SIGTERM, _sigterm)
     try:
         sim.start(args.ready_timeout)

@@ -16,6 +16,13 @@ roll, height and forward offset errors, the fit's residual before (nominal camer
 and the reported 1-sigma uncertainties. With ``--out DIR``: ``calibration.yaml`` (the fitted camera, the file
 ``raf bridge --calibration`` and ``raf localize --calibration`` load), ``robot_true.json`` (the perturbed
 robot, for ``raf sim --robot``), ``calibration_residuals.png`` and ``results.json``.
+
+``--simulator simtwo``: the real SimTwo (:mod:`._calibration_simtwo`) renders the perturbed camera as far as
+its GLScene camera can: fx and fy +3 % (one focal length) and pitch +1 degree by default; the principal point
+stays at the image centre (cx, cy +0: a symmetric frustum), no roll, no distortion. The robot drives the
+localization experiment's calibration drive (``raf simtwo run --robot`` with the perturbed robot file, raf
+bridge, a rosbag) and ``raf calibrate --bag`` fits it from the nominal camera; the same keys against the
+perturbed true camera.
 """
 from __future__ import annotations
 
@@ -25,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 NAME = "calibration"
-HELP = "raf calibrate on stand-in frames rendered with a perturbed camera (fx, fy +3 pct, cx +4 px, cy -3 px, pitch +1 deg)"
+HELP = ("raf calibrate on frames rendered with a perturbed camera (stand-in: fx, fy +3 pct, cx +4 px, cy -3 px, "
+        "pitch +1 deg; --simulator simtwo: fx, fy +3 pct, pitch +1 deg)")
 TARGETS = {
     "fx_error_pct": "|.| <= 0.3 (issue 9)",
     "fy_error_pct": "|.| <= 0.3 (issue 9)",
@@ -36,7 +44,16 @@ TARGETS = {
 LIMITS = {"fx_error_pct": 0.3, "fy_error_pct": 0.3, "cx_error_px": 0.5, "cy_error_px": 0.5, "pitch_error_deg": 0.1}
 
 
+#: the stand-in's default principal-point perturbation (px); SimTwo's is 0 (its frustum is symmetric)
+STANDIN_CX_PX, STANDIN_CY_PX = 4.0, -3.0
+STANDIN_WHEEL_ERROR = "0.01,-0.005"
+
+
 def add_arguments(parser) -> None:
+    parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
+                        help="standin: frames rendered in this process (default); simtwo: the real SimTwo with "
+                             "its scene's camera perturbed (raf simtwo run --robot: fx = fy, principal point at the "
+                             "centre), the localization experiment's calibration drive and raf calibrate --bag")
     parser.add_argument("--route", default="reference", choices=("reference", "second"),
                         help="route to drive (localization/route.py; default reference)")
     parser.add_argument("--laps", type=int, default=1, help="laps of the route (default 1)")
@@ -45,16 +62,19 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="simulator seed")
     parser.add_argument("--fx-pct", type=float, default=3.0, help="true fx against the nominal, percent (default 3)")
     parser.add_argument("--fy-pct", type=float, default=3.0, help="true fy against the nominal, percent (default 3)")
-    parser.add_argument("--cx-px", type=float, default=4.0, help="true cx against the nominal, px (default 4)")
-    parser.add_argument("--cy-px", type=float, default=-3.0, help="true cy against the nominal, px (default -3)")
+    parser.add_argument("--cx-px", type=float, default=None,
+                        help="true cx against the nominal, px (default 4; SimTwo: 0, the only value it renders)")
+    parser.add_argument("--cy-px", type=float, default=None,
+                        help="true cy against the nominal, px (default -3; SimTwo: 0, the only value it renders)")
     parser.add_argument("--pitch-deg", type=float, default=1.0, help="true pitch against the nominal, deg (default 1)")
     parser.add_argument("--roll-deg", type=float, default=0.0, help="true roll, deg (default 0)")
     parser.add_argument("--height-mm", type=float, default=0.0, help="true mount height against the nominal, mm")
     parser.add_argument("--forward-mm", type=float, default=0.0, help="true forward offset against the nominal, mm")
     parser.add_argument("--no-odometry", action="store_true", help="fit without the odometry prior")
-    parser.add_argument("--wheel-error", default="0.01,-0.005", metavar="TRACK,RADIUS",
+    parser.add_argument("--wheel-error", default=None, metavar="TRACK,RADIUS",
                         help="relative errors of the simulated robot's track and wheel radius against the nominal "
-                             "ones the odometry uses (default 0.01,-0.005, as raf experiment localization)")
+                             "ones the odometry uses (default 0.01,-0.005, as raf experiment localization; not on "
+                             "SimTwo, whose wheels are its scene's)")
     parser.add_argument("--fit-distortion", action="store_true", help="also fit k1, k2")
     parser.add_argument("--fit-corner-bias", action="store_true",
                         help="also fit a constant detector corner bias (px; docs/calibration.md: off by default)")
@@ -113,8 +133,9 @@ def record(fld, true_robot, nominal_robot, route: str = "reference", laps: int =
         if odometry:
             o = tuple(float(np.interp(stamp, odo_t, odo_p[:, k])) for k in range(3))
         out.append(FrameData(stamp, dets, o))
-    info = {"frames_rendered": frames_seen, "frames_with_markers": len(out), "drive_s": float(odo_t[-1]) if len(odo_t) else 0.0,
-            "route_done": bool(pp.done), "record_wall_s": time.perf_counter() - t_wall}
+    info = {"frames_rendered": frames_seen, "frames_with_markers": len(out),
+            "drive_s": float(odo_t[-1]) if len(odo_t) else 0.0, "route_done": bool(pp.done),
+            "record_wall_s": time.perf_counter() - t_wall}
     return out, info
 
 
@@ -158,6 +179,10 @@ def figure(result, result_nominal, errors: dict, path: Path) -> None:
 
 
 def run(args, out_dir: Path | None) -> dict:
+    if getattr(args, "simulator", "standin") == "simtwo":
+        from . import _calibration_simtwo
+
+        return _calibration_simtwo.run(args, out_dir)
     from ..field import load_field
     from ..localization.calibration import (CalibrationConfig, calibrate, compare, perturbed_robot,
                                             write_calibration, write_robot_json)
@@ -169,6 +194,9 @@ def run(args, out_dir: Path | None) -> dict:
 
     fld = load_field(args.field)
     nominal = load_robot("simtwo")
+    args.cx_px = STANDIN_CX_PX if args.cx_px is None else args.cx_px
+    args.cy_px = STANDIN_CY_PX if args.cy_px is None else args.cy_px
+    args.wheel_error = args.wheel_error or STANDIN_WHEEL_ERROR
     try:
         track_err, radius_err = (float(v) for v in args.wheel_error.split(","))
     except ValueError:
@@ -202,6 +230,7 @@ def run(args, out_dir: Path | None) -> dict:
         "rejected_detections": result.rejected, "odometry_links": result.odometry_links,
         "degenerate_params": ",".join(result.degenerate) or "none",
         "fit_s": round(fit_s, 2), "route": args.route, "laps": args.laps, "mode": "default (SimTwo-like)",
+        "simulator": "standin",
         "wheel_error": args.wheel_error,
         **{k: (round(v, 3) if isinstance(v, float) else v) for k, v in info.items()},
     })

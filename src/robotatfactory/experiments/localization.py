@@ -880,8 +880,9 @@ class Session:
 
         args, env = self.args, self.graph.env()
         time.sleep(1.0)  # the bridge binds its port
+        robot = ["--robot", str(self.robot_file)] if self.robot_file is not None else []  # its camera, into AGV.xml
         self.procs.start("sim", _raf("--field", args.field, "simtwo", "run", "--port", str(sport), "--bridge",
-                                     f"127.0.0.1:{bport}", "--camera-port", str(cport)), env)
+                                     f"127.0.0.1:{bport}", "--camera-port", str(cport), *robot), env)
         log = self.log_dir / "sim.log"
         wait_until(lambda: log.exists() and "[simtwo] running" in log.read_text(errors="replace"), 180,
                    "SimTwo streaming with its camera", self.procs.check)

@@ -298,8 +298,10 @@ def _wrap(defines_node):
 
 # ---------------------------------------------------------------------------------------------- running it
 def run_dump(fld, build=None, timeout: float = 120.0, keep: Path | None = None,
-             progress: Callable[[str], None] = lambda _m: None, probe_list: list[Probe] | None = None) -> Dump:
-    """One SimTwo start with field_dump.pas (probes from ``fld``); its lines and camera frames parsed."""
+             progress: Callable[[str], None] = lambda _m: None, probe_list: list[Probe] | None = None,
+             robot_camera=None) -> Dump:
+    """One SimTwo start with field_dump.pas (probes from ``fld``); its lines and camera frames parsed.
+    ``robot_camera``: a robot file's camera installed into the scene's AGV.xml (scene.install_camera)."""
     import zmq
 
     from . import build as b
@@ -310,7 +312,7 @@ def run_dump(fld, build=None, timeout: float = 120.0, keep: Path | None = None,
     script = tmp / "field_dump.pas"
     script.write_text(script_text(fld, probe_list=probe_list), encoding="latin-1")
     run = SimTwoRun(build, Ports.free(), camera=True, script=script, ready_line=READY_LINE, workdir=keep,
-                    keep=keep is not None, progress=progress)
+                    keep=keep is not None, progress=progress, robot_camera=robot_camera)
     frames: dict[str, np.ndarray] = {}
     sub = None
     try:

@@ -2,7 +2,8 @@
 
 One :class:`SimTwoRun` is one SimTwo with everything it needs and nothing shared with another run:
 
-- a fresh copy of the scene with the project's side installed (:mod:`.scene`) in a private folder;
+- a fresh copy of the scene with the project's side installed (:mod:`.scene`) in a private folder, with a
+  robot file's camera when ``robot_camera`` is given (``raf simtwo run --robot FILE``);
 - its own X server (Xvfb, which picks a free display itself: ``-displayfd``) at 96 dpi, Windows' default,
   so that LCL does not rescale the forms (the camera's viewer must stay 640 x 480); Mesa renders in software;
 - its own ports: SimTwo's UDP port (the scene's ``config_Params.ini``), the bridge's port (``control.pas``)
@@ -79,6 +80,7 @@ class SimTwoRun:
     script: Path | None = None                  # default: simtwo/control.pas
     extra_ini: dict = field(default_factory=dict)
     parts: list | None = None                   # scene.PartPlacement per Part1..4; None: the scene file's
+    robot_camera: object | None = None          # a robot file's CameraSpec for AGV.xml (scene.install_camera)
     ready_line: str = READY_LINE                # SimTwo's output that means the script runs (with no SensorFrame)
     workdir: Path | None = None                 # default: a new temporary folder, removed by stop()
     keep: bool = False                          # keep the folder (scene copy, logs) after stop()
@@ -127,7 +129,8 @@ class SimTwoRun:
         self.workdir.mkdir(parents=True, exist_ok=True)
         try:
             settings = SceneSettings(udp_port=self.ports.udp, bridge_host=self.bridge_host,
-                                     bridge_port=self.ports.bridge, extra_ini=self.scene_ini(), parts=self.parts)
+                                     bridge_port=self.ports.bridge, extra_ini=self.scene_ini(), parts=self.parts,
+                                     camera=self.robot_camera)
             if self.script is not None:
                 settings.script = Path(self.script)
             install(self.build.simtwo_dir, self.scene_dir, settings, self.scene)

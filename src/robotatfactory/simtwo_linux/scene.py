@@ -5,6 +5,8 @@ its scene's ``config_*.ini`` when it exits, so every run gets its own):
 
 - ``control.pas`` <- ``simtwo/control.pas``, with ``BRIDGE_IP`` / ``BRIDGE_PORT`` set (step 2);
 - ``AGV.xml`` gets the ``<ranger2d>`` element of ``simtwo/AGV_lidar.xml`` inside ``<sensors>`` (step 3);
+- with a robot's camera (``raf simtwo run --robot FILE``): ``AGV.xml``'s ``<camera>`` shell gets its focal
+  length, pitch and mount (:func:`install_camera`; what GLScene cannot render is refused);
 - ``config_Params.ini`` [Config] and ``config_Cameras.ini`` [Cameras] get the lines of
   ``simtwo/settings/*.ini`` (steps 4-5), with SimTwo's UDP port set;
 - headless only: the Cameras window is placed where no other window covers it (a covered or off-screen
@@ -64,6 +66,7 @@ class SceneSettings:
     lidar: bool = True                       # paste simtwo/AGV_lidar.xml into AGV.xml
     extra_ini: dict[str, dict[str, str]] = field(default_factory=dict)  # {"config_Params.ini": {key: value}}
     parts: list[PartPlacement] | None = None  # None: the parts where the scene file has them
+    camera: object | None = None             # a robot file's CameraSpec for AGV.xml's <camera>; None: the scene's
 
 
 @dataclass(frozen=True)
@@ -171,6 +174,110 @@ def install_lidar(agv_xml: Path) -> None:
     agv_xml.write_text(text[:i] + lidar_element() + "\n" + text[i:], encoding="latin-1")
 
 
+#: the logical resolution SimTwo's GLScene turns the focal length (mm) into pixels with: run.py's Xvfb runs at
+#: 96 dpi (Windows at 100 %), so fx = fy = 2 * focal length * 96 / 25.4 (docs/calibration.md)
+CAMERA_DPI = 96.0
+#: SimTwo's camera image (cameras.pas 13-14: CameraImageWidth = 320 * 2, CameraImageHeight = 240 * 2)
+CAMERA_SIZE = (640, 480)
+
+
+def focal_length_mm(fx: float, dpi: float = CAMERA_DPI) -> float:
+    """The ``<focal length>`` (mm) GLScene renders ``fx`` pixels with at ``dpi``."""
+    return fx * 25.4 / (2 * dpi)
+
+
+def _camera_shell(text: str, where) -> re.Match:
+    m = re.search(r"<camera>.*?</camera>", text, re.S)
+    if not m:
+        raise SceneError(f"{where}: no <camera> shell")
+    return m
+
+
+def _xyz(elem: str, tag: str, where) -> tuple[float, float, float]:
+    m = re.search(rf"<{tag}\s+x=['\"]([^'\"]*)['\"]\s+y=['\"]([^'\"]*)['\"]\s+z=['\"]([^'\"]*)['\"]\s*/>", elem)
+    if not m:
+        raise SceneError(f"{where}: the <camera> shell has no <{tag} x= y= z=/>")
+    try:
+        return tuple(float(v) for v in m.groups())
+    except ValueError:
+        raise SceneError(f"{where}: the camera's <{tag}> is not three numbers: {m.group(0)}") from None
+
+
+def scene_camera(agv_xml: Path) -> dict:
+    """The ``<camera>`` shell of an AGV.xml: ``pos`` (m, on its solid), ``rot_deg`` and ``focal`` (mm)."""
+    text = Path(agv_xml).read_text(encoding="latin-1")
+    elem = _camera_shell(text, agv_xml).group(0)
+    m = re.search(r"<focal\s+length=['\"]([^'\"]*)['\"]\s*/>", elem)
+    return {"pos": _xyz(elem, "pos", agv_xml), "rot_deg": _xyz(elem, "rot_deg", agv_xml),
+            "focal": float(m.group(1)) if m else 50.0}  # Viewer.pas 3326: 50 when the element is missing
+
+
+def camera_refusals(camera) -> list[str]:
+    """Why SimTwo's GLScene camera cannot be ``camera`` (a robot file's CameraSpec): an ideal pinhole with a
+    symmetric frustum (fx = fy, the principal point at the image's centre), 640 x 480, no roll (the camera's
+    ``rot_deg`` is not mapped to a roll here). Empty when it can."""
+    out = []
+    w, h = CAMERA_SIZE
+    if (camera.width, camera.height) != (w, h):
+        out.append(f"image {camera.width} x {camera.height}: SimTwo's camera is {w} x {h} (cameras.pas)")
+    if abs(camera.fx - camera.fy) > 1e-6 * abs(camera.fx):
+        out.append(f"fx {camera.fx:g} != fy {camera.fy:g}: GLScene has one focal length (square pixels)")
+    if abs(camera.cx - (w - 1) / 2) > 1e-3 or abs(camera.cy - (h - 1) / 2) > 1e-3:
+        out.append(f"principal point ({camera.cx:g}, {camera.cy:g}) off the image centre ({(w - 1) / 2:g}, "
+                   f"{(h - 1) / 2:g}): GLScene's frustum is symmetric")
+    if any(abs(v) > 0 for v in camera.distortion):
+        out.append(f"distortion {tuple(camera.distortion)}: GLScene renders an ideal pinhole")
+    if abs(camera.roll_deg) > 1e-9:
+        out.append(f"roll {camera.roll_deg:g} deg: not installed into the scene (only pitch and mount)")
+    if not camera.bottom_up:
+        out.append("bottom_up false: SimTwo's frames are bottom-up")
+    return out
+
+
+def camera_values(camera, nominal, scene: dict) -> dict:
+    """The ``<camera>`` values that render ``camera``: the scene's minus the nominal robot's (``nominal``, the
+    camera the unedited scene renders) plus ``camera``'s. ``pos`` is on the BasePlate solid (its centre 16.5 mm
+    above the floor), so the mount moves by the difference; ``rot_deg`` x is 90 + the pitch down (120: 30
+    degrees); the focal length from fx (:func:`focal_length_mm`)."""
+    px, py, pz = scene["pos"]
+    rx, ry, rz = scene["rot_deg"]
+    d = [c - n for c, n in zip(camera.xyz, nominal.xyz)]
+    return {"pos": (px + d[0], py + d[1], pz + d[2]),
+            "rot_deg": (rx + camera.pitch_down_deg - nominal.pitch_down_deg, ry, rz),
+            "focal": focal_length_mm(camera.fx), "decimation": int(camera.decimation)}
+
+
+def install_camera(agv_xml: Path, camera, nominal=None) -> dict:
+    """Write ``camera`` (a robot file's CameraSpec) into ``agv_xml``'s ``<camera>`` shell: focal length, pitch
+    (``rot_deg`` x), mount (``pos``) and frame decimation, relative to ``nominal`` (default the shipped robot
+    file's camera, which the unedited scene renders). SceneError lists what GLScene cannot render
+    (:func:`camera_refusals`). Returns the values written."""
+    if nominal is None:
+        from ..robot import load_robot
+
+        nominal = load_robot("simtwo").camera
+    why = camera_refusals(camera)
+    if why:
+        raise SceneError("SimTwo's camera cannot render this robot file's camera: " + "; ".join(why))
+    text = Path(agv_xml).read_text(encoding="latin-1")
+    m = _camera_shell(text, agv_xml)
+    v = camera_values(camera, nominal, scene_camera(agv_xml))
+    elem = m.group(0)
+    fmt = lambda t: " ".join(f"{a}='{c:.6f}'" for a, c in zip("xyz", t))  # noqa: E731
+    elem = re.sub(r"<pos\s[^>]*/>", f"<pos {fmt(v['pos'])}/>", elem, count=1)
+    elem = re.sub(r"<rot_deg\s[^>]*/>", f"<rot_deg {fmt(v['rot_deg'])}/>", elem, count=1)
+    focal = f"<focal length='{v['focal']:.6f}'/>"
+    elem, n = re.subn(r"<focal\s[^>]*/>", focal, elem, count=1)
+    if not n:
+        elem = elem.replace("</camera>", f"  {focal}\n    </camera>")
+    frame = f"<frame decimation='{v['decimation']}'/>"
+    elem, n = re.subn(r"<frame\s[^>]*/>", frame, elem, count=1)
+    if not n:
+        elem = elem.replace("</camera>", f"  {frame}\n    </camera>")
+    Path(agv_xml).write_text(text[:m.start()] + elem + text[m.end():], encoding="latin-1")
+    return v
+
+
 def configure_script(text: str, s: SceneSettings) -> str:
     """The script with ``BRIDGE_IP`` and ``BRIDGE_PORT`` set, as step 2 tells a user to. Both or neither: a
     script with neither does not talk to the bridge (e.g. simtwo/linux/abi_check.pas) and is left as it is."""
@@ -190,6 +297,9 @@ def install(simtwo_dir: Path, dest: Path, settings: SceneSettings | None = None,
     """Copy ``simtwo_dir/scene`` to ``dest`` (which must not exist) and install the project's side into it.
     Returns ``dest``."""
     s = settings or SceneSettings()
+    if s.camera is not None and camera_refusals(s.camera):  # before anything is copied
+        raise SceneError("SimTwo's camera cannot render this robot file's camera: "
+                         + "; ".join(camera_refusals(s.camera)))
     src = Path(simtwo_dir) / scene
     if not (src / "scene.xml").exists():
         known = sorted(p.name for p in Path(simtwo_dir).iterdir() if (p / "scene.xml").exists())
@@ -200,6 +310,8 @@ def install(simtwo_dir: Path, dest: Path, settings: SceneSettings | None = None,
     (dest / "control.pas").write_text(script, encoding="latin-1")
     if s.lidar:
         install_lidar(dest / "AGV.xml")
+    if s.camera is not None:
+        install_camera(dest / "AGV.xml", s.camera)
     if s.parts is not None:
         place_parts(dest / "scene.xml", s.parts)
     params = ini_lines(SIMTWO_DIR / "settings" / "config_Params.ini")
