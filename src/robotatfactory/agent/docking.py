@@ -41,6 +41,11 @@ class DockSettings:
     place_short: float = 0.006
     v_back: float = 0.25
     v_back_carrying: float = 0.25  # m/s backing out of a slot with the part on the magnet
+    # m/s^2 and m/s: backing out with the part, the speed ramps up and down at this rate and ends at this speed
+    # (SimTwo's magnet let the part go when the robot set off at 2 m/s^2 and stopped from 0.25 m/s at once:
+    # 5 of 12 picks lost on round 1, docs/simtwo.md "The agent on SimTwo")
+    a_back_carrying: float = 0.4
+    v_back_carrying_final: float = 0.03
     lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
     magnet_early: bool = True
     # s: an approach still going after this plus 3x its straight-line time at its speed is blocked (backs out,
@@ -237,9 +242,11 @@ class Docker:
     def _back(self, pose) -> None:
         """Back straight out along the slot's normal to ``retreat`` m from its centre."""
         back = pose_in_front(self._slot, self._retreat)
+        s = self.settings
         self.follower.limits = self.back_limits if not self.magnet else replace(
-            self.back_limits, v_max=min(self.back_limits.v_max, self.settings.v_back_carrying),
-            v_final=min(self.back_limits.v_final, self.settings.v_back_carrying))
+            self.back_limits, v_max=min(self.back_limits.v_max, s.v_back_carrying),
+            v_final=min(self.back_limits.v_final, s.v_back_carrying, s.v_back_carrying_final),
+            a_max=min(self.back_limits.a_max, s.a_back_carrying))
         # along the slot's normal, from the point of it nearest the robot (a lateral error is steered out)
         self.follower.start([self._shifted(self._on_normal(pose, 0.0)), self._shifted(back)[:2]], reverse=True,
                             no_spin=self.magnet)  # backing out with the part: straight, no turn on the spot

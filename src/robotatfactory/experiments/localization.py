@@ -1008,8 +1008,8 @@ def run_route(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, name: s
         (out_dir / f"{prefix}_table.md").write_text(table(out, f"{title}:") + "\n")
         np.savez_compressed(out_dir / f"{prefix}_data.npz", **{k: v for k, v in data.items()})
     for k in sorted(diag):  # the node's counters at the end: frames, fixes, rejections by reason, filter
-        if k.startswith(("rejected_", "filter_")) or k in ("frames", "fixes", "beacons_seen", "beacons_used",
-                                                           "frame_ms_median", "scans"):
+        if k.startswith(("rejected_", "filter_", "scan_")) or k in ("frames", "fixes", "beacons_seen", "beacons_used",
+                                                                    "frame_ms_median", "scans"):
             try:
                 out[f"node_{k.replace(':', '_')}"] = float(diag[k]) if "." in diag[k] else int(diag[k])
             except ValueError:
