@@ -49,7 +49,8 @@ def test_restarts_of_simulator_bridge_camera_and_roscore(tmp_path):
     assert r["restart_sim_odom_back_s"] <= 1.0 and r["restart_sim_clock_back_s"] <= 1.0
     assert r["restart_sim_image_back_s"] <= 1.0
     assert r["restart_sim_odometry_resets"] == 1
-    assert r["restart_bridge_stop_s"] <= 0.5 + 1e-9
+    # as control.pas: the first 40 ms cycle more than 0.5 s after the last valid command runs with V = W = 0
+    assert 0.5 < r["restart_bridge_stop_s"] <= 0.54 + 1e-9
     assert r["restart_bridge_resume_s"] <= 1.0
     assert r["restart_roscore_nodes_clear"], r["restart_roscore_exit_codes"]
 

@@ -75,7 +75,7 @@ def test_fuzz_loss_and_restarts_on_the_real_simtwo(tmp_path):
     # valid command (its own log line); at most one cycle beyond its 0.5 s timeout
     stop = r[f"{p}restart_bridge_stop_s"]
     assert math.isfinite(stop) and 0.5 <= stop <= 0.54 + 1e-9, stop
-    assert r[f"{p}restart_bridge_stop_target_met"] == (stop <= 0.5 + 1e-6)
+    assert r[f"{p}restart_bridge_stop_target_met"] == (stop <= 0.54 + 1e-6)
     assert r[f"{p}restart_bridge_at_rest_s"] <= 1.0
     assert r[f"{p}restart_bridge_resume_s"] <= 1.0
     assert r[f"{p}restart_roscore_nodes_clear"], r[f"{p}restart_roscore_exit_codes"]

@@ -13,10 +13,10 @@ What the real SimTwo cannot do, and how the result says so (:data:`NOT_APPLICABL
   start and after the restart);
 * no seed: ``--seed`` seeds the fuzz and the proxy only;
 * its command timeout is control.pas's (``COMMAND_TIMEOUT_MS``, checked at the start of each 40 ms script
-  cycle: ``TimeMs - LastValidMs > 500`` stops the wheels, so 520 ms after the last valid command, where
-  ``raf sim`` stops before 500 ms); ``restart_bridge_stop_s`` is read from the line the script writes then
-  (``raf: no valid command for N ms: wheels stopped``, SimTwo's log in the kept folder) and its 0.5 s target
-  is judged as on the stand-in (not met by 20 ms);
+  cycle: ``TimeMs - LastValidMs > 500`` stops the wheels, so 520 ms after the last valid command, as ``raf
+  sim`` does since 2026-11-26); ``restart_bridge_stop_s`` is read from the line the script writes then
+  (``raf: no valid command for N ms: wheels stopped``, SimTwo's log in the kept folder) and its target (the
+  timeout plus one cycle, 0.54 s) is judged as on the stand-in;
 * its camera publishes only while its Cameras window is open: after a restart the images come back once
   ``raf simtwo run`` has reopened it (``restart_sim_image_back_s``);
 * no control channel: the campaign does not use one on either simulator (``raf sim --no-server``).
@@ -41,7 +41,7 @@ TARGETS_NOT_APPLICABLE = ("soak_rss_growth_max_pct", "soak_queue_lag_late_s")
 DIFFERENCES = ("start poses by teleport (sim/set_robot_pose); no simulator seed (--seed: the fuzz and the proxy "
                "only); restart_bridge_stop_s from control.pas's own log line: its timeout stops the wheels in the "
                "first 40 ms cycle more than 500 ms after the last valid command (TimeMs - LastValidMs > 500: 520 "
-               "ms; raf sim stops before 500 ms); images come back once raf simtwo run has reopened SimTwo's "
+               "ms, as raf sim); images come back once raf simtwo run has reopened SimTwo's "
                "Cameras window; a SimTwo restart takes seconds (restart_sim_process_start_to_first_frame_s)")
 HELP = ("standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, field simtwo2022, the robot "
         "teleported to each part's start; keys start with " + MODE + "). SimTwo has no --fast and no lockstep, "

@@ -73,7 +73,8 @@ TARGETS = {
     "restart_sim_clock_back_s": "<= 1 s",
     "restart_sim_image_back_s": "<= 1 s",
     "restart_sim_odometry_resets": "1",
-    "restart_bridge_stop_s": "<= 0.5 s (simulation) from the last command to V = W = 0 (the simulator's log)",
+    "restart_bridge_stop_s": "<= 0.54 s (simulation) from the last command to V = W = 0 (the simulator's log): "
+                             "the 0.5 s command timeout plus one 40 ms cycle, as control.pas checks it (issue 22)",
     "restart_bridge_resume_s": "<= 1 s",
     "restart_roscore_nodes_clear": "every node exits with a clear message (or reconnects)",
     "soak_rss_growth_max_pct": "< 5 % after warm-up",
@@ -860,7 +861,7 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
             "restart_sim_odom_back_target_met": out["restart_sim_odom_back_s"] <= 1.0,
             "restart_sim_clock_back_target_met": out["restart_sim_clock_back_s"] <= 1.0,
             "restart_sim_odometry_resets_target_met": out["restart_sim_odometry_resets"] == 1,
-            "restart_bridge_stop_target_met": out["restart_bridge_stop_s"] <= 0.5 + 1e-6,
+            "restart_bridge_stop_target_met": out["restart_bridge_stop_s"] <= 0.54 + 1e-6,
             "restart_bridge_resume_target_met": out["restart_bridge_resume_s"] <= 1.0,
         })
         if camera:

@@ -462,13 +462,15 @@ class SimRunner:
         return False
 
     def _check_command_age(self) -> None:
-        """No valid command for ``command_timeout`` simulation seconds: stop the wheels (magnet kept). Checked
-        before each cycle, for the cycle's end: a command never drives the robot beyond its timeout."""
+        """No valid command for more than ``command_timeout`` simulation seconds: stop the wheels (magnet kept).
+        Checked before each cycle, as control.pas does at each script call (``TimeMs - LastValidMs >
+        COMMAND_TIMEOUT_MS``): the first cycle that starts more than the timeout after the last valid command
+        runs with V = W = 0 (0.52 s after it with 0.5 s and 40 ms cycles, as SimTwo; it stopped one cycle
+        earlier, at 0.48 s, before issue 19's faults run on SimTwo)."""
         t = self.config.command_timeout
         if t is None or self._command_sim_time is None:
             return
-        age_at_end = self.sim.time + self.sim.robot.control_period - self._command_sim_time
-        if age_at_end <= t + 1e-9:
+        if self.sim.time - self._command_sim_time <= t + 1e-9:
             return
         if self.command.v or self.command.w:
             self.counters.command_timeouts += 1
