@@ -29,11 +29,14 @@ def test_bench_bridge_measures_on_the_middleware(middleware, tmp_path):
 
 def test_speed_experiment_runs_on_the_middleware(middleware, tmp_path):
     out = tmp_path / "speed"
-    r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "speed", "--hold", "1.0", "--out",
-                        str(out)], capture_output=True, text=True, timeout=240)
+    # lockstep (deterministic: the same figure on both middlewares) with its matching lead (20 ms: the hold's
+    # half cycle; the free-running default's 60 ms adds the cycle lockstep does not have)
+    r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "speed", "--hold", "1.0", "--lockstep",
+                        "--lead-ms", "20", "--out", str(out)], capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     res = json.loads((out / "results.json").read_text())
     assert res["middleware"] == middleware and res["speed_mode"] == "simtwo/script_enabled/lockstep"
+    assert res["speed_lead_ms"] == 20
     assert res["speed_samples"] >= 45
     assert res["speed_rmse_mps"] <= 0.01  # lockstep: the same figure on both middlewares
     assert res["speed_steady_mean_mps"] == pytest.approx(0.3, abs=0.005)
