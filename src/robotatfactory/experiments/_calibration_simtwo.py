@@ -115,7 +115,7 @@ def run(args, out_dir: Path | None) -> dict:
     from ..robot import load_robot
     from ..ros.master import private_graph
     from ..ros.processes import ExperimentNode
-    from ..simtwo_linux.scene import field_for_simtwo
+    from ..simtwo_linux.scene import field_for_simtwo, focal_length_mm
     from . import localization as loc
 
     check_args(args)
@@ -150,7 +150,7 @@ def run(args, out_dir: Path | None) -> dict:
             "perturbation": (f"fx, fy {args.fx_pct:+g} %, pitch {args.pitch_deg:+g} deg, height "
                              f"{args.height_mm:+g} mm, forward {args.forward_mm:+g} mm; cx, cy centred (SimTwo's "
                              "GLScene camera has a symmetric frustum)"),
-            "focal_length_mm": round(truth.camera.fx * 25.4 / (2 * 96), 4),
+            "focal_length_mm": round(focal_length_mm(truth.camera.fx), 4),
             "bag_images": keys.get("calibration_bag_images"), "bag_odom": keys.get("calibration_bag_odom"),
             "calibrate_wall_s": round(keys.get("calibration_wall_s", 0.0), 1),
             "wall_s": round(time.monotonic() - t0, 1),
