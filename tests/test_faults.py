@@ -62,3 +62,12 @@ def test_short_soak_keeps_memory_and_queues_flat(tmp_path):
     assert r["soak_queue_lag_late_s"] <= 1.0
     assert math.isfinite(r["soak_rss_growth_max_pct"])
     assert r["soak_camera_published"] > 0
+
+
+def test_a_parts_own_wall_time_is_not_overwritten_by_its_total(tmp_path, monkeypatch):
+    """run() records each part's whole wall time as <part>_part_wall_s, beside what the part measured itself
+    (the fuzz's own phase, fuzz_wall_s, was overwritten by the total before)."""
+    monkeypatch.setattr(faults, "run_part", lambda p, args, log_dir: {f"{p}_wall_s": 12.5})
+    res = faults.run(make_args(parts="fuzz"), tmp_path)
+    assert res["fuzz_wall_s"] == 12.5
+    assert res["fuzz_part_wall_s"] >= 0
