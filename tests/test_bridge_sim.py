@@ -113,13 +113,17 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(middl
     from robotatfactory.simtwo import Command
 
     truth: dict[bytes, float] = {}
+    repeated: set[bytes] = set()
 
     turn = Command(0.05, 0.8, False)
 
     class Recording(SimRunner):
         def _publish(self, frames):
             for f in frames:
-                truth[hashlib.sha1(f.bgr().tobytes()).digest()] = f.time
+                key = hashlib.sha1(f.bgr().tobytes()).digest()
+                if key in truth:  # the same picture twice (the first frames, before the turn starts): no single
+                    repeated.add(key)  # true render time, so it is left out of the comparison
+                truth[key] = f.time
             super()._publish(frames)
 
         def _drain(self, expect_seq=None, first_wins=False):  # the robot turns (every frame differs); the
@@ -152,7 +156,7 @@ def test_default_camera_stamps_are_within_a_cycle_of_raf_sims_render_times(middl
         errs = []
         for m in img.msgs:
             key = hashlib.sha1(image_to_bgr(m).tobytes()).digest()
-            if key in truth:
+            if key in truth and key not in repeated:
                 errs.append(stamp_s(m.header.stamp) - truth[key])
         img.close()
         assert not t.is_alive() and len(truth) >= 60
