@@ -237,11 +237,7 @@ class _SimTwo:
 # ------------------------------------------------------------------------------------------ geometry
 def field_boxes(field, scan_z: float) -> list:
     """The field's boxes that the scan plane cuts: (cx, cy, hx, hy, cos yaw, sin yaw)."""
-    out = []
-    for b in field.boxes:
-        if abs(scan_z - b.center[2]) <= b.size[2] / 2:
-            out.append((b.center[0], b.center[1], b.size[0] / 2, b.size[1] / 2, math.cos(b.yaw), math.sin(b.yaw)))
-    return out
+    return [b.plan for b in field.boxes_at_height(scan_z)]
 
 
 def cast(boxes: list, ox: np.ndarray, oy: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:

@@ -1,6 +1,8 @@
 """Typed objects of the competition map. Plain data: no I/O here (see :mod:`.loader`)."""
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -67,6 +69,12 @@ class Box:
     @property
     def half_extents(self) -> np.ndarray:
         return np.asarray(self.size) / 2.0
+
+    @property
+    def plan(self) -> tuple[float, float, float, float, float, float]:
+        """The box seen from above, as ray casts want it: (cx, cy, half x, half y, cos yaw, sin yaw)."""
+        return (self.center[0], self.center[1], self.size[0] / 2, self.size[1] / 2, math.cos(self.yaw),
+                math.sin(self.yaw))
 
     def footprint(self) -> np.ndarray:
         """4x2 world corners of the box's footprint, counter-clockwise."""
@@ -149,6 +157,10 @@ class Field:
 
     def __post_init__(self):
         self._by_id.update({m.id: m for m in self.markers})
+
+    def boxes_at_height(self, z: float) -> tuple[Box, ...]:
+        """The boxes whose vertical extent holds height ``z`` (m): what a scan plane at ``z`` cuts."""
+        return tuple(b for b in self.boxes if abs(z - b.center[2]) <= b.size[2] / 2)
 
     def marker(self, marker_id: int) -> Marker:
         try:

@@ -98,8 +98,7 @@ class FieldMap:
     """The surfaces a LIDAR at height ``scan_z`` sees: the field's boxes the plane cuts and its beacons."""
 
     def __init__(self, field, scan_z: float, beacons: bool = True):
-        rows = [(b.center[0], b.center[1], b.size[0] / 2, b.size[1] / 2, math.cos(b.yaw), math.sin(b.yaw))
-                for b in field.boxes if abs(scan_z - b.center[2]) <= b.size[2] / 2]
+        rows = [b.plan for b in field.boxes_at_height(scan_z)]
         self.boxes = np.array(rows, dtype=float).reshape(-1, 6)
         circ = []
         if beacons and field.beacons and scan_z <= field.beacon_height:
