@@ -23,8 +23,6 @@ focal length, mount height and pitch (docs/calibration.md, "Wall markers"), so t
 from __future__ import annotations
 
 import argparse
-import shutil
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -113,8 +111,6 @@ def result_keys(calib: Path, truth) -> dict:
 def run(args, out_dir: Path | None) -> dict:
     from ..localization.calibration import write_robot_json
     from ..robot import load_robot
-    from ..ros.master import private_graph
-    from ..ros.processes import ExperimentNode
     from ..simtwo_linux.scene import field_for_simtwo, focal_length_mm
     from . import localization as loc
 
@@ -132,14 +128,9 @@ def run(args, out_dir: Path | None) -> dict:
     plan = loc.Plan(loc.REAL, (), "auto", False, 0.0, 0.0, CALIBRATION_SPEED)
     notes: list[str] = []
     out: dict = {}
-    private = private_graph().start()
-    exp = None
-    ok = False
     t0 = time.monotonic()
-    try:
-        private.use_in_this_process()
-        exp = ExperimentNode("raf_experiment_calibration")
-        graph = loc.Graph(private, exp)
+    # the work folder (the ~100 MB bag) goes when the drive finished; logs live in out_dir/logs with --out
+    with loc.experiment_graph("raf_experiment_calibration", work, log_dir) as graph:
         calib, keys = loc.calibration_drive(largs, plan, graph, log_dir, work, robot_file, nominal,
                                             Path(out_dir) if out_dir else None, notes)
         out.update(result_keys(calib, truth.camera))
@@ -155,15 +146,6 @@ def run(args, out_dir: Path | None) -> dict:
             "calibrate_wall_s": round(keys.get("calibration_wall_s", 0.0), 1),
             "wall_s": round(time.monotonic() - t0, 1),
         })
-        ok = True
-    finally:
-        if exp is not None:
-            exp.close()
-        private.cleanup()
-        if ok:
-            shutil.rmtree(work, ignore_errors=True)  # the ~100 MB bag; logs live in out_dir/logs with --out
-        else:
-            print(f"logs: {log_dir}", file=sys.stderr)
     if not out.get("wall_detections"):
         notes.append("no wall marker in the fit: floor markers alone cannot separate focal length, mount height "
                      "and pitch (docs/calibration.md), so fx and pitch trade against each other and the height")

@@ -29,7 +29,7 @@ processes' logs.
 """
 from __future__ import annotations
 
-import json
+import contextlib
 import math
 import os
 import shutil
@@ -926,6 +926,32 @@ class Session:
         rec.close_bag()
 
 
+@contextlib.contextmanager
+def experiment_graph(node_name: str, work: Path, log_dir: Path):
+    """A private ROS graph with this process's :class:`~robotatfactory.ros.processes.ExperimentNode` on it, as a
+    :class:`Graph`. On the way out the node closes and the graph ends; the work folder goes when the body
+    finished (its logs live in ``log_dir``), else where the logs are is printed."""
+    from ..ros.master import private_graph
+    from ..ros.processes import ExperimentNode
+
+    private = private_graph().start()
+    exp = None
+    ok = False
+    try:
+        private.use_in_this_process()
+        exp = ExperimentNode(node_name)
+        yield Graph(private, exp)
+        ok = True
+    finally:
+        if exp is not None:
+            exp.close()
+        private.cleanup()
+        if ok:
+            shutil.rmtree(work, ignore_errors=True)
+        else:
+            print(f"logs: {log_dir}", file=sys.stderr)
+
+
 def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, robot_file: Path | None, robot,
                       out_dir: Path | None, notes: list) -> tuple[Path | None, dict]:
     """``--calibration auto``: drive the calibration route recording a bag of camera/image_raw (every 3rd
@@ -1047,8 +1073,6 @@ def run(args, out_dir: Path | None) -> dict:
     from ..field import load_field
     from ..localization.calibration import write_calibration
     from ..robot import load_robot
-    from ..ros.master import private_graph
-    from ..ros.processes import ExperimentNode
 
     plan = plan_from_args(args)
     if plan.mode == REAL:  # SimTwo's scene is not the rules' field
@@ -1070,13 +1094,7 @@ def run(args, out_dir: Path | None) -> dict:
                  "sim_track_error_fraction": plan.track_error, "sim_wheel_radius_error_fraction": plan.radius_error,
                  "camera_error": plan.camera_error}
     notes: list[str] = []
-    private = private_graph().start()
-    exp = None
-    ok = False
-    try:
-        private.use_in_this_process()
-        exp = ExperimentNode("raf_experiment_localization")
-        graph = Graph(private, exp)
+    with experiment_graph("raf_experiment_localization", work, log_dir) as graph:
         out["middleware"] = graph.middleware
         calib: Path | None = None
         if plan.calibration == "auto":
@@ -1096,15 +1114,6 @@ def run(args, out_dir: Path | None) -> dict:
             keys = run_route(args, plan, graph, log_dir, work, name, laps, robot_file, robot, nominal, calib,
                              field, out_dir, notes)
             out.update({f"{m}_{name}_{k}": v for k, v in keys.items()})
-        ok = True
-    finally:
-        if exp is not None:
-            exp.close()
-        private.cleanup()
-        if ok:
-            shutil.rmtree(work, ignore_errors=True)  # logs live in out_dir/logs when --out is given
-        elif not ok:
-            print(f"logs: {log_dir}", file=sys.stderr)
     failed = [k for k, v in out.items() if k.endswith("_target_met") and v is False]
     out["targets_met"] = not failed
     out["notes"] = "; ".join(notes)
