@@ -29,10 +29,10 @@ def test_bench_bridge_measures_on_the_middleware(middleware, tmp_path):
 
 def test_speed_experiment_runs_on_the_middleware(middleware, tmp_path):
     out = tmp_path / "speed"
-    # lockstep (deterministic: the same figure on both middlewares) with its matching lead (20 ms: the hold's
-    # half cycle; the free-running default's 60 ms adds the cycle lockstep does not have)
+    # lockstep (deterministic: the same figure on both middlewares) takes its own lead by default (20 ms: the
+    # hold's half cycle; the free-running default's 60 ms adds the cycle lockstep does not have)
     r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "speed", "--hold", "1.0", "--lockstep",
-                        "--lead-ms", "20", "--out", str(out)], capture_output=True, text=True, timeout=240)
+                        "--out", str(out)], capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     res = json.loads((out / "results.json").read_text())
     assert res["middleware"] == middleware and res["speed_mode"] == "simtwo/script_enabled/lockstep"

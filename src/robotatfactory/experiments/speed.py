@@ -16,12 +16,12 @@ controller (SimTwo's CalcPID, or the stand-in's copy of it) takes its own time t
 at stamp T is the mean over (T - P, T], so it is compared with the reference at the middle of that interval,
 r(T - P/2).
 
-Lead. ``--lead-ms`` (default 60, :data:`DEFAULT_LEAD_MS`) is a feed-forward a controller that knows its loop
-can apply: the reference is sent that much further ahead, r(T + P + lead). Where the bare loop's lag
-(``--lead-ms 0``: 61 ms on the stand-in, 54-63 ms on SimTwo) comes from, measured on the stand-in
-(docs/benchmarks.md, "The paper's speed test"): 40 ms are the extra cycle of the free-running loop (the
-answer to the frame at T is applied during (T + 2P, T + 3P], not (T + P, T + 2P]: free-running with
-``--lead-ms 40`` gives the lockstep figures to the digit), 20 ms the zero-order hold (the reference is
+Lead. ``--lead-ms`` (default 60, :data:`DEFAULT_LEAD_MS`; 20 with ``--lockstep``, :data:`LOCKSTEP_LEAD_MS`) is
+a feed-forward a controller that knows its loop can apply: the reference is sent that much further ahead,
+r(T + P + lead). Where the bare loop's lag (``--lead-ms 0``: 61 ms on the stand-in, 54-63 ms on SimTwo) comes
+from, measured on the stand-in (docs/benchmarks.md, "The paper's speed test"): 40 ms are the extra cycle of the
+free-running loop (the answer to the frame at T is applied during (T + 2P, T + 3P], not (T + P, T + 2P]:
+free-running with ``--lead-ms 40`` gives the lockstep figures to the digit), 20 ms the zero-order hold (the reference is
 sampled at the start of the 40 ms it is held for and compared at its middle: P/2), and 1 ms (SimTwo: -5
 to +2 ms) the wheels' speed controller (CalcPID with ``simtwo_pid``; its feed-forward kf makes it follow
 within the cycle). The default is the first two, P + P/2, known from the loop's structure and not fitted
@@ -69,6 +69,8 @@ P = 0.04  # s, control period
 #: script call after the one it answers) and the zero-order hold's half period; the wheels' speed controller
 #: adds a few ms (1 on the stand-in, -5..+2 on SimTwo) that are left in (docs/benchmarks.md, "The paper's speed test")
 DEFAULT_LEAD_MS = 1000 * (P + P / 2)
+#: ... and under --lockstep, where a reply is applied in the cycle it answers: the hold's half period only
+LOCKSTEP_LEAD_MS = 1000 * (P / 2)
 START_POSE = (-0.7, 0.35, 0.0)  # m, m, rad: 1.2 m free ahead on both fields (rules2026, simtwo2022)
 
 
@@ -94,10 +96,11 @@ def add_arguments(parser) -> None:
                              "in real time, as SimTwo)")
     parser.add_argument("--no-lockstep", dest="lockstep", action="store_false", default=False,
                         help=argparse.SUPPRESS)  # the default since issue 19; kept so that older commands run
-    parser.add_argument("--lead-ms", type=float, default=DEFAULT_LEAD_MS,
+    parser.add_argument("--lead-ms", type=float, default=None,
                         help="feed-forward lead: answer each odom at T with the reference at T + 40 ms + LEAD "
-                             f"(default {DEFAULT_LEAD_MS:g}: the free-running loop's extra cycle and the zero-order "
-                             "hold's half period; 0: the bare loop; 20 matches --lockstep)")
+                             f"(default {DEFAULT_LEAD_MS:g} free-running: the loop's extra cycle and the zero-order "
+                             f"hold's half period; {LOCKSTEP_LEAD_MS:g} with --lockstep: the half period only; "
+                             "0: the bare loop)")
     parser.add_argument("--simulator", choices=("standin", "simtwo"), default="standin",
                         help="standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, free-running, "
                              "field simtwo2022, teleported to the start pose)")
@@ -137,11 +140,14 @@ def run(args, out_dir: Path | None) -> dict:
     duration = args.settle + rise + hold
     simtwo = getattr(args, "simulator", "standin") == "simtwo"
     lockstep = bool(getattr(args, "lockstep", False))
-    lead = float(getattr(args, "lead_ms", DEFAULT_LEAD_MS)) / 1000.0
+    lead_ms = getattr(args, "lead_ms", None)
+    if lead_ms is None:  # the mode's own lead
+        lead_ms = LOCKSTEP_LEAD_MS if lockstep else DEFAULT_LEAD_MS
+    lead = float(lead_ms) / 1000.0
     if simtwo and lockstep:
         raise ConfigError("--lockstep: the real SimTwo cannot wait for a reply (it runs free); leave it out")
     if not -0.2 <= lead <= 0.5:
-        raise ConfigError(f"--lead-ms {args.lead_ms:g}: expected -200..500 ms")
+        raise ConfigError(f"--lead-ms {lead_ms:g}: expected -200..500 ms")
     field = args.field
     if simtwo:
         from ..simtwo_linux.scene import field_for_simtwo
