@@ -116,7 +116,8 @@ def test_speed_experiment_runs_free_by_default_with_the_lead():
     p = argparse.ArgumentParser()
     speed.add_arguments(p)
     a = p.parse_args([])
-    assert a.lockstep is False and a.lead_ms == speed.DEFAULT_LEAD_MS == 60.0
+    assert a.lockstep is False and a.lead_ms is None and speed.DEFAULT_LEAD_MS == 60.0  # None: the mode's lead
+    assert speed.LOCKSTEP_LEAD_MS == 20.0
     assert p.parse_args(["--lockstep"]).lockstep is True
     assert p.parse_args(["--no-lockstep"]).lockstep is False  # the old spelling of the default still parses
     assert p.parse_args(["--lead-ms", "0"]).lead_ms == 0.0
@@ -143,7 +144,8 @@ def test_calibration_experiment_on_simtwo_reports_the_stand_ins_keys(tmp_path):
         assert k in res, k
     assert res["simulator"] == "simtwo" and res["fx_true_px"] == pytest.approx(233.604)
     assert res["pitch_true_deg"] == pytest.approx(31.0) and res["cx_true_px"] == pytest.approx(319.5)
-    assert res["detections"] > 100 and res["residual_px_rms"] < 1.0
+    # detections follow SimTwo's camera rate (software rendering): 60 on a host that renders at half the speed
+    assert res["detections"] > 30 and res["residual_px_rms"] < 1.0
     # fx moved from the nominal camera's 2.9 % towards the truth in 4 of 4 runs (at most 1.29 % off); the pitch
     # lies on the degenerate line with fx and height (floor markers only): 0.00-0.32 deg off in 3 runs, 1.47 in
     # a fourth (the nominal camera is 1 deg off), so only a gross error fails here
