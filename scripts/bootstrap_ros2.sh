@@ -5,7 +5,8 @@
 #  - installs the pinned requirements-ros2.txt (ros-jazzy-* wheels from PyPI, rosbags, the core deps)
 #    and the package itself (editable)
 #  - points the wheels' exported CMake files at this machine's Python and numpy headers
-#  - builds ros2/tf2_msgs and ros2/robotatfactory_msgs (its .srv files are the repository's srv/*.srv)
+#  - builds ros2/tf2_msgs, ros2/robotatfactory_msgs (its .srv files are the repository's srv/*.srv) and
+#    ros2/simulation_interfaces (the standard's interface files as Jazzy releases them: ros2/simulation_interfaces/UPSTREAM)
 #    with cmake + ninja under build/ros2/ and installs them into the venv's own prefix, where rclpy
 #    finds them with no environment variables (as it finds the wheels)
 #  - runs scripts/check_ros2.py once after anything was (re)built
@@ -20,7 +21,7 @@ ROOT=$(pwd)
 VENV=${RAF_ROS2_VENV:-$ROOT/.venv-ros2}
 PY=$VENV/bin/python
 BUILD=$ROOT/build/ros2
-INTERFACE_PACKAGES=(tf2_msgs robotatfactory_msgs)
+INTERFACE_PACKAGES=(tf2_msgs robotatfactory_msgs simulation_interfaces)
 export PIP_NO_INPUT=1 PIP_DISABLE_PIP_VERSION_CHECK=1 DEBIAN_FRONTEND=noninteractive
 
 # one run at a time (several shells may run scripts/bootstrap.sh at once): the others wait, then find

@@ -73,6 +73,9 @@ def check_imports() -> list[str]:
         "tf2_msgs.msg": ["TFMessage"],
         "robotatfactory_msgs.srv": ["ResetSimulation", "StepSimulation", "SetRobotPose", "PlacePart",
                                     "GetSimulationState"],
+        "simulation_interfaces.srv": ["GetSimulatorFeatures", "SpawnEntity", "SetEntityState"],
+        "simulation_interfaces.action": ["SimulateSteps"],
+        "rclpy.action": ["ActionServer", "ActionClient"],
         "rosbags.rosbag2": ["Writer", "Reader"],
         "rosbags.typesys": ["Stores", "get_typestore"],
         "robotatfactory": [],
@@ -85,6 +88,10 @@ def check_imports() -> list[str]:
             hint = {"tf2_msgs.msg": " (built from ros2/tf2_msgs by scripts/bootstrap_ros2.sh)",
                     "robotatfactory_msgs.srv": " (built from ros2/robotatfactory_msgs by "
                                                "scripts/bootstrap_ros2.sh)",
+                    "simulation_interfaces.srv": " (built from ros2/simulation_interfaces by "
+                                                 "scripts/bootstrap_ros2.sh)",
+                    "simulation_interfaces.action": " (built from ros2/simulation_interfaces by "
+                                                    "scripts/bootstrap_ros2.sh)",
                     "robotatfactory": " (pip install -e . into .venv-ros2)"}.get(module, "")
             raise CheckError(f"cannot import {module}: {exc}{hint}") from exc
         missing = [n for n in names if not hasattr(mod, n)]
