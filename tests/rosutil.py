@@ -75,8 +75,8 @@ ros_master = ros_graph  # the ROS 1 name, kept for the tests that use it
 
 def test_node(name: str = "raf_test"):
     """The middleware node of this process against :func:`graph` (made once). ROS 1: ``rospy.init_node``;
-    ROS 2: ``rclpy.init`` and a node spun by the nodes' executor (mw.ros2.make_executor) in a background thread, destroyed (and
-    rclpy shut down) at exit."""
+    ROS 2: ``rclpy.init`` and a node spun by the nodes' executor (mw.ros2.make_executor) in a background
+    thread, destroyed (and rclpy shut down) at exit."""
     global _NODE, _SPIN
     graph()
     with _NODE_LOCK:
@@ -251,7 +251,7 @@ def service_names() -> set[str]:
     return set(rosservice.get_service_list())
 
 
-def call_service(name: str, srv_type, timeout: float = 30.0, **fields):
+def call_service(name: str, srv_type, /, timeout: float = 30.0, **fields):
     """Call a service with the request's fields as keywords; the response (the test node's ``call``: ROS 1
     rospy's ServiceProxy; ROS 2 a client's call_async, waited for while the test node spins in its thread)."""
     return test_node().call(name, srv_type, timeout, **fields)

@@ -18,8 +18,9 @@ Stamps are the middleware's own time message (``rospy.Time`` / ``builtin_interfa
 the implementation's ``time_msg(ns)`` and read them with ``stamp_ns(stamp)`` (which reads either kind).
 
 An implementation module also provides (module level): ``NAME``, ``time_msg(ns)``, ``duration_msg(s)``,
-``diag_level(level)``, ``srv_types()``, ``init_node(...) -> Node``, ``run_node(...)`` (a node from the
-command line) and ``spin_node(...)`` (a node's ``main`` under a launch file).
+``diag_level(level)``, ``srv_types()``, ``standard_sim_types()`` (ROS 2's simulation_interfaces, or None),
+``init_node(...) -> Node``, ``run_node(...)`` (a node from the command line) and ``spin_node(...)`` (a node's
+``main`` under a launch file).
 """
 from __future__ import annotations
 
@@ -167,10 +168,18 @@ class Node(ABC):
         holds up the node's other callbacks."""
 
     @abstractmethod
-    def call(self, name: str, srv_type, timeout: float = 5.0, **fields):
+    def call(self, name: str, srv_type, /, timeout: float = 5.0, **fields):
         """Call the service ``name`` with a request of these fields and return its response; waits up to
         ``timeout`` s for the service to be offered and for its answer (``TimeoutError``). Call it from a
         thread of your own, never from a callback (on ROS 2 the answer comes through this node's executor)."""
+
+    def action_server(self, name: str, action_type, execute: Callable[[Any, Callable, Callable], tuple]):
+        """Serve the action ``name``: ``execute(goal, publish_feedback, cancel_requested)`` runs each accepted
+        goal in a thread of its own and returns ``(outcome, result)``, outcome one of ``succeeded``,
+        ``aborted``, ``canceled``; ``publish_feedback(msg)`` sends feedback, ``cancel_requested()`` is True once
+        a client asked to cancel (every cancel request is accepted). ROS 2 only: ROS 1 has no actions in this
+        project (``NotImplementedError``)."""
+        raise NotImplementedError(f"{self.middleware}: no action servers (ROS 2 only)")
 
     @abstractmethod
     def timer(self, period: float, callback: Callable[[], None]):

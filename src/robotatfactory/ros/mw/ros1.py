@@ -38,6 +38,11 @@ def srv_types():
     return srv
 
 
+def standard_sim_types():
+    """ROS 2's simulation_interfaces: None on ROS 1 (the package's own sim/* services serve instead)."""
+    return None
+
+
 class _Pub(Publisher):
     def __init__(self, pub: rospy.Publisher):
         self._pub = pub
@@ -91,7 +96,7 @@ class Ros1Node(Node):
         resp_cls = srv_type._response_class
         return rospy.Service(name, srv_type, lambda req: handler(req, resp_cls()))
 
-    def call(self, name, srv_type, timeout=5.0, **fields):
+    def call(self, name, srv_type, /, timeout=5.0, **fields):
         try:
             rospy.wait_for_service(name, timeout=timeout)
         except rospy.ROSException:

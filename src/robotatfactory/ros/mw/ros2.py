@@ -69,6 +69,20 @@ def srv_types():
     return ns
 
 
+def standard_sim_types():
+    """ROS 2's simulation_interfaces (msg, srv, action modules; built by scripts/bootstrap_ros2.sh from
+    ros2/simulation_interfaces, or the distribution's), or None when the package is not installed."""
+    import types
+
+    try:
+        import simulation_interfaces.action as action
+        import simulation_interfaces.msg as msg
+        import simulation_interfaces.srv as srv
+    except ImportError:
+        return None
+    return types.SimpleNamespace(msg=msg, srv=srv, action=action)
+
+
 def qos_profile(qos: QoS, depth: int = 10) -> QoSProfile:
     depth = max(1, int(depth or 10))
     if qos is QoS.SENSOR:
@@ -125,6 +139,7 @@ class Ros2Node(Node):
         self._workers: set = set()  # service calls being answered (service())
         self._clients: dict = {}  # (name, type) -> service client (call())
         self.executor = None  # made by spin() (make_executor) unless set before
+        self._actions = None  # (companion node, its executor, its thread): action_server()
         self.callback_errors = 0  # callbacks that raised (logged, the node goes on)
         self.on_callback_error = None  # called with the error's text as well (tests: fail the test it happened in)
 
@@ -148,7 +163,7 @@ class Ros2Node(Node):
         self._keep.append(sub)
         return sub
 
-    def call(self, name, srv_type, timeout=5.0, **fields):
+    def call(self, name, srv_type, /, timeout=5.0, **fields):
         with self._lock:
             key = (name, srv_type)
             cli = self._clients.get(key)
@@ -206,6 +221,40 @@ class Ros2Node(Node):
         self._keep.append(srv)
         return srv
 
+    def action_server(self, name, action_type, execute):
+        """Actions are served by a companion rclpy node, ``<name>_actions`` in the same namespace, on a
+        multi-threaded executor of its own: rclpy's EventsExecutor (the nodes' default) does not run action
+        servers in Jazzy, and a goal that runs for long must not hold up cancel requests."""
+        from rclpy.action import ActionServer, CancelResponse
+
+        with self._lock:
+            if self._actions is None:
+                n = rclpy.create_node(f"{self.node.get_name()}_actions", namespace=self.node.get_namespace(),
+                                      context=self.node.context)
+                ex = MultiThreadedExecutor(num_threads=3, context=self.node.context)
+                ex.add_node(n)
+                th = threading.Thread(target=self._spin_loop, args=(ex,), name="raf-actions", daemon=True)
+                self._actions = (n, ex, th)
+                th.start()
+            n = self._actions[0]
+        ends = {"succeeded": "succeed", "aborted": "abort", "canceled": "canceled"}
+
+        def run(goal_handle):
+            try:
+                outcome, result = execute(goal_handle.request, goal_handle.publish_feedback,
+                                          lambda: goal_handle.is_cancel_requested)
+            except Exception as e:  # noqa: BLE001 - as a callback's error: logged, the goal aborted
+                self._callback_failed(f"action {name} failed", e)
+                goal_handle.abort()
+                return action_type.Result()
+            getattr(goal_handle, ends[outcome])()
+            return result
+
+        srv = ActionServer(n, action_type, name, run, cancel_callback=lambda _g: CancelResponse.ACCEPT,
+                           callback_group=ReentrantCallbackGroup())
+        self._keep.append(srv)
+        return srv
+
     def _callback_failed(self, what: str, e: Exception) -> None:
         """A callback or a service worker raised: counted (under the lock: workers are threads), logged, and
         handed to ``on_callback_error`` when set."""
@@ -241,6 +290,8 @@ class Ros2Node(Node):
             destroy = n.destroy_timer
         elif isinstance(inner, Client):
             destroy = n.destroy_client
+        elif type(inner).__name__ == "ActionServer":  # rclpy.action's, made by action_server()
+            destroy = _destroy_action_server
         else:
             raise TypeError(f"close: not a subscription, publisher, service or timer: {handle!r}")
         with self._lock:
@@ -361,17 +412,21 @@ class Ros2Node(Node):
         self.executor = ex
         ex.add_node(self.node)
         try:
-            while self.ok():
-                try:
-                    ex.spin_once(timeout_sec=0.1)
-                except (KeyboardInterrupt, ExternalShutdownException):
-                    break
-                except Exception as e:  # noqa: BLE001 - a callback's error must not end the node (as in rospy)
-                    if type(e).__name__ == "InvalidHandle":  # an entity destroyed while the executor held it
-                        continue
-                    self._callback_failed("a callback failed (node goes on)", e)
+            self._spin_loop(ex)
         finally:
             self._shutdown.set()
+
+    def _spin_loop(self, ex) -> None:
+        """Spin ``ex`` until the node shuts down (the node's executor, or the action servers' own)."""
+        while self.ok():
+            try:
+                ex.spin_once(timeout_sec=0.1)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                return
+            except Exception as e:  # noqa: BLE001 - a callback's error must not end the node (as in rospy)
+                if type(e).__name__ == "InvalidHandle":  # an entity destroyed while the executor held it
+                    continue
+                self._callback_failed("a callback failed (node goes on)", e)
 
     def destroy(self) -> None:
         self._shutdown.set()
@@ -380,12 +435,25 @@ class Ros2Node(Node):
         end = time.monotonic() + 3.5  # service calls being answered (a sim/* call waits up to 3 s)
         for th in workers:
             th.join(max(0.0, end - time.monotonic()))
+        if self._actions is not None:
+            n, ex, th = self._actions
+            th.join(1.0)
+            try:
+                ex.shutdown(timeout_sec=1.0)
+                n.destroy_node()
+            except Exception:  # noqa: BLE001 - already torn down
+                pass
         try:
             if self.executor is not None:
                 self.executor.shutdown(timeout_sec=1.0)
             self.node.destroy_node()
         except Exception:  # noqa: BLE001 - already torn down
             pass
+
+
+def _destroy_action_server(server) -> bool:
+    server.destroy()
+    return True
 
 
 def _emit(lg, level: str, text: str) -> None:
