@@ -21,6 +21,7 @@ The algorithms are in ``robotatfactory.simtwo.stream``, ``robotatfactory.simtwo.
 """
 from __future__ import annotations
 
+import functools
 import math
 import socket
 from collections import deque
@@ -50,7 +51,8 @@ from ..simtwo.watchdog import CommandWatchdog
 from . import messages as rm
 from .cli import publish_every, spin_node
 from .config import BridgeConfig, default_params, load_config
-from .mw import QoS
+from .mw import QoS, api
+from .simulation_interfaces import StandardServices
 from .mw.base import OK, WARN, Node
 from .udp import TimestampedUDP
 
@@ -105,6 +107,8 @@ class Bridge:
         self._cmd_lock = threading.Lock()
         self.watchdog = CommandWatchdog(cfg.watchdog_timeout)  # under self._cmd_lock
         self._gt_prev = None
+        self._gt_velocity = (0.0, 0.0)
+        self._parts_truth = (0.0, ())
         self._map_odom_sent = False
         self._running = False
         self._threads: list[threading.Thread] = []
@@ -118,6 +122,7 @@ class Bridge:
         # the sim/* services (ros/sim_services.py) and the resets they ask for: "stream" (the stand-in
         # restarts: its next Seq-0 frame starts a new stream at once) or "odometry" (SimTwo's robot reset)
         self.sim_services = None
+        self.standard = None  # ROS 2: the simulation_interfaces services (ros/simulation_interfaces.py)
         self._sim_reset: str | None = None
         self._stream_starts = 0
         self._published = 0
@@ -162,11 +167,37 @@ class Bridge:
         from .sim_services import SimServices
 
         self.sim_services = SimServices(self, cfg.sim_control).start()
+        types = api().standard_sim_types()  # ROS 2: the simulation_interfaces standard as well
+        if types is not None:
+            self.standard = StandardServices(node, self._standard(), types).start()
         node.info(f"bridge: SensorFrames on udp {cfg.bind_host}:{self.bound_port} from "
                       f"{'any host' if cfg.sim_host == '*' else cfg.sim_host}, camera "
                       f"{cfg.camera_endpoint if cfg.camera_enabled else 'off'}, field {self.field.name}, "
                       f"frame prefix {cfg.frame_prefix or '(none)'}")
         return self
+
+    def _standard(self):
+        """The simulation_interfaces standard over the sim/* services' backends (sim/standard.py): the robot's
+        box is its LIDAR-height footprint (base and wheels) up to its highest sensor."""
+        from ..sim.standard import SimulationStandard
+        from ..simtwo.selfhits import Footprint
+
+        robot = self.robot
+        boxes = Footprint.from_robot(robot, margin=0.0).boxes
+        top = max(robot.base["z"] + robot.base["size"][2] / 2, robot.lidar.xyz[2], robot.camera.xyz[2])
+        box = (min(b[0] for b in boxes), max(b[1] for b in boxes), min(b[2] for b in boxes),
+               max(b[3] for b in boxes), 0.0, top)
+        return SimulationStandard(self.field, self.sim_services.backend, self.cfg.frames["map"], robot_box=box)
+
+    @functools.cached_property
+    def robot(self):
+        """The robot description (``robot``), with the wheel radius and track this bridge is configured with."""
+        import dataclasses
+
+        from ..robot import load_robot
+
+        cfg = self.cfg
+        return dataclasses.replace(load_robot(cfg.robot), wheel_radius=cfg.wheel_radius, track=cfg.track)
 
     def _spawn(self, fn, name):
         th = threading.Thread(target=self._guard, args=(fn,), name=f"raf-bridge-{name}", daemon=True)
@@ -190,6 +221,8 @@ class Bridge:
         self._running = False
         if self.sim_services is not None:
             self.sim_services.shutdown()
+        if self.standard is not None:
+            self.standard.shutdown()
         for s in self._subs:
             self.node.close(s)
         for th in self._threads:
@@ -264,6 +297,15 @@ class Bridge:
     def ground_truth(self):
         """(t s, x m, y m, theta rad) of the last published frame, None before the first."""
         return self._gt_prev
+
+    def ground_truth_velocity(self) -> tuple[float, float]:
+        """(v m/s, w rad/s), body frame, between the last two published frames (0, 0 before the second)."""
+        return self._gt_velocity
+
+    def parts_truth(self) -> tuple[float, tuple]:
+        """(t s, ((x, y, heading) of Part1..PartN)) of the last published frame: the SensorFrame's optional
+        ``Parts`` (SimTwo's headings); () when the simulator does not send them."""
+        return self._parts_truth
 
     def _warn(self, key: str, text: str) -> None:
         suffix = self.log(key)
@@ -433,6 +475,8 @@ class Bridge:
                 v = ((f.x - px) * math.cos(pth) + (f.y - py) * math.sin(pth)) / dt
                 w = math.remainder(f.theta - pth, 2 * math.pi) / dt
         self._gt_prev = (t, f.x, f.y, f.theta)
+        self._gt_velocity = (v, w)
+        self._parts_truth = (t, tuple(f.parts))
         self.pub_gt.publish(rm.odometry(stamp, fr["map"], fr["base_link"], f.x, f.y, f.theta, v, w,
                                         np.zeros((3, 3)), np.zeros((2, 2))))
         self.pub_joints.publish(rm.joint_states(stamp, JOINT_NAMES, (s.left_angle, s.right_angle),
@@ -470,12 +514,9 @@ class Bridge:
             return ranges
         n = len(ranges)
         if self.self_filter is None or self.self_filter.n != n:
-            import dataclasses
-
-            from ..robot import load_robot
             from ..simtwo.selfhits import Footprint
 
-            robot = dataclasses.replace(load_robot(cfg.robot), wheel_radius=cfg.wheel_radius, track=cfg.track)
+            robot = self.robot
             fov = math.radians(cfg.lidar_fov_deg)
             angles = -fov / 2 + np.arange(n) * (fov / (n - 1) if n > 1 else 0.0)  # as rm.laser_scan
             self.self_filter = SelfFilter(Footprint.from_robot(robot, cfg.lidar_xyz[2], cfg.lidar_self_margin),

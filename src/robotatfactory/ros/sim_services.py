@@ -22,14 +22,17 @@ import math
 import threading
 import time
 
+from ..sim import standard
 from ..sim.control import ControlClient
-from ..simtwo.teleport import SIMTWO_PART_PREFIX, SIMTWO_PART_Z, TeleportSender, part_heading
+from ..simtwo.teleport import (SIMTWO_PART_PREFIX, SIMTWO_PART_Z, TeleportSender, part_heading, plate_facing,
+                               spare_part_xy)
 from .mw import api
 
 SERVICES = ("reset", "pause", "resume", "step", "set_robot_pose", "place_part", "get_state")
 SIMTWO_SERVICES = ("reset", "set_robot_pose", "place_part", "get_state")
 STANDIN, SIMTWO = "stand-in", "simtwo"
 TELEPORT_WAIT = 3.0  # wall s a SimTwo teleport may take to be delivered and seen in the ground truth
+PROBE_REUSE = 1.0  # wall s: backend() reuses a probe this young
 POSE_TOLERANCE = 0.02  # m: the ground truth confirms a SimTwo teleport of the robot
 
 
@@ -43,6 +46,38 @@ class SimServices:
         self.teleports = TeleportSender(repeats)
         self.kind: str | None = None
         self.services: list = []
+        self.standin = standard.StandInBackend(self.client, self._standin_backend_reset) if self.client else None
+        self.simtwo = SimTwoBackend(self)
+        self._probed = -1e9  # monotonic time of backend()'s last probe
+
+    def backend(self):
+        """The connected simulator as :mod:`robotatfactory.sim.standard` sees it: probed again when the last
+        probe is older than :data:`PROBE_REUSE` (one standard call asks several times; SimTwo's probe costs its
+        timeout, 0.3 s)."""
+        now = time.monotonic()
+        if self.kind is None or now - self._probed > PROBE_REUSE:
+            self.probe()
+            self._probed = now
+        return self.standin if self.kind == STANDIN else self.simtwo
+
+    def _standin_reset(self, **fields) -> tuple[bool, str]:
+        """A stand-in reset: the bridge expects the new stream, then waits for its first frame unless the
+        simulation stays paused. (ok, message)."""
+        self.bridge.expect_restart()
+        err, r = self.standin.call("reset", **fields)
+        if err:
+            self.bridge.expect_restart(False)
+            return False, err
+        self.bridge._reset_commands()
+        if r.get("paused"):
+            return True, "reset (paused: the new stream starts at the next step or resume)"
+        if self.bridge.wait_restarted(3.0):
+            return True, "reset: the new stream is published"
+        return False, "reset done, but no frame of the new stream within 3 s"
+
+    def _standin_backend_reset(self) -> str:
+        ok, msg = self._standin_reset()
+        return "" if ok else msg
 
     # ------------------------------------------------------------------------------------------ setup
     def start(self) -> "SimServices":
@@ -77,8 +112,8 @@ class SimServices:
             where = (f"control channel udp {self.client.address[0]}:{self.client.address[1]}"
                      if self.client else "no control channel configured")
             if kind == STANDIN:
-                self.bridge.node.info(f"bridge: simulation services {self.namespace}/*: the stand-in ({where}) supports "
-                              f"all: {', '.join(SERVICES)}")
+                self.bridge.node.info(f"bridge: simulation services {self.namespace}/*: the stand-in ({where}) "
+                                      f"supports all: {', '.join(SERVICES)}")
             else:
                 self.bridge.node.info(f"bridge: simulation services {self.namespace}/*: SimTwo assumed ({where}: no "
                               f"answer): supported {', '.join(SIMTWO_SERVICES)} (reset: the robot only) through "
@@ -93,13 +128,8 @@ class SimServices:
     # ------------------------------------------------------------------------------------------ helpers
     def _call(self, op: str, **fields) -> tuple[bool, str, dict]:
         """A stand-in request: (success, message, reply)."""
-        try:
-            r = self.client.request(op, **fields)
-        except ConnectionError as e:
-            return False, str(e), {}
-        if not r.get("ok"):
-            return False, f"{r.get('error')}: {r.get('message')}", r
-        return True, "", r
+        err, r = self.standin.call(op, **fields)
+        return not err, err, r
 
     def _unsupported(self, what: str) -> str:
         return (f"{what} is not supported by SimTwo (its script API has no call for it); supported: "
@@ -139,18 +169,7 @@ class SimServices:
                 fields["parts"] = req.parts
             if req.set_start_pose:
                 fields["start_pose"] = [req.x, req.y, req.theta]
-            self.bridge.expect_restart()
-            ok, msg, r = self._call("reset", **fields)
-            if not ok:
-                self.bridge.expect_restart(False)
-                return _answer(resp, False, msg)
-            self.bridge._reset_commands()
-            if r.get("paused"):
-                return _answer(resp, True, "reset (paused: the new stream starts at the next step or "
-                                                     "resume)")
-            ok = self.bridge.wait_restarted(3.0)
-            return _answer(resp, ok, "reset: the new stream is published" if ok else
-                                           "reset done, but no frame of the new stream within 3 s")
+            return _answer(resp, *self._standin_reset(**fields))
         if req.round or req.set_seed or req.parts:
             return _answer(resp, False, "SimTwo resets the robot only (round, seed and parts: restart "
                                                   "the scene in SimTwo)")
@@ -210,7 +229,7 @@ class SimServices:
             return _answer(resp, False, f"unknown_part: {req.part} (SimTwo's parts are Part1..Part4)")
         field = self.bridge.field
         if req.remove:
-            x, y, facing = field.floor.x[1] + 20.0 + 0.5 * req.part, field.floor.y[0], 0.0
+            (x, y), facing = parking(int(req.part)), 0.0
         elif req.slot:
             slots = {s.name: s for s in field.slots}
             if req.slot not in slots:
@@ -247,6 +266,71 @@ class SimServices:
         out.seq = tr.last_seq if tr.last_seq is not None else 0
         out.message = "SimTwo: from the last SensorFrame (pause state unknown)"
         return out
+
+
+class SimTwoBackend:
+    """SimTwo for :mod:`robotatfactory.sim.standard`: the ground truth of the last SensorFrame (the robot, and
+    the parts when the script sends ``Parts``), teleports through the Command datagram's labels. No pause, no
+    step, no reset (SimTwo's script API has no call for them): its features say so."""
+
+    name = "simtwo"
+    features = standard.SIMTWO_FEATURES
+
+    def __init__(self, services: SimServices):
+        self.s = services
+
+    def snapshot(self):
+        b = self.s.bridge
+        gt = b.ground_truth()
+        if gt is None:
+            return "no SensorFrame from SimTwo yet"
+        _, parts = b.parts_truth()
+        floor = b.field.floor
+        out = tuple(standard.PartTruth(k + 1, "", x, y, plate_facing(h), floor.contains(x, y))
+                    for k, (x, y, h) in enumerate(parts))
+        return standard.Snapshot(float(gt[0]), tuple(gt[1:]), b.ground_truth_velocity(), out, None)
+
+    def set_robot_pose(self, x, y, yaw) -> str:
+        ok, msg = self.s._teleport(x, y, yaw)
+        return "" if ok else msg
+
+    def place_part(self, pid, x, y, facing, letter) -> str:
+        if letter:
+            return "SimTwo cannot recolour a part: use uri 'raf://part'"
+        ok, msg = self.s._teleport(x, y, part_heading(facing), SIMTWO_PART_Z, f"{SIMTWO_PART_PREFIX}{pid}")
+        if not ok:
+            return msg
+        return self._seen(pid, x, y)
+
+    def remove_part(self, pid) -> str:
+        x, y = parking(pid)
+        ok, msg = self.s._teleport(x, y, 0.0, SIMTWO_PART_Z, f"{SIMTWO_PART_PREFIX}{pid}")
+        return self._seen(pid, x, y) if ok else msg
+
+    def _seen(self, pid: int, x: float, y: float) -> str:
+        """Wait until the frames' ``Parts`` show part ``pid`` at (x, y) (nothing to wait for without them)."""
+        end = time.monotonic() + TELEPORT_WAIT
+        while True:
+            _, parts = self.s.bridge.parts_truth()
+            if len(parts) < pid:
+                return ""
+            px, py, _ = parts[pid - 1]
+            if math.hypot(px - x, py - y) < POSE_TOLERANCE:
+                return ""
+            if time.monotonic() > end:
+                return f"part {pid} teleported, but SimTwo's ground truth shows it at ({px:.3f}, {py:.3f})"
+            time.sleep(0.01)
+
+    def pause(self, *_args) -> str:
+        return "SimTwo's script API has no pause, step or reset"
+
+    resume = step = reset = pause
+
+
+def parking(pid: int) -> tuple[float, float]:
+    """Where SimTwo's part ``pid`` goes when it is removed: beside the scene's spare parts (off the field, on
+    SimTwo's ground: 20 m away there is none, and a part put there falls and drifts)."""
+    return spare_part_xy(3 + pid)
 
 
 def _answer(resp, success: bool, message: str):
