@@ -210,6 +210,104 @@ def test_set_robot_pose_reset_and_unsupported_services(stack):
     assert not r.success and "not supported" in r.message
 
 
+def test_simulation_interfaces_on_simtwo(stack, middleware):
+    """ROS 2's simulation_interfaces on the real SimTwo: the features its script API allows, the robot and a
+    part moved, deleted and spawned by teleport, each effect seen in SimTwo's ground truth (``ground_truth``,
+    ``ground_truth/parts``: the script's own labels); reset, pause and step unsupported. ROS 1: the package's
+    own sim/* services only."""
+    from rosutil import service_names
+
+    from robotatfactory.field import load_field
+    from robotatfactory.ros.mw import api
+    from robotatfactory.ros.simulation_interfaces import SERVICE_NAMES
+    from robotatfactory.sim import standard as st
+
+    if middleware == "ros1":
+        names = service_names()
+        assert "/sim/set_robot_pose" in names and not any(f"/{n}" in names for n in SERVICE_NAMES)
+        return
+    T = api().standard_sim_types()
+
+    def call(service, **fields):
+        return call_service(f"/{service}", getattr(T.srv, SERVICE_NAMES[service]), timeout=20, **fields)
+
+    def state(x, y, yaw):
+        s = T.msg.EntityState()
+        s.pose.position.x, s.pose.position.y = x, y
+        s.pose.orientation.z, s.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        return s
+
+    floor = load_field("simtwo2022").floor
+    f = call("get_simulator_features").features
+    assert sorted(f.features) == sorted(st.SIMTWO_FEATURES)
+    for service, fields in (("reset_simulation", {}), ("step_simulation", {"steps": 1}),
+                            ("set_simulation_state", {"state": T.msg.SimulationState(state=st.PAUSED)})):
+        r = call(service, **fields)
+        assert r.result.result == st.FEATURE_UNSUPPORTED, service
+    assert call("get_simulation_state").state.state == st.PLAYING
+    gt = Collector("/ground_truth", _msg("nav_msgs", "Odometry"))
+    parts = Collector("/ground_truth/parts", _msg("geometry_msgs", "PoseArray"))
+    try:
+        r = call("set_entity_state", entity="robot", state=state(0.1, -0.33, 0.3))
+        assert r.result.result == st.OK, r.result.error_message
+        gt.wait(5, timeout=5)
+        x, y, th = _latest(gt)
+        assert math.hypot(x - 0.1, y + 0.33) < 0.01 and abs(math.remainder(th - 0.3, 2 * math.pi)) < 0.03
+        r = call("get_entity_state", entity="robot")
+        assert math.hypot(r.state.pose.position.x - x, r.state.pose.position.y - y) < 0.01
+
+        truth = parts.wait(1, timeout=5)[-1].poses
+        names = list(call("get_entities").entities)
+        on = [k + 1 for k, p in enumerate(truth) if floor.contains(p.position.x, p.position.y)]
+        assert names == ["robot"] + [f"part_{k}" for k in on]
+        pid = len(truth)  # the last part: deleted (if on the field), spawned at a free spot, deleted again
+        if pid in on:
+            assert call("delete_entity", entity=f"part_{pid}").result.result == st.OK
+        parts.clear()
+        p = parts.wait(1, timeout=5)[-1].poses[pid - 1].position
+        assert not floor.contains(p.x, p.y) and f"part_{pid}" not in call("get_entities").entities
+        from geometry_msgs.msg import PoseStamped
+
+        pose = PoseStamped()
+        pose.pose.position.x, pose.pose.position.y, pose.pose.orientation.w = 0.35, -0.33, 1.0
+        r = call("spawn_entity", name=f"part_{pid}", uri="raf://part", initial_pose=pose)
+        assert r.result.result == st.OK and r.entity_name == f"part_{pid}", r.result.error_message
+        parts.clear()
+        p = parts.wait(1, timeout=5)[-1].poses[pid - 1].position
+        assert math.hypot(p.x - 0.35, p.y + 0.33) < 0.01
+        r = call("get_entity_state", entity=f"part_{pid}")
+        assert math.hypot(r.state.pose.position.x - 0.35, r.state.pose.position.y + 0.33) < 0.01
+        r = call("spawn_entity", name=f"part_{pid}", uri="raf://part/red", initial_pose=pose)
+        assert r.result.result == st.NAME_NOT_UNIQUE
+        assert call("delete_entity", entity=f"part_{pid}").result.result == st.OK
+        assert [s.uri for s in call("get_spawnables").spawnables] == ["raf://part"]
+        b = call("get_entity_bounds", entity="robot").bounds
+        assert b.type == st.BOUNDS_BOX and b.points[0].x < 0 < b.points[1].x
+        # the rest of SimTwo's subset: info, states, named poses, several spawns, a part moved
+        assert call("get_entity_info", entity="robot").info.category.category == st.CATEGORY_ROBOT
+        r = call("get_entities_states", filters=T.msg.EntityFilters(filter="^robot$"))
+        assert list(r.entities) == ["robot"] and math.hypot(r.states[0].pose.position.x - 0.1,
+                                                            r.states[0].pose.position.y + 0.33) < 0.02
+        named = {p.name: p for p in call("get_named_poses").poses}
+        assert "start" in named and call("get_named_pose_bounds", name="start").result.result == st.OK
+        SE, R = T.msg.SpawnEntity, T.msg.Resource
+        r = call("spawn_entities", spawn_requests=[SE(name=f"part_{pid}", entity_resource=R(uri="raf://part"),
+                                                      initial_pose=pose)])  # free floor: (0.35, -0.33)
+        assert r.result.result == st.OK and r.results[0].entity_name == f"part_{pid}", r.results[0].result
+        parts.clear()
+        p = parts.wait(1, timeout=5)[-1].poses[pid - 1].position
+        assert math.hypot(p.x - 0.35, p.y + 0.33) < 0.01
+        r = call("set_entity_state", entity=f"part_{pid}", state=state(0.35, -0.25, 0.0))
+        assert r.result.result == st.OK, r.result.error_message
+        parts.clear()
+        p = parts.wait(1, timeout=5)[-1].poses[pid - 1].position
+        assert math.hypot(p.x - 0.35, p.y + 0.25) < 0.01
+        assert call("delete_entity", entity=f"part_{pid}").result.result == st.OK
+    finally:
+        gt.close()
+        parts.close()
+
+
 def _drive(pub, twist_type, v: float, w: float, seconds: float) -> None:
     msg = twist_type()
     msg.linear.x, msg.angular.z = v, w
