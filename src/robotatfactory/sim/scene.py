@@ -74,7 +74,7 @@ PART_FRICTION = (0.95, 0.005, 0.0001)
 PART_FOOT_FRICTION = (0.01, 0.005, 0.0001)
 # MuJoCo's pyramidal friction cones (this scene's) with mu 0.01 at the feet made the solver throw held parts off
 # the magnet (pyramid edges almost parallel to the normal: contact force spikes of 100+ N in one step, parts
-# lost in straight driving and slow turns, measured with agent/envelope.py). A foot friction below this is
+# lost in straight driving and slow turns, measured with raf experiment envelope). A foot friction below this is
 # therefore a frictionless floor contact plus the same friction as the part's free joint's frictionloss,
 # mu m g = 0.021 (N on the translations: a sliding part decelerates at mu g, measured 0.098 m/s^2, 5.1 cm from
 # 0.1 m/s; N m on the rotations, where the feet's would be ~0.001 N m: more yaw resistance than SimTwo's, still

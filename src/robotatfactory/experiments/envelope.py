@@ -1,19 +1,26 @@
-"""The carry envelope: which drives keep a part on the stand-in's electromagnet (SimTwo's force by default).
+"""``raf experiment envelope``: which drives keep a part on the stand-in's electromagnet (SimTwo's force by
+default).
 
 A robot at the origin heading +x holds a part whose plate touches its magnet; each trial drives a ramped
 profile (turn on the spot, arc forwards or backwards, straight) and reports whether the part was lost
 (``Simulator.held`` went None) and how far it slid sideways on the magnet's face (m). Plain Python on the
-bare stand-in (no ROS). ``python -m robotatfactory.agent.envelope`` prints the table docs/agent.md quotes.
+bare stand-in (no ROS): the table docs/agent.md and docs/simulator.md quote. An experiment, not part of the
+agent: the agent's carrying limits were chosen from it (docs/agent.md, "The carry envelope").
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+NAME = "envelope"
+HELP = ("the carry envelope: which ramped turns, arcs and straights keep a part on the stand-in's magnet, and "
+        "how far it slides on the face")
+TARGETS: dict = {}
+
 
 def touch_distance(robot, part) -> float:
     """base_link to the centre of a part whose plate touches the magnet (m)."""
-    from .footprint import dock_distance
+    from ..agent.footprint import dock_distance
 
     return dock_distance(robot, part, gap=0.0)
 
@@ -48,12 +55,13 @@ def profile(t: Trial, dt=0.04):
     return up + [(t.v, t.w)] * n + down
 
 
-def run(field, robot, t: Trial, magnet: str = "force", settle: int = 5) -> tuple[bool, float]:
+def run_trial(field, robot, t: Trial, magnet: str | None = None, settle: int = 5) -> tuple[bool, float]:
     """(held to the end, largest sideways slide on the face in m)."""
     from ..sim import PartPlacement, SimConfig, Simulator
     from ..simtwo import Command
 
     part = PartPlacement("R", touch_distance(robot, field.part) + 0.002, 0.0, math.pi)
+    magnet = magnet or SimConfig.magnet
     sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, competition=False, magnet=magnet,
                                             start_pose=(0.0, 0.0, 0.0), extra_parts=(part,)))
     try:
@@ -90,28 +98,40 @@ def default_trials() -> list[Trial]:
     return out
 
 
-def main(argv=None) -> int:
-    import argparse
+def key(t: Trial) -> str:
+    """The trial's prefix in the results: ``spin_w1.5_alpha6``, ``arc_v-0.3_r0.1``, ``straight_v0.4_a2``."""
+    def g(v: float) -> str:
+        return f"{v:g}"
 
+    if t.kind == "spin":
+        return f"spin_w{g(t.w)}_alpha{g(t.alpha)}"
+    if t.kind == "arc":
+        return f"arc_v{g(t.v)}_r{g(round(abs(t.v / t.w), 3))}"
+    return f"straight_v{g(t.v)}_a{g(t.a)}"
+
+
+def add_arguments(parser) -> None:
+    from ..sim.config import MAGNETS, SimConfig
+
+    parser.add_argument("--magnet", default=SimConfig.magnet, choices=MAGNETS,
+                        help=f"the stand-in's magnet model (default {SimConfig.magnet}: SimTwo's)")
+    parser.add_argument("--kind", default=None, choices=("spin", "arc", "straight"), help="only these trials")
+
+
+def run(args, out_dir=None) -> dict:
     from ..field import load_field
     from ..robot import load_robot
 
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--magnet", default="force")
-    ap.add_argument("--kind", default=None, help="only spin / arc / straight")
-    args = ap.parse_args(argv)
     field, robot = load_field(), load_robot()
-    print(f"magnet={args.magnet}")
-    print("kind      v m/s  w rad/s  a  alpha  radius  held  slide mm")
-    for t in default_trials():
-        if args.kind and t.kind != args.kind:
-            continue
-        held, slide = run(field, robot, t, args.magnet)
-        rad = abs(t.v / t.w) if t.w else float("inf")
-        print(f"{t.kind:8s} {t.v:6.2f} {t.w:7.2f} {t.a:4.1f} {t.alpha:6.2f} {rad:6.2f}  {'yes' if held else 'LOST':4s}"
-              f" {slide * 1000:6.1f}", flush=True)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    trials = [t for t in default_trials() if not args.kind or t.kind == args.kind]
+    out: dict = {"magnet": args.magnet, "trials": len(trials)}
+    lost = 0
+    for i, t in enumerate(trials, 1):
+        held, slide = run_trial(field, robot, t, args.magnet)
+        lost += not held
+        out[f"{key(t)}_held"] = held
+        out[f"{key(t)}_slide_mm"] = round(slide * 1000, 2)
+        print(f"[envelope] {i}/{len(trials)} {key(t)}: {'held' if held else 'LOST'}, slide {slide * 1000:.1f} mm",
+              flush=True)
+    out["trials_lost"] = lost
+    return out
