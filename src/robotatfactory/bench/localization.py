@@ -84,7 +84,7 @@ def run(args) -> dict:
     from ..field import load_field
     from ..localization.config import load_config
     from ..localization.detect import DetectorConfig
-    from ..localization.frames import frames, random_poses
+    from ..localization.frames import random_poses
     from ..localization.pipeline import METHODS, FrameLocalizer
     from ..results import machine_info
     from ..robot import load_robot
@@ -94,7 +94,7 @@ def run(args) -> dict:
     robot = load_robot()
     cfg = load_config(args.config)
     poses = random_poses(field, args.frames, seed=args.seed)
-    data = list(frames(args.source, field, robot, poses, seed=args.seed))
+    data = list(_frames(args.source, field, robot, poses, seed=args.seed))
     poses = [p for p, _ in data]
     imgs = [img for _, img in data]
     loc = FrameLocalizer(field, robot, cfg.detector, cfg.pose)
@@ -117,3 +117,38 @@ def run(args) -> dict:
             out[f"sweep_{name}_markers_per_frame_mean"] = m["markers_per_frame_mean"]
             out[f"sweep_{name}_planar_position_error_mm_p95"] = m["planar_position_error_mm_p95"]
     return out
+
+
+def _simulator_frames(field, robot, poses, seed: int = 0):
+    """Camera images rendered by the stand-in simulator with the robot placed at each pose."""
+    import os
+
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    try:
+        from ..sim import SimConfig, Simulator
+    except Exception as e:  # the simulator is another part of the project
+        from ..errors import ConfigError
+
+        raise ConfigError(f"the stand-in simulator is not available ({type(e).__name__}: {e})") from None
+    sim = Simulator(field, robot, SimConfig(seed=seed))
+    try:
+        for p in poses:
+            sim.set_pose(*p)
+            yield p, np.ascontiguousarray(sim.render_camera())
+    finally:
+        close = getattr(sim, "close", None)
+        if close:
+            close()
+
+
+def _frames(source: str, field, robot, poses, seed: int = 0):
+    """(pose, image) of each pose: ``synth`` (the synthetic renderer) or ``sim`` (the stand-in's camera)."""
+    from ..localization.frames import synthetic_frames
+
+    if source == "synth":
+        return synthetic_frames(field, robot, poses, seed)
+    if source == "sim":
+        return _simulator_frames(field, robot, poses, seed)
+    from ..errors import ConfigError
+
+    raise ConfigError(f"frame source must be synth or sim, not {source!r}")

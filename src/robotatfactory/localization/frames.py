@@ -1,12 +1,10 @@
-"""Test frames for the bench and calibration: random robot poses on the field and their camera images.
-
-Images come from the synthetic renderer (:mod:`.synth`, no simulator needed) or from the stand-in simulator's
-MuJoCo camera (``robotatfactory.sim``), which is what the ROS node sees in the experiment.
+"""Test frames for the bench and calibration: random robot poses on the field and their synthetic camera
+images (:mod:`.synth`, no simulator needed). The stand-in simulator's images of the same poses are the
+bench's (``bench/localization.py``): localization does not depend on the simulator.
 """
 from __future__ import annotations
 
 import math
-import os
 from typing import Iterator
 
 import numpy as np
@@ -51,33 +49,3 @@ def synthetic_frames(field: Field, robot: RobotSpec, poses, seed: int = 0, blur_
     rng = np.random.default_rng(seed)
     for p in poses:
         yield p, r.render(p, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
-
-
-def simulator_frames(field: Field, robot: RobotSpec, poses, seed: int = 0) -> Iterator[tuple[tuple, np.ndarray]]:
-    """Camera images rendered by the stand-in simulator with the robot placed at each pose."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    try:
-        from ..sim import SimConfig, Simulator
-    except Exception as e:  # the simulator is another part of the project
-        from ..errors import ConfigError
-
-        raise ConfigError(f"the stand-in simulator is not available ({type(e).__name__}: {e})") from None
-    sim = Simulator(field, robot, SimConfig(seed=seed))
-    try:
-        for p in poses:
-            sim.set_pose(*p)
-            yield p, np.ascontiguousarray(sim.render_camera())
-    finally:
-        close = getattr(sim, "close", None)
-        if close:
-            close()
-
-
-def frames(source: str, field: Field, robot: RobotSpec, poses, seed: int = 0):
-    if source == "synth":
-        return synthetic_frames(field, robot, poses, seed)
-    if source == "sim":
-        return simulator_frames(field, robot, poses, seed)
-    from ..errors import ConfigError
-
-    raise ConfigError(f"frame source must be synth or sim, not {source!r}")
