@@ -81,12 +81,22 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return 130
     except Exception as e:  # a clear message, not a traceback, for the errors users cause
-        from .errors import UserError
-
-        if isinstance(e, UserError):
+        if isinstance(e, user_errors()):
             print(f"raf {args.command}: error: {e}", file=sys.stderr)
             return 2
         raise
+
+
+def user_errors() -> tuple[type[Exception], ...]:
+    """The errors a user can cause (bad settings, unknown names, a missing file, SimTwo's build or run)."""
+    from .errors import ConfigError
+    from .field.loader import FieldError
+    from .simtwo.errors import ProtocolError
+    from .simtwo_linux.build import BuildError
+    from .simtwo_linux.run import SimTwoError
+    from .simtwo_linux.scene import SceneError
+
+    return (FieldError, ProtocolError, ConfigError, FileNotFoundError, BuildError, SceneError, SimTwoError)
 
 
 if __name__ == "__main__":

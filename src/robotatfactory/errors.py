@@ -1,13 +1,6 @@
-"""Errors a user can cause (bad settings, unknown names); ``raf`` prints them without a traceback."""
-from .field.loader import FieldError
-from .simtwo.errors import ProtocolError
-from .simtwo_linux.build import BuildError
-from .simtwo_linux.run import SimTwoError
-from .simtwo_linux.scene import SceneError
+"""The error for a bad setting or an unknown name, at the bottom of the package: every layer may raise it
+(``raf`` prints it, and the other errors users cause, without a traceback: ``cli.user_errors``)."""
 
 
 class ConfigError(ValueError):
     """A setting or parameter has a bad value; the message names the setting and what is allowed."""
-
-
-UserError = (FieldError, ProtocolError, ConfigError, FileNotFoundError, BuildError, SceneError, SimTwoError)

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import socket
 
+from ..errors import ConfigError
+
 SIMTWO_UDP_PORT = 9808  # SimTwo (or raf sim) listens for Command datagrams
 BRIDGE_UDP_PORT = 9810  # scripts send SensorFrame datagrams here (the bridge binds it)
 CAMERA_ZMQ_PORT = 9899  # ZMQ PUB of raw camera frames
@@ -17,8 +19,6 @@ def bind_udp(sock: socket.socket, host: str, port: int, what: str, hint: str) ->
     try:
         sock.bind((host, port))
     except OSError as e:
-        from ..errors import ConfigError  # here: robotatfactory.errors imports this package
-
         sock.close()
         raise ConfigError(f"{what} cannot bind udp {host}:{port}: {e.strerror or e} ({hint})") from None
     return sock
