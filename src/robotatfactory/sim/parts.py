@@ -1,24 +1,11 @@
-"""Part colours and the free-joint bookkeeping of part bodies (move, recolour, read poses)."""
+"""The free-joint bookkeeping of part bodies (move, recolour, read poses)."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-from .scene import quat_yaw
-
-# display colours by type letter; the competition package's PartType.rgba wins when it is installed
-_FALLBACK_RGBA = {"R": (0.85, 0.1, 0.1, 1.0), "G": (0.1, 0.7, 0.15, 1.0), "B": (0.1, 0.25, 0.85, 1.0)}
-
-
-def part_rgba(letter: str) -> tuple[float, float, float, float]:
-    try:
-        from ..competition.parts import PartType
-
-        return tuple(PartType.from_letter(letter).rgba)  # type: ignore[return-value]
-    except ImportError:  # pragma: no cover - the competition package is part of the project
-        return _FALLBACK_RGBA[letter]
-
+from .scene import part_rgba, quat_yaw
 
 class PartBodies:
     """Handles to the part bodies of a compiled model: ids, qpos/qvel addresses, visual geom ids."""

@@ -149,6 +149,20 @@ class SceneInfo:
     marker_ids: list[int] = dc_field(default_factory=list)
 
 
+# display colours by type letter; the competition package's PartType.rgba wins when it is installed
+_FALLBACK_RGBA = {"R": (0.85, 0.1, 0.1, 1.0), "G": (0.1, 0.7, 0.15, 1.0), "B": (0.1, 0.25, 0.85, 1.0)}
+
+
+def part_rgba(letter: str) -> tuple[float, float, float, float]:
+    """A part's display colour by its type letter (R, G, B)."""
+    try:
+        from ..competition.parts import PartType
+
+        return tuple(PartType.from_letter(letter).rgba)  # type: ignore[return-value]
+    except ImportError:  # pragma: no cover - the competition package is part of the project
+        return _FALLBACK_RGBA[letter]
+
+
 def yaw_quat(theta: float) -> list[float]:
     """MuJoCo quaternion (w, x, y, z) of a rotation by ``theta`` about z."""
     return [math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2)]
@@ -508,7 +522,6 @@ def _add_robot(spec, world, robot: RobotSpec, config: SimConfig, field: Field, n
 def _add_part(spec, world, field: Field, pid: int, letter: str, x: float, y: float, facing: float) -> None:
     import mujoco
 
-    from .parts import part_rgba
 
     p = field.part
     body = world.add_body(name=f"part_{pid}", pos=[x, y, 0.0], quat=yaw_quat(facing))
