@@ -21,12 +21,13 @@ examples:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..ros.cli import add_node_arguments, add_settings_arguments
+    from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST
 
     add_settings_arguments(parser, "config/bridge.yaml", "udp/port=9811")
     parser.add_argument("--sim-host", metavar="HOST", help="accept SensorFrames from this host only ('*': any)")
-    parser.add_argument("--port", type=int, metavar="PORT", help="UDP port to listen on (default 9810)")
+    parser.add_argument("--port", type=int, metavar="PORT", help=f"UDP port to listen on (default {BRIDGE_UDP_PORT})")
     cam = parser.add_mutually_exclusive_group()
-    cam.add_argument("--camera", metavar="ENDPOINT", help="ZMQ endpoint of the camera (default tcp://127.0.0.1:9899)")
+    cam.add_argument("--camera", metavar="ENDPOINT", help=f"ZMQ endpoint of the camera (default tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT})")
     cam.add_argument("--no-camera", action="store_true", help="do not subscribe to the camera")
     parser.add_argument("--calibration", metavar="FILE",
                         help="camera calibration YAML from raf calibrate: camera_info K and D and the camera TF "

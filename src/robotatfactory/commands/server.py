@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import argparse
 
+from ..simtwo.ports import SERVER_UDP_PORT
+
 NAME = "server"
-HELP = "run a standalone factory-state server (UDP 44832) for a round, or --query a running one"
+HELP = f"run a standalone factory-state server (UDP {SERVER_UDP_PORT}) for a round, or --query a running one"
 ORDER = 40
 DESCRIPTION = """\
 Run the competition's factory-state server (UDP, plain ASCII: IWP OWP MAP MBP CTL PING) for one round with

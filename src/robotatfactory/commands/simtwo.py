@@ -57,6 +57,8 @@ def robot_camera(path: str | None):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
+
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     b = sub.add_parser("build", help="build SimTwo from the pinned sources (cached)",
                        description="Build SimTwo: Debian's packages checked, the pinned sources (an archive "
@@ -70,10 +72,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                    "installed, its own Xvfb and ports, the camera window opened; wait until the "
                                    "script streams; run until Ctrl-C or --duration; stop all it started.")
     r.add_argument("--scene", default="RobotFactoryPro2022", help="the scene folder (default RobotFactoryPro2022)")
-    r.add_argument("--port", type=int, metavar="UDP", help="the UDP port SimTwo listens on (default 9808)")
+    r.add_argument("--port", type=int, metavar="UDP",
+                   help=f"the UDP port SimTwo listens on (default {SIMTWO_UDP_PORT})")
     r.add_argument("--bridge", default=None, metavar="HOST:PORT",
-                   help="where the SensorFrames go (control.pas BRIDGE_IP/BRIDGE_PORT; default 127.0.0.1:9810)")
-    r.add_argument("--camera-port", type=int, metavar="TCP", help="the camera's ZMQ port (default 9899)")
+                   help=f"where the SensorFrames go (control.pas BRIDGE_IP/BRIDGE_PORT; default "
+                        f"{LOCALHOST}:{BRIDGE_UDP_PORT})")
+    r.add_argument("--camera-port", type=int, metavar="TCP", help=f"the camera's ZMQ port (default {CAMERA_ZMQ_PORT})")
     r.add_argument("--free-ports", action="store_true", help="free ports for all three (printed)")
     r.add_argument("--no-camera", action="store_true", help="do not open SimTwo's camera window")
     r.add_argument("--round", type=int, choices=(1, 2, 3),

@@ -35,6 +35,9 @@ LOG_TAIL = 25  # lines of a dead child's log printed
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ..sim.control import CONTROL_PORT_OFFSET
+    from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, SERVER_UDP_PORT, SIMTWO_UDP_PORT
+
     g = parser.add_argument_group("what runs")
     g.add_argument("--agent", action="store_true", help="also run raf agent (plays the round; raf sim then runs "
                                                         "realtime with --start-after 3, as competition.launch)")
@@ -61,7 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("graph, ports and logs")
     g.add_argument("--roscore", action="store_true", help="ROS 1: start a private roscore on a free port")
     g.add_argument("--free-ports", action="store_true",
-                   help="free ports instead of the defaults 9808/9810/9812/9899/44832 (several sets at once)")
+                   help=f"free ports instead of the defaults {SIMTWO_UDP_PORT}/{BRIDGE_UDP_PORT}/"
+                        f"{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}/{CAMERA_ZMQ_PORT}/{SERVER_UDP_PORT} (several sets "
+                        "at once)")
     g.add_argument("--log-dir", metavar="DIR", help="where each child's log goes (default: a new temporary folder)")
     g.add_argument("--ready-timeout", type=float, default=60.0, metavar="S",
                    help="how long a node may take to come up (default 60 s)")

@@ -16,6 +16,8 @@ from typing import Any
 
 from ..errors import ConfigError
 from ..robot import CameraSpec, RobotSpec, load_robot
+from ..sim.control import CONTROL_PORT_OFFSET
+from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
 
 #: Topic names (relative: a namespace puts each robot's bridge in its own space). ``/clock`` and
 #: ``/diagnostics`` are global by ROS convention.
@@ -67,8 +69,9 @@ def default_params(robot: RobotSpec | None = None) -> dict:
         "field": "rules2026",
         "robot": "simtwo",
         "frame_prefix": "",
-        "udp": {"bind_host": "auto", "port": 9810, "max_datagram": 16384},
-        "simulator": {"host": "127.0.0.1", "port": 0, "reply_port": 0, "control": "127.0.0.1:9812"},
+        "udp": {"bind_host": "auto", "port": BRIDGE_UDP_PORT, "max_datagram": 16384},
+        "simulator": {"host": LOCALHOST, "port": 0, "reply_port": 0,
+                      "control": f"{LOCALHOST}:{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}"},
         "stream": {"reorder_window": 25, "restart_confirm": 3, "max_jump": 250, "takeover_after": 2.0,
                    "max_wheel_speed": _max_wheel_speed(r)},
         "watchdog": {"timeout": 0.5},
@@ -84,7 +87,7 @@ def default_params(robot: RobotSpec | None = None) -> dict:
             "delivery_lag": 0.001,
         },
         "camera": {
-            "enabled": True, "endpoint": "tcp://127.0.0.1:9899",
+            "enabled": True, "endpoint": f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}",
             "xyz": list(cam.xyz), "pitch_down_deg": cam.pitch_down_deg, "roll_deg": cam.roll_deg,
             "distortion": list(cam.distortion),
             "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
