@@ -4,7 +4,8 @@ from __future__ import annotations
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from robotatfactory.simtwo.stream import LogLimiter, RateMeter, StreamTracker, Verdict
+from robotatfactory.ratelog import LogLimiter
+from robotatfactory.simtwo.stream import RateMeter, StreamTracker, Verdict
 
 
 def feed(tr, seqs, period=40):

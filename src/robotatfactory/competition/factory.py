@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError
 from ..field.model import Field, Slot
-from ._ratelog import RateLimitedLog
+from ..ratelog import RateLimitedLog
 from .parts import PartType, letter_of
 from .rounds import RoundSetup
 

@@ -23,7 +23,7 @@ from typing import Callable
 
 from ..errors import ConfigError
 from ..simtwo.ports import LOCALHOST, SERVER_UDP_PORT, bind_udp
-from ._ratelog import RateLimitedLog
+from ..ratelog import RateLimitedLog
 from .factory import Factory
 
 log = logging.getLogger(__name__)

@@ -39,10 +39,11 @@ from std_msgs.msg import Bool
 from visualization_msgs.msg import MarkerArray
 
 from ..localization.odometry import DiffDriveOdometry
+from ..ratelog import LogLimiter
 from ..simtwo import Command, ProtocolError, SensorFrame
 from ..simtwo.labels import LabelledValues
 from ..simtwo.messages import PROTOCOL_VERSION, VERSION_LABEL
-from ..simtwo.stream import (Event, LogLimiter, RateMeter, SourceGate, StreamTracker, Verdict, source_key,
+from ..simtwo.stream import (Event, RateMeter, SourceGate, StreamTracker, Verdict, source_key,
                              stream_health)
 from ..simtwo.scan import PerRayAssembler, WholeSweepAssembler, make_assembler
 from ..simtwo.selfhits import SelfFilter

@@ -33,7 +33,8 @@ RCVHWM = 64  # camera frames queued in ZMQ before it drops any (77 MB at 640x480
 
 class CameraBridge:
     def __init__(self, cfg, node, timing_sock: socket.socket | None = None):
-        from ..simtwo.stream import LogLimiter, RateMeter
+        from ..ratelog import LogLimiter
+        from ..simtwo.stream import RateMeter
         from ..simtwo.timing import CameraStamper
 
         self.cfg = cfg

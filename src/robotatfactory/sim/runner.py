@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
+from ..ratelog import RateLimitedLog
 from ..simtwo import Command, ProtocolError
 from ..simtwo.labels import format_real
 from ..simtwo.messages import LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, encode_parts, encode_ranges
@@ -116,26 +117,6 @@ def parse_address(text: str, default_host: str = LOCALHOST) -> tuple[str, int]:
     if not 0 <= p <= 65535:
         raise ConfigError(f"address {text!r}: port must be 0..65535")
     return host or default_host, p
-
-
-class RateLimitedLog:
-    """The first message of a kind, then at most one per ``period`` seconds, telling how many were held back."""
-
-    def __init__(self, logger: logging.Logger, period: float = 5.0, clock=time.monotonic):
-        self.logger, self.period, self.clock = logger, period, clock
-        self._last: dict[str, float] = {}
-        self._held: dict[str, int] = {}
-
-    def warn(self, key: str, msg: str) -> bool:
-        now = self.clock()
-        last = self._last.get(key)
-        if last is not None and now - last < self.period:
-            self._held[key] = self._held.get(key, 0) + 1
-            return False
-        n = self._held.pop(key, 0)
-        self._last[key] = now
-        self.logger.warning(msg + (f" ({n} more like this since the last report)" if n else ""))
-        return True
 
 
 class CachedFrameEncoder:

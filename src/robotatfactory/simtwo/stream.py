@@ -355,26 +355,6 @@ class RateMeter:
         return (time.monotonic() if now is None else now) - self._t[-1]
 
 
-class LogLimiter:
-    """At most one message per ``period`` wall seconds per key; says how many were suppressed in between."""
-
-    def __init__(self, period: float = 5.0):
-        self.period = period
-        self._last: dict[str, float] = {}
-        self._suppressed: dict[str, int] = {}
-
-    def __call__(self, key: str, now: float | None = None) -> str | None:
-        """None to stay quiet, else a suffix (possibly empty) to append to the message being logged."""
-        now = time.monotonic() if now is None else now
-        t = self._last.get(key)
-        if t is not None and now - t < self.period:
-            self._suppressed[key] = self._suppressed.get(key, 0) + 1
-            return None
-        self._last[key] = now
-        n = self._suppressed.pop(key, 0)
-        return f" ({n} more like this in the last {now - t:.0f} s)" if n and t is not None else ""
-
-
 OK, WARN, ERROR = 0, 1, 2  # the levels of diagnostic_msgs/DiagnosticStatus
 
 
