@@ -1,4 +1,4 @@
-"""Camera calibration (localization/calibration.py, raf calibrate) and distortion handling."""
+"""Camera calibration (localization/calibration/, raf calibrate) and distortion handling."""
 from __future__ import annotations
 
 import argparse

@@ -45,24 +45,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..field.model import Field
-from ..robot import CameraSpec, RobotSpec
-from .detect import Detection
-from .geometry import between2, compose2, wrap_angle
-
-#: The camera parameters of the model, in the order of the parameter vector (units in docs above).
-PARAMS = ("fx", "fy", "cx", "cy", "x", "y", "z", "pitch_down_deg", "roll_deg", "k1", "k2", "p1", "p2", "k3",
-          "corner_bias_px")
-DEFAULT_FREE = ("fx", "fy", "cx", "cy", "z", "pitch_down_deg", "roll_deg")
-DISTORTION = ("k1", "k2", "p1", "p2", "k3")
-UNITS = {"fx": "px", "fy": "px", "cx": "px", "cy": "px", "x": "m", "y": "m", "z": "m", "pitch_down_deg": "deg",
-         "roll_deg": "deg", "k1": "", "k2": "", "p1": "", "p2": "", "k3": "", "corner_bias_px": "px"}
+from ...errors import ConfigError
+from ...field.model import Field
+from ...robot import CameraSpec, RobotSpec
+from ..geometry import between2, wrap_angle
+from .model import (DEFAULT_FREE, DISTORTION, PARAMS, FrameData, camera_from_vector, camera_vector,
+                    predict_corners)
 
 
 @dataclass
@@ -115,82 +107,6 @@ class CalibrationConfig:
         for k in ("sigma_px", "huber_sigmas", "outlier_px", "odom_sigma_xy_m", "odom_sigma_theta_deg"):
             if not float(getattr(self, k)) > 0:
                 raise ConfigError(f"calibration: {k} must be > 0, got {getattr(self, k)!r}")
-
-
-@dataclass
-class FrameData:
-    """One frame's detections of known markers (pixels, as detected, i.e. distorted) and its odometry."""
-
-    stamp: float
-    detections: list[Detection]
-    odom: tuple[float, float, float] | None = None  # base_link in odom (m, m, rad) at the frame's stamp
-
-
-# -------------------------------------------------------------------------------------------- camera model
-
-
-def camera_vector(cam: CameraSpec) -> np.ndarray:
-    """The :data:`PARAMS` vector of a camera."""
-    return np.array([cam.fx, cam.fy, cam.cx, cam.cy, *cam.xyz, cam.pitch_down_deg, cam.roll_deg, *cam.distortion,
-                     0.0], dtype=float)
-
-
-def camera_from_vector(base: CameraSpec, v: Sequence[float]) -> CameraSpec:
-    """``base`` (image size, timing) with the parameters of a :data:`PARAMS` vector."""
-    v = [float(a) for a in v]
-    return replace(base, fx=v[0], fy=v[1], cx=v[2], cy=v[3], xyz=(v[4], v[5], v[6]), pitch_down_deg=v[7],
-                   roll_deg=v[8], distortion=tuple(v[9:14]))
-
-
-def _rot_base_optical(pitch_deg: float, roll_deg: float) -> np.ndarray:
-    p, r = math.radians(pitch_deg), math.radians(roll_deg)
-    c, s, cr, sr = math.cos(p), math.sin(p), math.cos(r), math.sin(r)
-    Ry = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    L = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], dtype=float)
-    return Ry @ Rx @ L
-
-
-def distort(xn: np.ndarray, yn: np.ndarray, d: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV's plumb-bob model on normalised coordinates."""
-    k1, k2, p1, p2, k3 = d
-    if not (k1 or k2 or p1 or p2 or k3):
-        return xn, yn
-    r2 = xn * xn + yn * yn
-    rad = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = xn * rad + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
-    yd = yn * rad + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
-    return xd, yd
-
-
-def project_corners(v: np.ndarray, poses: np.ndarray, P: np.ndarray, fi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (Mx2) and depths (M) of world points ``P`` (Mx3) seen from the robot poses ``poses[fi]`` (x, y,
-    heading) by the camera of parameter vector ``v`` (:data:`PARAMS`)."""
-    R_bo = _rot_base_optical(v[7], v[8])
-    R_cb = R_bo.T
-    t_cb = -R_cb @ v[4:7]
-    x, y, th = poses[fi, 0], poses[fi, 1], poses[fi, 2]
-    c, s = np.cos(th), np.sin(th)
-    qx, qy = P[:, 0] - x, P[:, 1] - y
-    b = np.stack([c * qx + s * qy, -s * qx + c * qy, P[:, 2]], axis=1)
-    pc = b @ R_cb.T + t_cb
-    Z = pc[:, 2]
-    iz = 1.0 / np.where(np.abs(Z) < 1e-6, 1e-6, Z)
-    xd, yd = distort(pc[:, 0] * iz, pc[:, 1] * iz, v[9:14])
-    return np.stack([v[0] * xd + v[2], v[1] * yd + v[3]], axis=1), Z
-
-
-def predict_corners(v: np.ndarray, poses: np.ndarray, P: np.ndarray, fi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`project_corners` plus the detector's corner bias ``v[14]`` (pixels, outward along each corner's
-    direction from the marker's centre). ``P`` holds whole markers: 4 consecutive corners each."""
-    uv, Z = project_corners(v, poses, P, fi)
-    b = float(v[14]) if len(v) > 14 else 0.0
-    if b:
-        q = uv.reshape(-1, 4, 2)
-        d = q - q.mean(axis=1, keepdims=True)
-        d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-9)
-        uv = (q + b * d).reshape(-1, 2)
-    return uv, Z
 
 
 # -------------------------------------------------------------------------------------------- the result
@@ -246,8 +162,8 @@ class CalibrationResult:
 
 def _seed_poses(frames: list[FrameData], fld: Field, robot: RobotSpec) -> list[tuple[tuple, set[int]] | None]:
     """Per frame: (pose, ids of markers the planar fit kept) with the initial camera, or None."""
-    from .markerpose import PoseConfig
-    from .pipeline import FrameLocalizer
+    from ..markerpose import PoseConfig
+    from ..pipeline import FrameLocalizer
 
     lenient = PoseConfig(mount_max_height_m=0.08, mount_max_tilt_deg=15.0, marker_max_rms_px=12.0,
                          marker_rms_sigmas=40.0, lone_marker_max_distance_m=1.2, marker_outlier_chi2=3.0e4,
@@ -546,218 +462,6 @@ def _camera_covariance(res, nC: int, n_rows: int, n_params: int) -> np.ndarray:
         X = splu((H + 1e-9 * identity(n, format="csc")).tocsc()).solve(E)
     C = X[:nC] * s2
     return 0.5 * (C + C.T)
-
-
-# ------------------------------------------------------------------------------------ files and robots
-
-
-def calibration_dict(result: CalibrationResult) -> dict:
-    """The YAML document: ``camera:`` (what bridge and localize load) and ``fit:``."""
-    c = result.camera
-    return {"camera": camera_dict(c), "fit": result.summary()}
-
-
-def camera_dict(c: CameraSpec) -> dict:
-    def r(v, n=6):
-        return float(round(float(v), n))
-    return {"fx": r(c.fx, 4), "fy": r(c.fy, 4), "cx": r(c.cx, 4), "cy": r(c.cy, 4),
-            "distortion": [r(v, 8) for v in c.distortion], "xyz": [r(v, 5) for v in c.xyz],
-            "pitch_down_deg": r(c.pitch_down_deg, 4), "roll_deg": r(c.roll_deg, 4),
-            "width": int(c.width), "height": int(c.height)}
-
-
-def write_calibration(path: str | Path, result_or_camera, fit: dict | None = None) -> Path:
-    """Write a calibration YAML from a :class:`CalibrationResult` (or a CameraSpec and a ``fit`` dict)."""
-    import yaml
-
-    if isinstance(result_or_camera, CalibrationResult):
-        doc = calibration_dict(result_or_camera)
-    else:
-        doc = {"camera": camera_dict(result_or_camera), "fit": dict(fit or {})}
-    p = Path(path)
-    if p.parent and not p.parent.exists():
-        p.parent.mkdir(parents=True, exist_ok=True)
-    header = ("# camera calibration (raf calibrate; docs/calibration.md). Pixels with centres at integers,\n"
-              "# distortion: OpenCV (k1, k2, p1, p2, k3); xyz: base_link -> camera_link (m); pitch down and roll\n"
-              "# about the optical axis in degrees. Load with: raf bridge --calibration FILE, raf localize\n"
-              "# --calibration FILE.\n")
-    p.write_text(header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
-    return p
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """A loaded calibration file: the camera values it sets (a subset of the keys is allowed)."""
-
-    path: str
-    camera: dict
-    fit: dict
-
-    def apply(self, cam: CameraSpec) -> CameraSpec:
-        """``cam`` with this file's values."""
-        c = self.camera
-        kw = {}
-        for k in ("fx", "fy", "cx", "cy", "pitch_down_deg", "roll_deg"):
-            if k in c:
-                kw[k] = float(c[k])
-        if "xyz" in c:
-            kw["xyz"] = tuple(float(v) for v in c["xyz"])
-        if "distortion" in c:
-            kw["distortion"] = tuple(float(v) for v in c["distortion"])
-        for k in ("width", "height"):
-            if k in c and int(c[k]) != getattr(cam, k):
-                raise ConfigError(f"calibration {self.path}: camera/{k} is {c[k]} but the camera's image is "
-                                  f"{cam.width}x{cam.height} (a calibration holds for one image size)")
-        return replace(cam, **kw)
-
-
-def load_calibration(path: str | Path) -> Calibration:
-    """Read and check a calibration YAML (``camera:`` mapping; ``fit:`` optional)."""
-    from ..settings import read_yaml
-
-    d = read_yaml(path, "calibration file")
-    cam = d.get("camera")
-    if not isinstance(cam, dict) or not cam:
-        raise ConfigError(f"calibration file {path}: needs a 'camera:' mapping (fx, fy, cx, cy, distortion, xyz, "
-                          f"pitch_down_deg, roll_deg)")
-    known = {"fx", "fy", "cx", "cy", "distortion", "xyz", "pitch_down_deg", "roll_deg", "width", "height"}
-    bad = sorted(set(cam) - known)
-    if bad:
-        raise ConfigError(f"calibration file {path}: unknown camera key(s) {bad}; known: {sorted(known)}")
-
-    def num(k, v, positive=False):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or (positive and v <= 0):
-            raise ConfigError(f"calibration file {path}: camera/{k} must be a finite "
-                              f"{'positive ' if positive else ''}number, got {v!r}")
-        return float(v)
-    for k in ("fx", "fy"):
-        if k in cam:
-            num(k, cam[k], positive=True)
-    for k in ("cx", "cy", "pitch_down_deg", "roll_deg"):
-        if k in cam:
-            num(k, cam[k])
-    if "xyz" in cam:
-        v = cam["xyz"]
-        if not isinstance(v, (list, tuple)) or len(v) != 3:
-            raise ConfigError(f"calibration file {path}: camera/xyz must be [x, y, z] in metres, got {v!r}")
-        [num("xyz", a) for a in v]
-    if "distortion" in cam:
-        v = cam["distortion"]
-        if not isinstance(v, (list, tuple)) or not 1 <= len(v) <= 5:
-            raise ConfigError(f"calibration file {path}: camera/distortion must be [k1, k2, p1, p2, k3], got {v!r}")
-        [num("distortion", a) for a in v]
-    for k in ("width", "height"):
-        if k in cam and (isinstance(cam[k], bool) or not isinstance(cam[k], int) or cam[k] <= 0):
-            raise ConfigError(f"calibration file {path}: camera/{k} must be a positive integer, got {cam[k]!r}")
-    fit = d.get("fit") or {}
-    if not isinstance(fit, dict):
-        raise ConfigError(f"calibration file {path}: 'fit:' must be a mapping")
-    return Calibration(str(path), dict(cam), dict(fit))
-
-
-def calibrated_robot(robot: RobotSpec, path: str | Path) -> RobotSpec:
-    """``robot`` with the camera of a calibration file."""
-    return replace(robot, camera=load_calibration(path).apply(robot.camera))
-
-
-def perturbed_robot(robot: RobotSpec, fx_pct: float = 3.0, fy_pct: float | None = None, cx_px: float = 4.0,
-                    cy_px: float = -3.0, pitch_deg: float = 1.0, roll_deg: float = 0.0, height_m: float = 0.0,
-                    forward_m: float = 0.0, distortion: Sequence[float] | None = None) -> RobotSpec:
-    """``robot`` with its camera changed: focal lengths by a percentage (``fy_pct`` defaults to ``fx_pct``),
-    principal point by pixels, pitch down and roll by degrees, mount height and forward offset by metres.
-    The issue's test case is the default (fx, fy +3 %, cx +4 px, cy -3 px, pitch +1 degree)."""
-    c = robot.camera
-    fy_pct = fx_pct if fy_pct is None else fy_pct
-    cam = replace(c, fx=c.fx * (1 + fx_pct / 100), fy=c.fy * (1 + fy_pct / 100), cx=c.cx + cx_px, cy=c.cy + cy_px,
-                  pitch_down_deg=c.pitch_down_deg + pitch_deg, roll_deg=c.roll_deg + roll_deg,
-                  xyz=(c.xyz[0] + forward_m, c.xyz[1], c.xyz[2] + height_m),
-                  distortion=tuple(distortion) if distortion is not None else c.distortion)
-    return replace(robot, camera=cam)
-
-
-def robot_dict(robot: RobotSpec) -> dict:
-    """A robot as the JSON document :func:`robotatfactory.robot.load_robot` reads."""
-    from dataclasses import asdict
-
-    d = asdict(robot)
-    d["camera"]["xyz"] = list(robot.camera.xyz)
-    d["camera"]["distortion"] = list(robot.camera.distortion)
-    d["lidar"]["xyz"] = list(robot.lidar.xyz)
-    return d
-
-
-def write_robot_json(robot: RobotSpec, path: str | Path) -> Path:
-    """Write ``robot`` as a JSON file that ``raf sim --robot FILE`` (``load_robot``) accepts."""
-    import json
-
-    p = Path(path)
-    if p.suffix != ".json":
-        raise ConfigError(f"robot file {p}: must end in .json (load_robot recognises files by that suffix)")
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(robot_dict(robot), indent=1))
-    return p
-
-
-def compare(fitted: CameraSpec, truth: CameraSpec) -> dict:
-    """Errors of a fitted camera against the true one, flat keys with units."""
-    return {
-        "fx_error_pct": 100 * (fitted.fx - truth.fx) / truth.fx,
-        "fy_error_pct": 100 * (fitted.fy - truth.fy) / truth.fy,
-        "cx_error_px": fitted.cx - truth.cx,
-        "cy_error_px": fitted.cy - truth.cy,
-        "pitch_error_deg": fitted.pitch_down_deg - truth.pitch_down_deg,
-        "roll_error_deg": fitted.roll_deg - truth.roll_deg,
-        "height_error_mm": 1000 * (fitted.xyz[2] - truth.xyz[2]),
-        "forward_error_mm": 1000 * (fitted.xyz[0] - truth.xyz[0]),
-    }
-
-
-# ------------------------------------------------------------------------------------ synthetic data
-
-
-def synthetic_frames(fld: Field, camera: CameraSpec, poses: Sequence[tuple[float, float, float]],
-                     noise_px: float = 0.0, seed: int = 0, odom_noise: float = 0.0,
-                     outliers: int = 0) -> list[FrameData]:
-    """Exact projections (with the camera's distortion) of every marker fully inside the image, plus Gaussian
-    noise; odometry = the true poses (with ``odom_noise`` relative noise on each step); ``outliers`` random
-    detections get a corner moved by 5-20 px. For tests: no rendering."""
-    from .synth import camera_world_pose, visible_markers
-
-    rng = np.random.default_rng(seed)
-    pinhole = replace(camera, distortion=(0.0,) * 5)
-    v = camera_vector(camera)
-    out = []
-    odo = None
-    prev = None
-    for k, p in enumerate(poses):
-        T = camera_world_pose(camera, p)
-        vis = visible_markers(fld, pinhole, T, margin_px=3.0, min_side_px=6.0)
-        dets = []
-        for vm in vis:
-            m = fld.marker(vm.id)
-            uv, _ = project_corners(v, np.array([p], dtype=float), m.corners, np.zeros(4, dtype=int))
-            if np.any(uv < 0) or np.any(uv[:, 0] > camera.width - 1) or np.any(uv[:, 1] > camera.height - 1):
-                continue
-            uv = uv + rng.normal(0, noise_px, uv.shape) if noise_px > 0 else uv
-            dets.append(Detection(vm.id, uv))
-        if prev is None:
-            odo = tuple(p)
-        else:
-            d = np.array(between2(prev, p))
-            if odom_noise > 0:
-                d = d * (1 + rng.normal(0, odom_noise, 3))
-            odo = compose2(odo, tuple(d))
-        prev = tuple(p)
-        out.append(FrameData(float(k), dets, odo))
-    for _ in range(outliers):
-        cand = [f for f in out if f.detections]
-        f = cand[int(rng.integers(len(cand)))]
-        i = int(rng.integers(len(f.detections)))
-        d = f.detections[i]
-        c = d.corners.copy()
-        c[int(rng.integers(4))] += rng.uniform(5, 20, 2) * rng.choice([-1, 1], 2)
-        f.detections[i] = Detection(d.id, c)
-    return out
 
 
 # ------------------------------------------------------------------------------------ recorded data
