@@ -158,41 +158,6 @@ def test_far_off_the_path_the_follower_stops_and_says_so(robot):
     assert o.off_path > lim.max_off_path and not o.done and f.phase == "done"
 
 
-def _drive_straight(f, th0, n=12):
-    """w commanded on a straight path from (0, 0) heading th0 (the pose held: a pure feedback read-out)."""
-    f.start([(0.0, 0.0), (1.0, 0.0)])
-    f.phase, f.v = "drive", 0.2
-    return [f.step((0.0, 0.0, th0)).w for _ in range(n)]
-
-
-def test_a_heading_deadband_ignores_small_heading_errors_while_driving(robot):
-    dt = robot.control_period
-    plain = DriveLimits.from_robot(robot)
-    band = DriveLimits.from_robot(robot, heading_deadband=0.02)
-    assert abs(_drive_straight(PathFollower(plain, dt), 0.015)[-1]) > 0.03  # corrected without it
-    assert _drive_straight(PathFollower(band, dt), 0.015)[-1] == pytest.approx(0.0, abs=1e-9)
-    # beyond the band the correction is the error less the band, in the same direction
-    w_plain, w_band = _drive_straight(PathFollower(plain, dt), 0.05)[-1], _drive_straight(PathFollower(band, dt), 0.05)[-1]
-    assert w_plain < w_band < 0.0
-
-
-def test_a_turn_against_the_last_fast_turn_is_held_slow_for_a_while(robot):
-    dt = robot.control_period
-    lim = DriveLimits.from_robot(robot, w_reverse_max=0.3, reverse_hold=0.4)
-    f = PathFollower(lim, dt)
-    f.start([(0.0, 0.0)], final_heading=0.0)  # a turn on the spot to heading 0
-    f.w = 1.5  # turning left fast, already past the goal: the feedback wants to turn right
-    ws = [f.step((0.0, 0.0, 0.5)).w for _ in range(40)]
-    hold = round(lim.reverse_hold / dt)
-    slowed = next(i for i, w in enumerate(ws) if abs(w) <= 0.3)
-    assert min(ws[:slowed + hold]) >= -0.3 - 1e-9  # the reversal stays slow while the hold lasts
-    assert min(ws[slowed + hold:]) < -0.5  # then it turns back at the normal rate
-    f2 = PathFollower(DriveLimits.from_robot(robot), dt)  # without the limiter it reverses at full rate
-    f2.start([(0.0, 0.0)], final_heading=0.0)
-    f2.w = 1.5
-    assert min(f2.step((0.0, 0.0, 0.5)).w for _ in range(slowed + hold)) < -0.5
-
-
 def test_a_long_turn_on_the_spot_runs_at_the_long_spin_rate(robot):
     """DriveLimits.long_spin: a turn on the spot of more than long_spin rad runs at most w_long_spin throughout
     (carrying: the part slides less); a shorter one at the normal rate; both end on the heading."""

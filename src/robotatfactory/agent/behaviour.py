@@ -99,9 +99,6 @@ class RoundAgent:
     place_standoff: float = 0.05  # m: a place's leg ends this much farther out (the docker settles on the normal)
     place_min_radius: float = 0.08
     pick_straight: float = 0.015
-    # m: a pick's leg ends this much farther out where it can arrive along the normal there (0: at the approach
-    # pose, 1-2.5 cm from the dock pose: an arc's end left up to 0.08 rad of heading at the contact)
-    pick_standoff: float = 0.0
     pick_min_radius: float = 0.045
     min_radius: float = 0.045
     uncertainty_limit: float = 0.03  # m (position std) above which it stops to re-localize (with a std input)
@@ -124,9 +121,6 @@ class RoundAgent:
     # (round 2, 3 of 20 runs); 0.03 keeps the robot 19 cm from it, and on the bare stand-in rounds 1-3 were as
     # fast or faster (52.6 / 70.2 / 83.4 s on ground truth, 10 of 10 each)
     join_inflate: float = 0.03
-    # the same for the empty robot's legs to a pick (0.015 measured: round 2 1.2 s faster, but in round 3 2 collision
-    # checks hit at picks, the robot arriving a few degrees off the slot's heading)
-    join_inflate_empty: float = 0.0
     # carrying: forward arcs of at least carry_radius m and straight reversing only, never a turn on the spot
     # (SimTwo's magnet loses the part on the spot; the stand-in's default since 22 Nov 2026)
     carry_arcs: bool = False
@@ -138,14 +132,9 @@ class RoundAgent:
     # 1-3 x 4 seeds, w 1.5 rad/s at the maximum in every run, 1.75-2 rad/s or the normal 3 lost parts in most
     # (docs/agent.md, "The carry envelope")
     carry_w_max: float = 1.5  # rad/s
-    carry_w_spin: float = 0.0  # rad/s turning on the spot with a part (0: carry_w_max)
     carry_alpha_max: float = 6.0  # rad/s^2 (11.85: one part lost in 12 runs)
     carry_v_max: float = 0.4  # m/s
     carry_v_back: float = 0.25  # m/s backing out of a slot with the part
-    # a late, noisy pose while carrying: turns against the last fast turn held to this (rad/s) for 0.4 s, and
-    # driving heading errors within carry_deadband (rad) ignored (DriveLimits.w_reverse_max, heading_deadband)
-    carry_w_reverse: float = 0.0
-    carry_deadband: float = 0.0  # 0.02 measured: no gain (late, noisy, predicted pose, rounds 2-3 x 10: 15/20 vs 17/20 without)
     # a turn on the spot with a part of more than carry_long_spin rad runs at carry_w_long_spin rad/s (0: off;
     # DriveLimits.long_spin): after ~146 deg at 1.5 rad/s (machine B's outputs to outgoing 1-2) the part had slid
     # ~10 mm and the arc back the other way pivoted it off (round 2 on a late, noisy pose: 4-5 of 10 runs lost a
@@ -153,9 +142,6 @@ class RoundAgent:
     # 1-2 s faster and no part was lost in 60 runs, but one round-3 run jammed a place (59/60; with it 90/90)
     carry_long_spin: float = 2.4
     carry_w_long_spin: float = 1.1
-    carry_k_drive: float = 0.0  # 1/s steering gain while carrying (0: the normal k_drive)
-    place_alpha_max: float = 0.0  # rad/s^2 steering the place approach (0: carry_alpha_max)
-    dock_slack: float = 0.0  # s: DockSettings.approach_slack (a creeping, jammed approach is blocked; 0 = off)
     # m kept clear around the carrying turning circle (0.02 for the part's slide: outgoing 4 then has no approach
     # pose, round 2 0 of 6 seeds at the maximum)
     carry_margin: float = 0.01
@@ -171,19 +157,16 @@ class RoundAgent:
         self.delays = DelayEstimator(lanes_of(f))
         self.follower = PathFollower(self.limits, self.dt)
         cl = {k: v for k, v in (("w_max", self.carry_w_max), ("alpha_max", self.carry_alpha_max),
-                                ("v_max", self.carry_v_max), ("w_spin_max", self.carry_w_spin),
-                                ("w_reverse_max", self.carry_w_reverse), ("heading_deadband", self.carry_deadband),
-                                ("k_drive", self.carry_k_drive), ("long_spin", self.carry_long_spin),
+                                ("v_max", self.carry_v_max), ("long_spin", self.carry_long_spin),
                                 ("w_long_spin", self.carry_w_long_spin)) if v > 0}
         self.carry_limits = replace(self.limits, **cl)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
-                             DockSettings(v_dock=self.v_dock, v_place=self.v_place, approach_slack=self.dock_slack,
+                             DockSettings(v_dock=self.v_dock, v_place=self.v_place,
                                           v_back_carrying=self.carry_v_back or DockSettings.v_back))
         # the place approach steers with a part on the magnet: no faster turning than carrying allows
         dl = self.docker
         dl.place_limits = replace(dl.place_limits, w_max=min(dl.place_limits.w_max, self.carry_limits.w_max),
-                                  alpha_max=self.place_alpha_max or min(dl.place_limits.alpha_max,
-                                                                        self.carry_limits.alpha_max))
+                                  alpha_max=min(dl.place_limits.alpha_max, self.carry_limits.alpha_max))
         self.fp_empty = robot_footprint(r)
         self.fp_carry = carrying_footprint(r, f.part)
         self.d_dock = dock_distance(r, f.part)
@@ -444,12 +427,12 @@ class RoundAgent:
         pl = PathPlanner(self._obstacles(), margin=0.01 if not carrying else self.carry_margin)
         goal = pl.approach_pose(slot, self.d_dock, fp)
         goals = [goal]
-        standoff = self.place_standoff if carrying else self.pick_standoff
-        if standoff > 0:  # room to settle on the normal first
-            g2 = (goal[0] - standoff * math.cos(goal[2]), goal[1] - standoff * math.sin(goal[2]), goal[2])
+        if carrying and self.place_standoff > 0:  # a place: room to settle on the normal first
+            d = self.place_standoff
+            g2 = (goal[0] - d * math.cos(goal[2]), goal[1] - d * math.sin(goal[2]), goal[2])
             if pl.is_free(g2[:2], fp):
                 goals = [g2, goal]
-        join = self.join_inflate if carrying else self.join_inflate_empty
+        join = self.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
         if self.smooth:  # the last leg along the slot's normal: docking follows on at speed
             for g in goals:  # the leg ending farther out if it can arrive along the normal there
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)

@@ -48,10 +48,6 @@ class DockSettings:
     v_back_carrying_final: float = 0.03
     lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
     magnet_early: bool = True
-    # s: an approach still going after this plus 3x its straight-line time at its speed is blocked (backs out,
-    # the agent retries): a place jammed between ribs on a late, noisy pose crept ~4 mm/s for 11 s, slower
-    # than the stuck check sees, pushing parts (0: no limit but the agent's 20 s)
-    approach_slack: float = 0.0
     # s the contact switch may take after backing out to show the outcome (part along / part left): it lags
     # the predicted pose by the loop's latency (80 ms on SimTwo and raf sim)
     confirm: float = 0.2
@@ -94,7 +90,6 @@ class Docker:
         self._failing: str | None = None
         self.stuck = StuckDetector(window=1.0, min_command=0.03, min_motion=0.008, min_rotation=0.03)
         self._steps = 0
-        self._approach_limit = math.inf
         self.held_offset = 0.0  # m: the held part's centre to the right of the magnet's centre line, estimated
         self._shift = 0.0
         self._lateral: list[float] = []
@@ -141,9 +136,6 @@ class Docker:
         aligned = abs(wrap(pose[2] - target[2])) < 0.1
         self.follower.phase = "drive" if aligned or carrying else "turn"  # turning: it brakes, then turns in place
         self.phase = "approach"
-        v_nom = max(self.follower.limits.v_max, 1e-3)
-        self._approach_limit = (self.settings.approach_slack + 3.0 * self.follower.path.length / v_nom
-                                if self.settings.approach_slack > 0 else math.inf)
 
     def _shifted(self, p):
         """``p`` (x, y[, theta]) moved sideways by the held part's offset: the robot's left of the approach
@@ -171,9 +163,6 @@ class Docker:
         if self.phase == "approach":
             if self.stuck.update(self._steps * self.dt, pose, self.follower.v, 0.0):
                 self.abort(pose, "blocked")  # driving, not moving: something is in the way (a rib, a part)
-                return self._out(0.0, 0.0)
-            if self._steps * self.dt > self._approach_limit:
-                self.abort(pose, "blocked")  # creeping: jammed between ribs
                 return self._out(0.0, 0.0)
             self._steps += 1
             out = self.follower.step(pose)

@@ -56,13 +56,6 @@ class DriveLimits:
     spin_slack: float = 0.15
     max_off_path: float = 0.1  # m: farther from the path the follower stops and says so (off_path)
     ff_lead: float = 2.0  # control cycles the curvature feed-forward reads ahead (the wheels' response delay)
-    w_spin_max: float = 0.0  # rad/s: turns on the spot at most this (0: w_max); driving on arcs keeps w_max
-    # rad/s: a turn against the direction of the last turn faster than this is held to this until the robot has
-    # turned no faster for ``reverse_hold`` s (0: off). Carrying on a late, noisy pose the heading corrections
-    # reverse the turn, and a reversal after a part has slid along the magnet's face pivots it off (docs/agent.md)
-    w_reverse_max: float = 0.0
-    reverse_hold: float = 0.4  # s
-    heading_deadband: float = 0.0  # rad: driving, heading errors within this are no error (noise); beyond, less this
     # a turn on the spot of more than long_spin rad (0: off) runs at most w_long_spin rad/s throughout: carrying on
     # SimTwo's magnet the part slides along the face the farther and the faster the robot turns, and a turn back
     # the other way after a long fast one pivots it off (docs/agent.md, "The carry envelope")
@@ -117,8 +110,6 @@ class PathFollower:
         self._i = 0
         self._dist = 0.0
         self._prof: list[np.ndarray] = []
-        self._turn_dir = 0.0  # sign of the last turn faster than w_reverse_max (0: none recently)
-        self._slow_time = 0.0  # s turned no faster than w_reverse_max since then
         self._spin_cap = math.inf  # rad/s for the turn on the spot under way (long_spin)
         self._spinning = False
 
@@ -298,14 +289,12 @@ class PathFollower:
         if passed_end:
             v_t, w_t = self.v, self.w  # hand over at speed: the caller's next manoeuvre continues
         if self.phase in ("turn", "final_turn") and self.v == 0.0:
-            w_t = self._limit_reversal(w_t)  # on the spot only: a path's S-bends reverse the turn on purpose
             if not self._spinning:  # a turn on the spot begins: how far it goes sets its rate
                 self._spinning = True
                 long = L.long_spin > 0 and L.w_long_spin > 0 and abs(herr) > L.long_spin
                 self._spin_cap = L.w_long_spin if long else math.inf
             w_t = max(-self._spin_cap, min(self._spin_cap, w_t))
         else:
-            self._turn_dir = 0.0
             self._spinning = False
         # acceleration limits
         dv, dw = L.a_max * self.dt, L.alpha_max * self.dt
@@ -333,29 +322,10 @@ class PathFollower:
         ss = np.linspace(c - window / 2, c + window / 2, 7)
         return float(np.mean(np.interp(ss, p.s, p.kappa)))
 
-    def _limit_reversal(self, w_t: float) -> float:
-        """``w_t`` held to ``w_reverse_max`` against the last fast turn's direction (see DriveLimits)."""
-        L = self.limits
-        cap = L.w_reverse_max
-        if cap <= 0.0:
-            return w_t
-        if abs(self.w) > cap:
-            self._turn_dir, self._slow_time = math.copysign(1.0, self.w), 0.0
-        elif self._turn_dir != 0.0:
-            self._slow_time += self.dt
-            if self._slow_time >= L.reverse_hold:
-                self._turn_dir = 0.0
-        if self._turn_dir != 0.0 and w_t * self._turn_dir < 0.0 and abs(w_t) > cap:
-            return math.copysign(cap, w_t)
-        return w_t
-
     def _turn_rate(self, err: float, drive: bool = False) -> float:
         L = self.limits
-        if drive and L.heading_deadband > 0.0:
-            err = math.copysign(max(0.0, abs(err) - L.heading_deadband), err)
         if drive:  # a correction on top of the feed-forward
             return math.copysign(min(L.w_max, L.k_drive * abs(err)), err)
         # braking-distance limited so an in-place turn stops on the heading
-        w_max = min(L.w_max, L.w_spin_max) if L.w_spin_max > 0 else L.w_max
-        cap = min(w_max, math.sqrt(2 * L.alpha_max * abs(err)), L.k_heading * abs(err) + 0.05)
+        cap = min(L.w_max, math.sqrt(2 * L.alpha_max * abs(err)), L.k_heading * abs(err) + 0.05)
         return math.copysign(cap, err) if abs(err) > 1e-4 else 0.0

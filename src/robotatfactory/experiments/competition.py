@@ -69,11 +69,10 @@ for _m in (*MODES, SIMTWO_MODE):
         if _m != "bare_truth":
             TARGETS[f"{_m}_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
 AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
-                  "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock", "v_place",
-                  "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back", "carry_margin", "carry_w_spin",
-                  "carry_w_reverse", "carry_deadband", "carry_k_drive", "dock_slack",
-                  "place_alpha_max", "choose_by_time", "reserve_outgoing", "join_inflate", "join_inflate_empty",
-                  "carry_long_spin", "carry_w_long_spin", "pick_standoff", "escape_tries", "escape_time")
+                  "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock",
+                  "v_place", "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back",
+                  "carry_margin", "choose_by_time", "reserve_outgoing", "join_inflate", "carry_long_spin",
+                  "carry_w_long_spin", "escape_tries", "escape_time")
 DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "k_drive", "a_lat", "v_wheel", "slow_distance", "lookahead", "heading_tolerance", "w_max",
                   "alpha_max", "v_final")
 
