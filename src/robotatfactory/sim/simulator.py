@@ -366,19 +366,14 @@ class Simulator:
         self._start_factory_if_due()
         n = self.steps_per_cycle
         s0 = self._step
-        lidar_slot, events = self._plan_cycle(s0, n)
-        if self.reference_drive:
-            self._run_reference(s0, n, lidar_slot, events)
-        else:
-            self._run_fast(s0, n, lidar_slot, events)
+        self._steps((self,), (self._plan_cycle(s0, n),), s0, n)
         self._step = s0 + n
         return self._end_of_cycle()
 
     def step_all(self, commands) -> list[SensorFrame]:
         """Several robots: apply ``commands[k]`` to robot k + 1 (None: keep its present one), advance one
-        control period for all of them together, return their frames (robot 1 first). The robots' motors
-        run the plain per-step arithmetic of :meth:`_run_reference` (the one-robot fast path is
-        :meth:`step_cycle`'s); the factory steps once with every robot's position and held part."""
+        control period for all of them together, return their frames (robot 1 first). The factory steps once
+        with every robot's position and held part."""
         units = self.units
         if len(commands) != len(units):
             raise ValueError(f"{len(commands)} commands for {len(units)} robots")
@@ -388,36 +383,20 @@ class Simulator:
         self._start_factory_if_due()
         n = self.steps_per_cycle
         s0 = self._step
-        plans = [u._plan_cycle(s0, n) for u in units]
-        m, d = self.model, self.data
-        step = mujoco.mj_step
-        mags = [u._mag_engaged for u in units if u._mag_engaged is not None]
-        for j in range(n):
-            for u in units:
-                u._drive_step(s0 + j)
-            for mg in mags:
-                mg.pre_step()
-            step(m, d)
-            for mg in mags:  # ODE cleared every accumulator in the step: all forces first, then the new ones
-                mg.clear()
-            for mg in mags:
-                mg.post_step(s0 + j + 1, clear=False)
-            for u, (lidar_slot, events) in zip(units, plans):
-                if lidar_slot[j] >= 0:
-                    u._log_lidar_pose(lidar_slot[j])
-                if j in events:
-                    u._on_events(s0 + j + 1, events[j])
+        self._steps(units, [u._plan_cycle(s0, n) for u in units], s0, n)
         for u in units:
             u._step = s0 + n
             u._measure()
         poses = [u.pose for u in units]
         if self.factory is not None:
             held = {u.held for u in units if u.held is not None}
-            self._apply_teleports(self.factory.step(self.time, self.parts.all_xy(d), [p[:2] for p in poses], held))
+            self._apply_teleports(self.factory.step(self.time, self.parts.all_xy(self.data), [p[:2] for p in poses],
+                                                    held))
         return [u._make_frame(*p) for u, p in zip(units, poses)]
 
     def _drive_step(self, s: int) -> None:
-        """The motor voltages and torques of physics step ``s`` (the arithmetic of :meth:`_run_reference`)."""
+        """The motor voltages and torques of physics step ``s``, written plainly with :class:`DCMotor`,
+        :class:`SpeedPI` and :class:`SimTwoPID` (``reference_drive``; the fast drives must match it)."""
         d = self.data
         qvel, ctrl = d.qvel, d.ctrl
         il, ir = self._wv
@@ -484,58 +463,58 @@ class Simulator:
             elif kind == "magnet_idle":
                 self._magnet.idle_measure()
 
-    def _log_lidar_pose(self, slot: int) -> None:
-        q = self.data.qpos
-        a = self._qa
-        self._lidar.log_pose(slot, q[a], q[a + 1], sc.quat_yaw(q[a + 3:a + 7]))
-
-    def _run_reference(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
-        """The physics steps of one cycle, written plainly with :class:`DCMotor` and :class:`SpeedPI`."""
+    def _steps(self, units, plans, s0: int, n: int) -> None:
+        """The physics steps of one control cycle from step ``s0`` (``n`` steps), the one stepping loop: per
+        step every robot's drive (:meth:`_drive`), the magnets' forces, MuJoCo's step, then each robot's LIDAR
+        pose slots and camera and magnet events (``plans``: :meth:`_plan_cycle` per robot)."""
         m, d = self.model, self.data
+        qpos = d.qpos
+        step = mujoco.mj_step
+        drives = [u._drive(s0) for u in units]
+        steppers = [dr for dr, _ in drives]
+        mags = [u._mag_engaged for u in units if u._mag_engaged is not None]
+        logs = [(u._lidar.poses if u._lidar is not None else None, u._qa, slots, events, u)
+                for u, (slots, events) in zip(units, plans)]
+        for j in range(n):
+            for drive in steppers:
+                drive(j)
+            if mags:
+                for mg in mags:
+                    mg.pre_step()
+                step(m, d)
+                for mg in mags:  # ODE cleared every accumulator in the step: all forces first, then the new ones
+                    mg.clear()
+                for mg in mags:
+                    mg.post_step(s0 + j + 1, clear=False)
+            else:
+                step(m, d)
+            for poses, qa, slots, events, u in logs:
+                slot = slots[j]
+                if slot >= 0:  # the LIDAR's pose after this step: the free joint's x, y, z, qw, qx, qy, qz
+                    poses[slot] = qpos[qa:qa + 7].tolist()
+                if events and j in events:
+                    u._on_events(s0 + j + 1, events[j])
+        for _, finish in drives:
+            finish()
+
+    def _drive(self, s0: int):
+        """This robot's motors and speed controllers over one cycle from step ``s0``: ``(drive, finish)``;
+        ``drive(j)`` sets the wheel torques of step s0 + j from the wheel speeds now, ``finish()`` writes back
+        the state the drive kept in locals. With ``reference_drive`` the plain arithmetic (:meth:`_drive_step`);
+        else the same inlined on local floats (the hot loop: Python's call overhead would cost more than
+        MuJoCo's step). Tests check both give identical runs."""
+        if self.reference_drive:
+            return (lambda j: self._drive_step(s0 + j)), _nothing
+        if self.pid_params is not None:
+            return self._drive_fast_simtwo(s0)
+        return self._drive_fast(s0)
+
+    def _drive_fast(self, s0: int):
+        """:meth:`_drive_step` with this project's speed PI (:class:`SpeedPI`) and the motors inlined."""
+        d = self.data
         qvel, ctrl = d.qvel, d.ctrl
         il, ir = self._wv
-        (ml, mr), (pl, pr) = self.motors, self.controllers
-        vo = self.voltage_override
-        simtwo = self.pid_params is not None
-        mag = self._mag_engaged
-        for j in range(n):
-            wl, wr = qvel[il], qvel[ir]
-            if vo is not None:
-                ul, ur = vo
-                if not simtwo:
-                    pl.output, pr.output = vo
-            elif simtwo:
-                ul, ur = pl.tick(wl), pr.tick(wr)
-            else:
-                if (s0 + j) % self._ctrl_every == 0:
-                    pl.update(wl)
-                    pr.update(wr)
-                ul, ur = pl.output, pr.output
-            ctrl[self._act[0]] = ml.step(ul, wl)
-            ctrl[self._act[1]] = mr.step(ur, wr)
-            if mag is not None:
-                mag.pre_step()
-            mujoco.mj_step(m, d)
-            if mag is not None:
-                mag.post_step(s0 + j + 1)
-            if lidar_slot[j] >= 0:
-                self._log_lidar_pose(lidar_slot[j])
-            if j in events:
-                self._on_events(s0 + j + 1, events[j])
-
-    def _run_fast(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
-        """The same arithmetic as :meth:`_run_reference` inlined on local floats (the hot loop: Python's
-        call overhead would otherwise cost more than MuJoCo's step). Tests check both give identical runs."""
-        if self.pid_params is not None:
-            return self._run_fast_simtwo(s0, n, lidar_slot, events)
-        m, d = self.model, self.data
-        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
-        il, ir = self._wv
         al, ar = self._act
-        qa = self._qa
-        step = mujoco.mj_step
-        poses = self._lidar.poses if self._lidar is not None else None
-        mag = self._mag_engaged
         ml, mr = self.motors
         pl, pr = self.controllers
         mp, cp = self.motor_params, self.controller_params
@@ -557,7 +536,9 @@ class Simulator:
         intl, intr = pl.integral, pr.integral
         refl, refr = pl.ref, pr.ref
         tgl, tgr = pl.target, pr.target
-        for j in range(n):
+
+        def drive(j: int) -> None:
+            nonlocal Il, Ir, vl, vr, intl, intr, refl, refr
             wl = qvel[il]
             wr = qvel[ir]
             if every == 1 or (every and (s0 + j) % every == 0):
@@ -615,35 +596,24 @@ class Simulator:
             Ir += di
             Ir = imax if Ir > imax else (-imax if Ir < -imax else Ir)
             ctrl[ar] = kt * Ir
-            if mag is not None:
-                mag.pre_step()
-            step(m, d)
-            if mag is not None:
-                mag.post_step(s0 + j + 1)
-            slot = lidar_slot[j]
-            if slot >= 0:
-                poses[slot] = qpos[qa:qa + 7].tolist()
-            if events and j in events:
-                self._on_events(s0 + j + 1, events[j])
-        # write the state back
-        ml.current, mr.current = Il, Ir
-        ml.voltage = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
-        mr.voltage = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
-        pl.output, pr.output = vl, vr
-        pl.integral, pr.integral = intl, intr
-        pl.ref, pr.ref = refl, refr
 
-    def _run_fast_simtwo(self, s0: int, n: int, lidar_slot: list[int], events: dict) -> None:
-        """:meth:`_run_reference` with SimTwo's controller: the controller's clock and the motors inlined,
+        def finish() -> None:  # the state back into the objects
+            ml.current, mr.current = Il, Ir
+            ml.voltage = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
+            mr.voltage = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
+            pl.output, pr.output = vl, vr
+            pl.integral, pr.integral = intl, intr
+            pl.ref, pr.ref = refl, refr
+
+        return drive, finish
+
+    def _drive_fast_simtwo(self, s0: int):
+        """:meth:`_drive_step` with SimTwo's controller: the controller's clock and the motors inlined,
         ``CalcPID`` itself called (every 10 ms) on the :class:`SimTwoPID` objects."""
-        m, d = self.model, self.data
-        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+        d = self.data
+        qvel, ctrl = d.qvel, d.ctrl
         il, ir = self._wv
         al, ar = self._act
-        qa = self._qa
-        step = mujoco.mj_step
-        poses = self._lidar.poses if self._lidar is not None else None
-        mag = self._mag_engaged
         ml, mr = self.motors
         pl, pr = self.controllers
         mp, pp = self.motor_params, self.pid_params
@@ -659,7 +629,9 @@ class Simulator:
         tl, tr = pl.ticks, pr.ticks
         refl, refr = pl.ref_w, pr.ref_w
         Il, Ir = ml.current, mr.current
-        for j in range(n):
+
+        def drive(j: int) -> None:
+            nonlocal Il, Ir, vl, vr, tl, tr
             wl = qvel[il]
             wr = qvel[ir]
             if run:
@@ -687,22 +659,16 @@ class Simulator:
             Ir += di
             Ir = imax if Ir > imax else (-imax if Ir < -imax else Ir)
             ctrl[ar] = kt * Ir
-            if mag is not None:
-                mag.pre_step()
-            step(m, d)
-            if mag is not None:
-                mag.post_step(s0 + j + 1)
-            slot = lidar_slot[j]
-            if slot >= 0:
-                poses[slot] = qpos[qa:qa + 7].tolist()
-            if events and j in events:
-                self._on_events(s0 + j + 1, events[j])
-        ml.current, mr.current = Il, Ir
-        ml.voltage = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
-        mr.voltage = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
-        if vo is None:
-            pl.ref_volts, pr.ref_volts = vl, vr
-            pl.ticks, pr.ticks = tl, tr
+
+        def finish() -> None:  # the state back into the objects
+            ml.current, mr.current = Il, Ir
+            ml.voltage = vmax if vl > vmax else (-vmax if vl < -vmax else vl)
+            mr.voltage = vmax if vr > vmax else (-vmax if vr < -vmax else vr)
+            if vo is None:
+                pl.ref_volts, pr.ref_volts = vl, vr
+                pl.ticks, pr.ticks = tl, tr
+
+        return drive, finish
 
     def _end_of_cycle(self) -> SensorFrame:
         d = self.data
@@ -947,3 +913,7 @@ class RobotUnit(Simulator):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def _nothing() -> None:
+    pass
