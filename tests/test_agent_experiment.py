@@ -7,6 +7,7 @@ import pytest
 
 from robotatfactory.errors import ConfigError
 from robotatfactory.experiments import competition
+from robotatfactory.experiments import _competition_log as complog
 
 
 def args(**kw):
@@ -84,19 +85,19 @@ Round 1, incoming BBBB: run started at t = 3.00 s, report at t = 130.00 s, 473.0
 
 
 def test_the_full_stack_reads_raf_sims_final_report_or_its_last_status_line(tmp_path):
-    assert competition.parse_sim_report(REPORT) == (3, 4, 40.24, True)
+    assert complog.parse_sim_report(REPORT) == (3, 4, 40.24, True)
     # stopped before its report: the last status line still gives the score (one decimal of time)
     head = REPORT.split("raf sim:")[0]
-    assert competition.parse_sim_report(head) == (3, 4, 40.2, True)
-    p, mx, t, found = competition.parse_sim_report("t= 1.0s | score 0/4 (outgoing 0)\n")
+    assert complog.parse_sim_report(head) == (3, 4, 40.2, True)
+    p, mx, t, found = complog.parse_sim_report("t= 1.0s | score 0/4 (outgoing 0)\n")
     assert (p, mx, found) == (0, 4, True) and t != t
-    p, mx, t, found = competition.parse_sim_report("nothing here\n")
+    p, mx, t, found = complog.parse_sim_report("nothing here\n")
     assert (p, mx, found) == (0, -1, False)
     log = tmp_path / "sim.log"
     log.write_text(head)
-    assert not competition.wait_for_report(log, limit=0.3, poll=0.1)
+    assert not complog.wait_for_report(log, limit=0.3, poll=0.1)
     log.write_text(REPORT)
-    assert competition.wait_for_report(log, limit=0.3, poll=0.1)
+    assert complog.wait_for_report(log, limit=0.3, poll=0.1)
 
 
 def test_analyse_measures_kept_runs_again_and_names_a_missing_one(tmp_path):

@@ -125,7 +125,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     from ..ros.master import private_graph
     from ..ros.mw import name as middleware
     from ..ros.processes import Procs
-    from .competition import wait_for_report
+    from ._competition_log import wait_for_report
 
     mw = middleware()
     simtwo = simulator == "simtwo"
@@ -217,7 +217,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     from ..robot import load_robot
     from ..sim.trace import read_trace
     from ._competition_observe import RunObserver
-    from .competition import notes_of, parse_sim_report
+    from ._competition_log import notes_of, parse_sim_report
 
     text = _read(log_dir / report_log)
     agent_log = _read(log_dir / "agent.log")

@@ -42,7 +42,6 @@ every run's events.
 from __future__ import annotations
 
 import math
-import re
 import statistics
 import sys
 import time
@@ -291,44 +290,6 @@ class _PoseChannel:
         if self.predict and self.delay:
             q = extrapolate(q, twist[0], twist[1], self.delay * self.period)
         return self.in_flight.ahead(q, now)
-
-
-_REPORT = re.compile(r"total: (\d+) of (\d+) points(?:[^\n]*?time of the last score ([\d.]+) s)?")
-_STATUS = re.compile(r"score (\d+)/(\d+) \([^)]*?(?:last at ([\d.]+) s)?\)")
-
-
-def parse_sim_report(text: str) -> tuple[int, int, float, bool]:
-    """``raf sim``'s score from its log: ``(points, max_points, last_score_s, found)``.
-
-    The final report's ``total: P of M points ...; time of the last score T s`` when it is there (the last
-    one), else the last periodic status line's ``score P/M (..., last at T s)`` (a run stopped before its
-    report, or a report still unwritten), else ``(0, -1, nan, False)``. T is nan when nothing scored."""
-    for rx in (_REPORT, _STATUS):
-        m = rx.findall(text)
-        if m:
-            p, mx, t = m[-1]
-            return int(p), int(mx), float(t) if t else math.nan, True
-    return 0, -1, math.nan, False
-
-
-def wait_for_report(log: Path, limit: float = 10.0, poll: float = 0.2) -> bool:
-    """Wait up to ``limit`` s until ``log`` holds ``raf sim``'s final report (``total: ... points``): its
-    process may have exited with the last lines still on their way to the file. True when found."""
-    end = time.monotonic() + limit
-    while True:
-        try:
-            if _REPORT.search(log.read_text(errors="replace")):
-                return True
-        except OSError:
-            pass
-        if time.monotonic() >= end:
-            return False
-        time.sleep(poll)
-
-
-def notes_of(text: str) -> list[str]:
-    """The referee's rule notes in ``raf sim``'s log (each once)."""
-    return sorted(set(re.findall(r"note: (.*)", text)))
 
 
 def _job(spec):
