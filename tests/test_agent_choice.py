@@ -4,6 +4,7 @@ import pytest
 
 from robotatfactory.agent.behaviour import RoundAgent
 from robotatfactory.agent.planner import PathPlanner
+from robotatfactory.agent.settings import agent_settings
 from robotatfactory.agent.state import FactoryState, SlotRef
 from robotatfactory.agent.tasks import Move
 from robotatfactory.competition import PartType
@@ -13,14 +14,14 @@ B = PartType.BLUE
 
 def carrying_agent(field, robot, state, source, **kw):
     """An agent that has just backed out of ``source`` with its blue part (the carrying approach pose)."""
-    agent = RoundAgent(field, robot, **kw)
+    agent = RoundAgent(field, robot, agent_settings({"tasks": kw}))
     agent.state = state
     agent.carrying = B
     agent.task = Move(B, source, agent.policy.destinations(state, B, source)[0])  # as the policy planned it
     agent.target = agent.task.target
     agent.mode = "pick"
     slot = field.slot(source.zone, source.number)
-    pl = PathPlanner(agent._obstacles(exclude=source), margin=agent.carry_margin)
+    pl = PathPlanner(agent._obstacles(exclude=source), margin=agent.settings.carry.margin)
     pose = pl.approach_pose(slot, agent.d_dock, agent.fp_carry)
     return agent, pose
 

@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import pytest
 
-from robotatfactory.agent.behaviour import RoundAgent
+from robotatfactory.agent.settings import Carrying
 from robotatfactory.agent.docking import Docker
 from robotatfactory.agent.follower import DriveLimits, PathFollower
 from robotatfactory.agent.footprint import carrying_footprint, dock_distance, robot_footprint
@@ -22,8 +22,8 @@ class Run:
         self.sim, self.field, self.robot = sim, field, robot
         self.limits = DriveLimits.from_robot(robot)
         # carrying: the agent's gentler limits (a part on SimTwo's magnet slides on its face in fast turns)
-        self.carry_limits = replace(self.limits, w_max=RoundAgent.carry_w_max, alpha_max=RoundAgent.carry_alpha_max,
-                                    v_max=RoundAgent.carry_v_max)
+        self.carry_limits = replace(self.limits, w_max=Carrying.w_max, alpha_max=Carrying.alpha_max,
+                                    v_max=Carrying.v_max)
         self.follower = PathFollower(self.limits, robot.control_period)
         self.docker = Docker(self.limits, robot.control_period, robot.electromagnet["x"], field.part)
         self.magnet = False

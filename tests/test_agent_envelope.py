@@ -3,12 +3,12 @@
 sideways on the magnet's face the more the faster the robot turns."""
 import math
 
-from robotatfactory.agent.behaviour import RoundAgent
+from robotatfactory.agent.settings import Carrying
 from robotatfactory.experiments.envelope import Trial, run_trial
 
 
 def test_the_agents_carrying_turn_on_the_spot_keeps_the_part(field, robot):
-    held, slide = run_trial(field, robot, Trial("spin", 0.0, RoundAgent.carry_w_max, 0.8, RoundAgent.carry_alpha_max,
+    held, slide = run_trial(field, robot, Trial("spin", 0.0, Carrying.w_max, 0.8, Carrying.alpha_max,
                                           turn=math.pi))
     assert held and slide < 0.015  # measured 9 mm
 
@@ -21,6 +21,6 @@ def test_a_faster_turn_slides_the_part_farther(field, robot):
 
 
 def test_straight_carrying_and_backing_out_keep_the_part_centred(field, robot):
-    for v in (RoundAgent.carry_v_max, -RoundAgent.carry_v_back):
+    for v in (Carrying.v_max, -Carrying.back_speed):
         held, slide = run_trial(field, robot, Trial("straight", v, 0.0, 0.8, 11.85, hold=10))
         assert held and slide < 0.001, v

@@ -38,7 +38,7 @@ def test_a_cornered_robot_drives_clear_then_goes_on(field, robot):
     assert agent.counters.escapes >= 1, agent.events[:6]
     assert any("driving to" in text for _, text in agent.events)
     assert agent.mode == "pick", agent.events[-5:]  # it got clear, planned and reached the part
-    assert agent.counters.no_path <= agent.escape_tries
+    assert agent.counters.no_path <= agent.settings.recovery.escape_tries
 
 
 def test_a_target_without_a_path_is_given_up_not_asked_for_forever(field, robot):
@@ -52,4 +52,4 @@ def test_a_target_without_a_path_is_given_up_not_asked_for_forever(field, robot)
     run(agent, bot, lambda a: a.mode == "done", limit=60.0)
     assert agent.mode == "done", agent.events[-5:]
     assert any("giving it up" in text for _, text in agent.events)
-    assert agent.counters.no_path == agent.give_up_after and agent.counters.picks == 0
+    assert agent.counters.no_path == agent.settings.tasks.give_up_after and agent.counters.picks == 0

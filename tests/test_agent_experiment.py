@@ -52,9 +52,12 @@ def test_a_missed_run_is_the_worst_time_and_fails_the_rate():
 def test_bad_options_are_config_errors():
     with pytest.raises(ConfigError):
         competition.run(args(rounds="4"), None)
-    with pytest.raises(ConfigError):
-        competition.parse_drive(["warp=9"])
-    assert competition.parse_drive(["k_heading=8"]) == {"k_heading": 8.0}
+    with pytest.raises(ConfigError, match="drive.warp"):
+        competition.parse_agent(["drive.warp=9"])
+    with pytest.raises(ConfigError, match="dock.place_speed must be a number in"):
+        competition.parse_agent(["dock.place_speed=2"])
+    assert competition.parse_agent(["drive.k_heading=8", "legs/smooth=false"]) == {
+        "drive": {"k_heading": 8}, "legs": {"smooth": False}}
 
 
 def test_the_full_stack_mode_names_itself_and_reports_the_pose_error_against_its_target():
@@ -72,8 +75,10 @@ def test_the_full_stack_mode_names_itself_and_reports_the_pose_error_against_its
     assert res["full_stack_r1_pose_error_docking_max_target_met"] is False  # 2.5 cm > 2 cm in one run
     res = competition.summarize("full_stack", [r, dict(r, seed=1, pose_error_docking_max_m=float("nan"))])
     assert res["full_stack_r1_pose_error_docking_max_target_met"] is False  # a run without the measure fails it
-    with pytest.raises(ConfigError):  # the node takes no drive settings: refused before anything starts
-        competition.run(args(stack="full", rounds="1", seeds=1, drive=["a_max=0.5"]), None)
+    with pytest.raises(ConfigError, match="bare_truth's"):  # raf sim runs its defaults: refused before any run
+        competition.run(args(stack="full", rounds="1", seeds=1, pose_delay=2), None)
+    with pytest.raises(ConfigError, match="--agent: .*drive.a_max must be"):  # raf agent takes --agent, checked now
+        competition.run(args(stack="full", rounds="1", seeds=1, agent=["drive.a_max=-1"]), None)
 
 
 REPORT = """t=  129.84s rtf  1.00x | sent 3246 cmd 3244 | score 3/4 (outgoing 3, last at 40.2 s)

@@ -25,11 +25,12 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(middlewa
 
     from robotatfactory.competition import Factory, FactoryServer, RoundSetup
     from robotatfactory.ros import messages as rm
-    from robotatfactory.ros.agent_node import SUBSCRIBED, AgentNode, AgentNodeConfig
+    from robotatfactory.agent.settings import agent_settings
+    from robotatfactory.ros.agent_node import SUBSCRIBED, AgentNode
 
     factory = Factory(field, RoundSetup.make(1, parts="XBXX"))
     server = FactoryServer(factory, port=0, clock=time.monotonic).start()
-    node = AgentNode(AgentNodeConfig(server_port=server.address[1]), tnode).start()
+    node = AgentNode(agent_settings({"server": {"port": server.address[1]}}), tnode).start()
     cmds = Collector("/cmd_vel", Twist)
     magnet = Collector("/electromagnet", Bool)
     paths = Collector("/agent/path", Path)
@@ -139,11 +140,15 @@ def test_launch_parameters_are_checked():
     from robotatfactory.errors import ConfigError
     from robotatfactory.ros.agent_node import config_from_params
 
-    cfg = config_from_params({"server_port": 19832, "max_input_age": 0.3, "field": "rules2026"})
-    assert (cfg.server_port, cfg.max_input_age, cfg.server_host) == (19832, 0.3, "127.0.0.1")
-    with pytest.raises(ConfigError, match="unknown agent parameter.*serverport"):
+    cfg = config_from_params({"server": {"port": 19832}, "max_input_age": 0.3, "field": "rules2026",
+                              "dock": {"approach_speed": 0.16}, "drive": {"k_heading": 6}})
+    assert (cfg.server.port, cfg.max_input_age, cfg.server.host) == (19832, 0.3, "127.0.0.1")
+    assert (cfg.dock.approach_speed, cfg.drive.k_heading, cfg.drive.v_max) == (0.16, 6.0, None)
+    with pytest.raises(ConfigError, match="unknown setting.*serverport"):
         config_from_params({"serverport": 1})
-    with pytest.raises(ConfigError, match="server_port"):
-        config_from_params({"server_port": 0})
+    with pytest.raises(ConfigError, match=r"server.port must be a whole number in \[1, 65535\], got 0"):
+        config_from_params({"server": {"port": 0}})
     with pytest.raises(ConfigError, match="max_input_age"):
         config_from_params({"max_input_age": -1.0})
+    with pytest.raises(ConfigError, match="tasks.choose_by_time must be true or false"):
+        config_from_params({"tasks": {"choose_by_time": "yes"}})

@@ -10,6 +10,7 @@ import pytest
 from robotatfactory.agent.behaviour import RoundAgent
 from robotatfactory.agent.footprint import dock_distance, wrap
 from robotatfactory.agent.recovery import Relocalizer, StuckDetector, uncertainty_of
+from robotatfactory.agent.settings import agent_settings
 from robotatfactory.agent.state import FactoryState
 
 
@@ -99,7 +100,7 @@ def test_an_uncertain_pose_stops_the_robot_which_turns_slowly_towards_markers_th
 
 
 def test_relocalizing_has_a_time_limit(field, robot):
-    agent = RoundAgent(field, robot, relocalize_timeout=3.0)
+    agent = RoundAgent(field, robot, agent_settings({"recovery": {"relocalize_timeout": 3.0}}))
     bot = KinRobot(field, robot)
     run(agent, bot, lambda a: a.mode == "to_pick" and abs(a._v) > 0.2)
     t0 = bot.t

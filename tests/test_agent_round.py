@@ -4,6 +4,7 @@ client). The simulator's ground-truth pose stands in for the EKF only here."""
 import pytest
 
 from robotatfactory.agent.behaviour import RoundAgent
+from robotatfactory.agent.settings import Tasks
 from robotatfactory.experiments.competition import play_round
 
 
@@ -22,7 +23,7 @@ def test_a_round_scores_the_maximum(round_no, seed):
     assert r["parts_pushed"] == 0  # nothing knocked out of a slot, no part lost on the floor and pushed
     if round_no == 3:  # the machines' 10 s learned from the server: measured from the magnet's release, it
         # also holds the robot backing out past 0.17 m (about 1 s) and the 0.5 s poll period; never below
-        assert 10.0 <= r["delay_estimate_s"] <= 10.0 + 1.5 + RoundAgent.state_period + 0.2
+        assert 10.0 <= r["delay_estimate_s"] <= 10.0 + 1.5 + Tasks.state_period + 0.2
 
 
 def test_a_blocked_robot_times_out_gives_up_and_never_loops_forever(field, robot):
@@ -41,6 +42,6 @@ def test_a_blocked_robot_times_out_gives_up_and_never_loops_forever(field, robot
         assert not c.magnet
         t += robot.control_period
     assert agent.mode == "done", agent.events[-3:]
-    assert agent.counters.timeouts == agent.give_up_after == 3
+    assert agent.counters.timeouts == agent.settings.tasks.give_up_after == 3
     assert sum("timeout" in text for _, text in agent.events) == 3
     assert t < 300.0  # three budgets of one leg each, not the round's 600 s

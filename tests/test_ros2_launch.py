@@ -140,11 +140,9 @@ def _declared_params(node_name: str) -> set[str]:
         from robotatfactory.ros.localization_node import default_params
 
         return set(flatten(default_params(), "."))
-    from dataclasses import fields
+    from robotatfactory.ros.agent_node import default_params
 
-    from robotatfactory.ros.agent_node import AgentNodeConfig
-
-    return {f.name for f in fields(AgentNodeConfig)}
+    return set(flatten(default_params(), "."))
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -64,7 +64,7 @@ def generate_launch_description():
             additional_env={"RAF_MIDDLEWARE": "ros2"},
             parameters=[{
                 "field": ParameterValue(arg("field"), value_type=str),
-                "server_port": ParameterValue(arg("server_port"), value_type=int),
+                "server.port": ParameterValue(arg("server_port"), value_type=int),
                 "max_input_age": ParameterValue(arg("max_input_age"), value_type=float),
                 "use_sim_time": True,
             }],

@@ -1,10 +1,21 @@
-"""Layered settings shared by the nodes' configurations: YAML files, ``--set NAME=VALUE`` and merging.
+"""Layered settings shared by the components' configurations: YAML files, ``--set NAME=VALUE``, merging,
+and typed settings objects.
 
-Plain Python (PyYAML only); errors are :class:`robotatfactory.errors.ConfigError` naming the file or option.
+A typed settings object is a tree of frozen dataclasses whose fields are made with :func:`setting` (the
+default, what it means, its allowed values: the one place for each) and :func:`section` (a group). The same
+nested mapping, from a YAML file, ``--set``, ROS parameters or an experiment's options, becomes the object
+through :func:`build`, the one validation: an unknown name or a bad value is a
+:class:`robotatfactory.errors.ConfigError` naming the setting by its path (``dock.approach_speed``) and what is
+allowed. :func:`tree` and :func:`descriptions` go the other way (printing, ROS 2 parameter declarations).
+
+Plain Python (PyYAML only).
 """
 from __future__ import annotations
 
+import dataclasses
+import math
 from pathlib import Path
+from typing import Any, Mapping
 
 
 def deep_update(base: dict, over: dict) -> dict:
@@ -36,7 +47,8 @@ def read_yaml(path: str | Path, what: str = "settings file") -> dict:
 
 
 def parse_set(items: list[str]) -> dict:
-    """``["udp/port=9999", "camera/enabled=false"]`` to a nested dict; values parsed as YAML scalars."""
+    """``["udp/port=9999", "camera.enabled=false"]`` to a nested dict (``/`` or ``.`` between a section and its
+    setting, as in ROS 1's and ROS 2's parameter names); values parsed as YAML scalars."""
     import yaml
 
     from .errors import ConfigError
@@ -46,7 +58,7 @@ def parse_set(items: list[str]) -> dict:
         if "=" not in it:
             raise ConfigError(f"--set {it!r}: expected NAME=VALUE, e.g. camera/fx=283.5")
         k, v = it.split("=", 1)
-        keys = [s for s in k.strip().lstrip("~").split("/") if s]
+        keys = [s for s in k.strip().lstrip("~").replace(".", "/").split("/") if s]
         if not keys:
             raise ConfigError(f"--set {it!r}: empty parameter name")
         d = out
@@ -79,4 +91,156 @@ def yaml_comments(path: str | Path, sep: str = ".") -> dict:
             stack.append((indent, key))
         elif len(body) > 1:
             out[full] = body[1].strip()
+    return out
+
+
+# ------------------------------------------------------------------------------------------ typed settings
+def setting(default: Any, doc: str = "", *, lo: float | None = None, hi: float | None = None,
+            lo_open: bool = False, choices: tuple | None = None, kind: type | None = None):
+    """A field of a settings dataclass: ``default``, ``doc`` (units first, then what it does) and the values
+    :func:`build` allows: numbers within ``lo``..``hi`` (``lo_open``: above ``lo``), one of ``choices``.
+    ``kind`` when the default does not say it (a default of None: "unset", e.g. taken from the robot file)."""
+    meta = {"doc": doc, "lo": lo, "hi": hi, "lo_open": lo_open, "choices": choices,
+            "kind": kind or type(default)}
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def section(cls: type, doc: str = ""):
+    """A group of settings (a settings dataclass) inside another."""
+    return dataclasses.field(default_factory=cls, metadata={"doc": doc, "section": cls})
+
+
+def _join(where: str, name: str) -> str:
+    return f"{where}.{name}" if where else name
+
+
+def _allowed(m: Mapping) -> str:
+    kind, lo, hi, choices = m["kind"], m["lo"], m["hi"], m["choices"]
+    if choices:
+        return "one of " + ", ".join(map(str, choices))
+    if kind is bool:
+        return "true or false"
+    what = "a whole number" if kind is int else "a number" if kind is float else f"a {kind.__name__}"
+    if lo is not None and hi is not None:
+        return f"{what} in {'(' if m['lo_open'] else '['}{lo:g}, {hi:g}]"
+    if lo is not None:
+        return f"{what} {'>' if m['lo_open'] else '>='} {lo:g}"
+    if hi is not None:
+        return f"{what} <= {hi:g}"
+    return what
+
+
+def _value(path: str, v: Any, f: dataclasses.Field) -> Any:
+    from .errors import ConfigError
+
+    m = f.metadata
+    kind = m["kind"]
+    if v is None and f.default is None:
+        return None
+    bad = ConfigError(f"setting {path} must be {_allowed(m)}, got {v!r}"
+                      + (f" ({m['doc']})" if m.get("doc") else ""))
+    if kind is bool:
+        if isinstance(v, bool):
+            return v
+        if isinstance(v, int) and v in (0, 1):  # a switch given as 0 / 1
+            return bool(v)
+        raise bad
+    if kind in (int, float):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise bad
+        if kind is int and float(v) != int(v):
+            raise bad
+        v = int(v) if kind is int else float(v)
+        lo, hi = m["lo"], m["hi"]
+        if lo is not None and (v < lo or (m["lo_open"] and v == lo)) or hi is not None and v > hi:
+            raise bad
+    elif kind is str:
+        if not isinstance(v, str):
+            raise bad
+    elif kind in (tuple, list):
+        if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
+            raise bad
+        v = tuple(v)
+    if m["choices"] and v not in m["choices"]:
+        raise bad
+    return v
+
+
+def build(cls: type, values: Mapping | None = None, where: str = ""):
+    """The settings object ``cls`` with ``values`` (a nested mapping; what it lacks keeps its default), each
+    value checked (:func:`setting`'s kind, range and choices), then the object's own ``check()`` if it has one
+    (cross-setting rules). ``where``: the path of this group in a larger tree (for the errors)."""
+    from .errors import ConfigError
+
+    values = {} if values is None else values
+    if not isinstance(values, Mapping):
+        raise ConfigError(f"{where or 'settings'}: expected a mapping of settings, got {values!r}")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise ConfigError(f"unknown setting(s) {', '.join(_join(where, str(u)) for u in unknown)}; known"
+                          f"{' in ' + where if where else ''}: {', '.join(fields)}")
+    kw = {}
+    for name, v in values.items():
+        f, path = fields[name], _join(where, name)
+        sub = f.metadata.get("section")
+        kw[name] = build(sub, v, path) if sub else _value(path, v, f)
+    obj = cls(**kw)
+    if hasattr(obj, "check"):
+        obj.check()
+    return obj
+
+
+def tree(obj) -> dict:
+    """A settings object as the nested mapping :func:`build` reads (tuples as lists: YAML's and ROS's)."""
+    out = {}
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        out[f.name] = tree(v) if f.metadata.get("section") else list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def to_yaml(obj, header: str = "", indent: int = 0) -> str:
+    """A settings object as a YAML file that :func:`build` reads back: every setting with its value and,
+    after it, what it means (the comments ROS 2's parameter descriptions are read from: :func:`yaml_comments`);
+    ``header`` as comment lines on top."""
+    import yaml
+
+    lines = [f"# {h}".rstrip() for h in header.splitlines()] if header else []
+    pad = " " * indent
+    for f in dataclasses.fields(obj):
+        v, doc = getattr(obj, f.name), f.metadata.get("doc", "")
+        if f.metadata.get("section"):
+            empty = all(getattr(v, g.name) is None for g in dataclasses.fields(v))  # all unset: an empty mapping
+            lines.append(f"{pad}{f.name}:{' {}' if empty else ''}" + (f"  # {doc}" if doc else ""))
+            lines.append(to_yaml(v, indent=indent + 2).rstrip("\n"))
+            continue
+        if v is None:  # unset (null is no ROS parameter value): shown as a comment
+            lines.append(f"{pad}# {f.name}: (unset) {doc}".rstrip())
+            continue
+        value = yaml.safe_dump(list(v) if isinstance(v, tuple) else v, default_flow_style=True,
+                               width=10 ** 6).strip()
+        value = value[:-4].rstrip() if value.endswith("\n...") else value.removesuffix("...").rstrip()
+        text = f"{pad}{f.name}: {value}"
+        lines.append(f"{text:<36} # {doc}" if doc else text)
+    return "\n".join(lines) + "\n"
+
+
+def descriptions(cls: type, sep: str = ".", where: str = "") -> dict[str, tuple[str, tuple | None]]:
+    """``{path: (doc, (lo, hi) or None)}`` of every setting of ``cls`` (ROS 2's parameter descriptors)."""
+    out: dict = {}
+    for f in dataclasses.fields(cls):
+        path = f"{where}{sep}{f.name}" if where else f.name
+        sub = f.metadata.get("section")
+        if sub:
+            out.update(descriptions(sub, sep, path))
+        else:
+            m = f.metadata
+            lo, hi, kind = m.get("lo"), m.get("hi"), m.get("kind")
+            rng = None
+            if kind in (int, float) and (lo is not None or hi is not None):
+                big = 2 ** 62 if kind is int else 1e300  # one side open: as far as the parameter's type goes
+                rng = (lo if lo is not None else -big, hi if hi is not None else big)
+            doc = m.get("doc", "")
+            out[path] = (doc + (f" ({_allowed(m)})" if m.get("choices") else ""), rng)
     return out

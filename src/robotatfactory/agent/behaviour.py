@@ -25,6 +25,7 @@ from .follower import DriveLimits, PathFollower
 from .footprint import carrying_footprint, dock_distance, robot_footprint
 from .obstacles import FieldObstacles, PartObstacle, square_polygon
 from .recovery import Relocalizer, StuckDetector, uncertainty_of
+from .settings import AgentSettings
 from .hybrid import CarryPlanner, NoCarryPath
 from .planner import NoPath, Path, PathPlanner
 from .smooth import Piece, SmoothPath
@@ -76,93 +77,30 @@ class LegPlan:
 
 @dataclass
 class RoundAgent:
-    """See the module docstring. ``retries``: docking attempts per pick before re-deciding."""
+    """See the module docstring. ``settings``: every tuning setting (:class:`~.settings.AgentSettings`)."""
 
     field: object
     robot: object
-    limits: DriveLimits | None = None
-    retries: int = 2
-    state_period: float = 0.5  # s between server polls (5 requests each)
-    give_up_after: int = 3  # failures at one slot before its part is left alone
-    escape_tries: int = 3  # drives to the nearest clear point before a target without a path counts as failed
-    escape_time: float = 4.0  # s an escape drive may take
-    dock_timeout: float = 20.0  # s for one docking manoeuvre before it backs out
-    # the last leg before docking: at least this much straight line along the slot's normal (m), after an
-    # arc no tighter than this (m; else a stop and a turn in place); any arc at least min_radius (m)
-    # (measured over rounds 1-3 x 10 seeds: 0.04 / 0.1 / 0.02 / 0.06 cost 1.5-4 s a round for no gain; arcs
-    # down to 0.035 m right before a place let the carried part graze ribs)
-    v_dock: float = DockSettings.v_dock  # m/s, the pick approach (contact stops it)
-    # m/s, the place approach (the part enters between ribs): 0.16 against DockSettings' 0.12 measured 1-2 s faster a
-    # round, rounds 1-3 x 10 at the maximum on ground truth and on a late, noisy pose (0.2: no faster)
-    v_place: float = 0.16
-    place_straight: float = 0.03
-    place_standoff: float = 0.05  # m: a place's leg ends this much farther out (the docker settles on the normal)
-    place_min_radius: float = 0.08
-    pick_straight: float = 0.015
-    pick_min_radius: float = 0.045
-    min_radius: float = 0.045
-    uncertainty_limit: float = 0.03  # m (position std) above which it stops to re-localize (with a std input)
-    heading_uncertainty_limit: float = 0.1  # rad
-    relocalize_timeout: float = 12.0  # s looking at markers before it goes on regardless
-    replans: int = 2  # re-plans of one leg around a blocked spot before the leg counts as failed
-    block_memory: float = 20.0  # s a blocked spot stays an obstacle
-    lost_cycles: int = 5  # cycles without contact while carrying = the part was lost
-    smooth: bool = True
-    # a carried part goes to the free destination (of the best rank) the leg reaches soonest, by a kinematic run
-    # of the follower on each planned leg (False: the nearest to the part's source, the earlier choice)
-    choose_by_time: bool = True
-    # a blue part from elsewhere than a machine output leaves the outgoing slots nearest machine B's outputs to
-    # the parts still to come from there (TaskPolicy.reserved_outgoing)
-    reserve_outgoing: bool = True
-    # m, carrying: the straight line onto the slot's normal may pass where only the exact outline grown by this is
-    # clear (not the whole turning circle: the robot turns only at its ends); 0: the turning circle everywhere.
-    # 0.03, not 0.015: on the whole stack the leg from incoming 3 passed machine A's rib end with the carried part
-    # 1-2 cm off it; the EKF missed 0.15 rad of slip as the spin before it stopped, and the part caught the rib
-    # (round 2, 3 of 20 runs); 0.03 keeps the robot 19 cm from it, and on the bare stand-in rounds 1-3 were as
-    # fast or faster (52.6 / 70.2 / 83.4 s on ground truth, 10 of 10 each)
-    join_inflate: float = 0.03
-    # carrying: forward arcs of at least carry_radius m and straight reversing only, never a turn on the spot
-    # (SimTwo's magnet loses the part on the spot; the stand-in's default since 22 Nov 2026)
-    carry_arcs: bool = False
-    carry_radius: float = 0.3
-    carry_a_lat: float = 0.2  # m/s^2 on those arcs (the part slides sideways on the magnet's face)
-    # carrying on SimTwo's force magnet with the default legs (turns on the spot allowed): gentler limits while
-    # a part is on the magnet (0 = the normal limits). The part slides sideways on the magnet's face the more the
-    # faster it turns (~9 mm at 1.5 rad/s) and its corner then sweeps beyond the planned turning circle: rounds
-    # 1-3 x 4 seeds, w 1.5 rad/s at the maximum in every run, 1.75-2 rad/s or the normal 3 lost parts in most
-    # (docs/agent.md, "The carry envelope")
-    carry_w_max: float = 1.5  # rad/s
-    carry_alpha_max: float = 6.0  # rad/s^2 (11.85: one part lost in 12 runs)
-    carry_v_max: float = 0.4  # m/s
-    carry_v_back: float = 0.25  # m/s backing out of a slot with the part
-    # a turn on the spot with a part of more than carry_long_spin rad runs at carry_w_long_spin rad/s (0: off;
-    # DriveLimits.long_spin): after ~146 deg at 1.5 rad/s (machine B's outputs to outgoing 1-2) the part had slid
-    # ~10 mm and the arc back the other way pivoted it off (round 2 on a late, noisy pose: 4-5 of 10 runs lost a
-    # part without it). Since the stand-in's part feet (dbcc93f) the part creeps less: without it rounds 2-3 are
-    # 1-2 s faster and no part was lost in 60 runs, but one round-3 run jammed a place (59/60; with it 90/90)
-    carry_long_spin: float = 2.4
-    carry_w_long_spin: float = 1.1
-    # m kept clear around the carrying turning circle (0.02 for the part's slide: outgoing 4 then has no approach
-    # pose, round 2 0 of 6 seeds at the maximum)
-    carry_margin: float = 0.01
-    carry_inflate: float = 0.015  # m around the loaded outline (the part swings on the face)  # paths with arcs, the last leg along the slot's normal (False: stop at every corner)
+    settings: AgentSettings = field(default_factory=AgentSettings)  # agent/settings.py: every tuning setting
+    limits: DriveLimits | None = None  # None: DriveLimits.from_robot with settings.drive
     events: list = field(default_factory=list)
     counters: AgentCounters = field(default_factory=AgentCounters)
 
     def __post_init__(self):
         r, f = self.robot, self.field
-        self.limits = self.limits or DriveLimits.from_robot(r)
+        self.limits = self.limits or DriveLimits.from_robot(r, **self.settings.drive.given())
         self.dt = float(r.control_period)
         self.policy = TaskPolicy.for_field(f)
         self.delays = DelayEstimator(lanes_of(f))
         self.follower = PathFollower(self.limits, self.dt)
-        cl = {k: v for k, v in (("w_max", self.carry_w_max), ("alpha_max", self.carry_alpha_max),
-                                ("v_max", self.carry_v_max), ("long_spin", self.carry_long_spin),
-                                ("w_long_spin", self.carry_w_long_spin)) if v > 0}
+        c = self.settings.carry
+        cl = {k: v for k, v in (("w_max", c.w_max), ("alpha_max", c.alpha_max), ("v_max", c.v_max),
+                                ("long_spin", c.long_spin), ("w_long_spin", c.w_long_spin)) if v > 0}
         self.carry_limits = replace(self.limits, **cl)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
-                             DockSettings(v_dock=self.v_dock, v_place=self.v_place,
-                                          v_back_carrying=self.carry_v_back or DockSettings.v_back))
+                             DockSettings(v_dock=self.settings.dock.approach_speed,
+                                          v_place=self.settings.dock.place_speed,
+                                          v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back))
         # the place approach steers with a part on the magnet: no faster turning than carrying allows
         dl = self.docker
         dl.place_limits = replace(dl.place_limits, w_max=min(dl.place_limits.w_max, self.carry_limits.w_max),
@@ -224,7 +162,7 @@ class RoundAgent:
         if self.mode == "done":
             return False
         # also while driving: the delay estimate is only as sharp as the polls are frequent
-        return self.state_time < self.need_state_after or self.t - self._last_poll >= self.state_period
+        return self.state_time < self.need_state_after or self.t - self._last_poll >= self.settings.tasks.state_period
 
     def on_state(self, state: FactoryState, t: float) -> None:
         """A fresh server state seen at time ``t`` (s)."""
@@ -251,7 +189,8 @@ class RoundAgent:
         if self.mode in ("wait_start", "done"):
             return self._brake()
         unc = uncertainty_of(uncertainty)
-        uncertain = unc is not None and (unc[0] > self.uncertainty_limit or unc[1] > self.heading_uncertainty_limit)
+        rc = self.settings.recovery
+        uncertain = unc is not None and (unc[0] > rc.uncertainty_limit or unc[1] > rc.heading_uncertainty_limit)
         if self.mode == "relocalize":
             return self._relocalize(pose, unc)
         if uncertain and self.mode in ("to_pick", "to_place") and self.t >= self._reloc_quiet_until:
@@ -266,7 +205,7 @@ class RoundAgent:
         if self.mode == "to_place" and self.carrying is not None:
             # the contact switch stays pressed while a part hangs on the magnet
             self._no_contact = 0 if contact else self._no_contact + 1
-            if self._no_contact >= self.lost_cycles:
+            if self._no_contact >= self.settings.recovery.lost_cycles:
                 self._part_lost()
                 return self._brake()
         if self.mode == "decide":
@@ -277,26 +216,27 @@ class RoundAgent:
                 return self._brake()
         if self.mode == "escape":  # (:meth:`_no_leg`) then decide again from where it got to
             o = self.follower.step(pose)
-            if o.done or o.off_path or self.t - self._mode_t0 > self.escape_time:
+            if o.done or o.off_path or self.t - self._mode_t0 > self.settings.recovery.escape_time:
                 self.follower.stop()
                 self.mode, self.need_state_after = "decide", self.t
                 return self._brake()
             return self._cmd(o.v, o.w)
         if self.mode in ("to_pick", "to_place") and self.t - self._mode_t0 > self._budget:
-            if self._leg_replans < self.replans:
+            if self._leg_replans < self.settings.recovery.replans:
                 self._blocked(pose, f"took more than {self._budget:.0f} s")
             else:
                 self._timeout(f"{self.mode.replace('_', ' ')} {self.target} took more than {self._budget:.0f} s")
             return self._brake()
-        if self.mode in ("pick", "place") and self.t - self._mode_t0 > self.dock_timeout \
+        if self.mode in ("pick", "place") and self.t - self._mode_t0 > self.settings.dock.timeout \
                 and self.docker.phase not in ("back", "done", "failed"):
             self.docker.abort(pose)  # back out first, then the failure comes through the docker
         if self.mode in ("to_pick", "to_place"):
             if self.stuck.update(self.t, pose, self._v, self._w):
-                if self._leg_replans < self.replans:
+                if self._leg_replans < self.settings.recovery.replans:
                     self._blocked(pose, "stuck")
                 else:
-                    self._timeout(f"{self.mode.replace('_', ' ')} {self.target}: stuck after {self.replans} re-plans")
+                    self._timeout(f"{self.mode.replace('_', ' ')} {self.target}: stuck after "
+                                  f"{self.settings.recovery.replans} re-plans")
                 return self._brake()
             o = self.follower.step(pose)
             if o.off_path:  # far off the path (a slip, a push): plan again from here
@@ -331,7 +271,7 @@ class RoundAgent:
             self._go_fastest("to_place", pose, dest)
             return
         ready = {ln.input: self.delays.expected_ready(ln.input) for ln in self.delays.lanes}
-        avoid = {ref for ref, n in self.failures.items() if n >= self.give_up_after}
+        avoid = {ref for ref, n in self.failures.items() if n >= self.settings.tasks.give_up_after}
         task = self.policy.next_task(st, robot_xy=tuple(pose[:2]), ready_at={k: v for k, v in ready.items() if v},
                                      avoid=avoid)
         if task != self.task:
@@ -349,7 +289,7 @@ class RoundAgent:
 
     def _usable(self, dest: list) -> list:
         """Destinations without ``give_up_after`` - 1 failed places (else all: a slot is better than none)."""
-        ok = [d for d in dest if self.place_failed.get(d, 0) < self.give_up_after - 1]
+        ok = [d for d in dest if self.place_failed.get(d, 0) < self.settings.tasks.give_up_after - 1]
         return ok or dest
 
     def _obstacles(self, exclude: SlotRef | None = None) -> FieldObstacles:
@@ -373,14 +313,16 @@ class RoundAgent:
     def _relocalize(self, pose, unc) -> AgentCommand:
         """Standing still, turn towards markers until the uncertainty is back below 60 % of the limits for
         5 cycles, or relocalize_timeout; then re-plan the interrupted leg from here."""
-        calm = unc is None or (unc[0] <= 0.6 * self.uncertainty_limit and unc[1] <= 0.6 * self.heading_uncertainty_limit)
+        rc = self.settings.recovery
+        calm = unc is None or (unc[0] <= 0.6 * rc.uncertainty_limit and unc[1] <= 0.6 * rc.heading_uncertainty_limit)
         self._calm = self._calm + 1 if calm else 0
-        timed_out = self.t - self._reloc_t0 > self.relocalize_timeout
+        timed_out = self.t - self._reloc_t0 > self.settings.recovery.relocalize_timeout
         if self._calm >= 5 or timed_out:
             if timed_out:  # go on driving (new views of markers) for as long before looking again
-                self._reloc_quiet_until = self.t + self.relocalize_timeout
+                self._reloc_quiet_until = self.t + self.settings.recovery.relocalize_timeout
                 self.counters.relocalize_timeouts += 1
-                self._event(self.t, f"re-localizing took more than {self.relocalize_timeout:.0f} s: going on")
+                self._event(self.t, f"re-localizing took more than {self.settings.recovery.relocalize_timeout:.0f} s: "
+                                    "going on")
             else:
                 self._event(self.t, f"pose certain again after {self.t - self._reloc_t0:.1f} s")
             mode, self._resume = self._resume or "decide", None
@@ -405,7 +347,7 @@ class RoundAgent:
         ahead = (fp.front + 0.03) if self._v >= 0 else (fp.back - 0.03)
         x = pose[0] + ahead * math.cos(pose[2])
         y = pose[1] + ahead * math.sin(pose[2])
-        self.blocked_spots.append((x, y, self.t + self.block_memory))
+        self.blocked_spots.append((x, y, self.t + self.settings.recovery.block_memory))
         self._event(self.t, f"blocked ({why}) near ({x:.2f}, {y:.2f}): re-planning around it")
         self.follower.stop()
         self._go(self.mode, pose)
@@ -424,16 +366,16 @@ class RoundAgent:
         a :class:`LegPlan`. Raises NoPath."""
         fp = self.fp_carry if carrying else self.fp_empty
         slot = self.field.slot(target.zone, target.number)
-        pl = PathPlanner(self._obstacles(), margin=0.01 if not carrying else self.carry_margin)
+        pl = PathPlanner(self._obstacles(), margin=0.01 if not carrying else self.settings.carry.margin)
         goal = pl.approach_pose(slot, self.d_dock, fp)
         goals = [goal]
-        if carrying and self.place_standoff > 0:  # a place: room to settle on the normal first
-            d = self.place_standoff
+        if carrying and self.settings.legs.place_standoff > 0:  # a place: room to settle on the normal first
+            d = self.settings.legs.place_standoff
             g2 = (goal[0] - d * math.cos(goal[2]), goal[1] - d * math.sin(goal[2]), goal[2])
             if pl.is_free(g2[:2], fp):
                 goals = [g2, goal]
-        join = self.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
-        if self.smooth:  # the last leg along the slot's normal: docking follows on at speed
+        join = self.settings.legs.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
+        if self.settings.legs.smooth:  # the last leg along the slot's normal: docking follows on at speed
             for g in goals:  # the leg ending farther out if it can arrive along the normal there
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
                 if aligned:
@@ -441,9 +383,10 @@ class RoundAgent:
             goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
             if not aligned and len(goals) > 1:
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp, join_inflate=join)
-            sp = pl.smooth(path, fp, final_straight=(self.place_straight if carrying else self.pick_straight)
-                           if aligned else 0.0, min_radius=self.min_radius,
-                           final_min_radius=self.place_min_radius if carrying else self.pick_min_radius)
+            lg = self.settings.legs
+            sp = pl.smooth(path, fp, final_straight=(lg.place_straight if carrying else lg.pick_straight)
+                           if aligned else 0.0, min_radius=self.settings.legs.min_radius,
+                           final_min_radius=lg.place_min_radius if carrying else lg.pick_min_radius)
             end_speed = self.docker.entry_speed("pick" if mode == "to_pick" else "place") if aligned else 0.0
         else:
             goal = goals[0]
@@ -454,9 +397,9 @@ class RoundAgent:
     def _go(self, mode: str, pose) -> None:
         carrying = self.carrying is not None
         self.follower.limits = self.limits if not carrying else self.carry_limits
-        if carrying and self.carry_arcs:
+        if carrying and self.settings.carry.arcs:
             slot = self.field.slot(self.target.zone, self.target.number)
-            pl = PathPlanner(self._obstacles(), margin=self.carry_margin)
+            pl = PathPlanner(self._obstacles(), margin=self.settings.carry.margin)
             if self._go_carrying(mode, pose, pl, slot):
                 return
         try:
@@ -477,12 +420,12 @@ class RoundAgent:
         (its part left alone, or, carrying, another destination preferred), as a failed pick or place is."""
         carrying = self.carrying is not None
         fp = self.fp_carry if carrying else self.fp_empty
-        pl = PathPlanner(self._obstacles(), margin=self.carry_margin if carrying else 0.01)
+        pl = PathPlanner(self._obstacles(), margin=self.settings.carry.margin if carrying else 0.01)
         try:
             point = pl.escape_point(tuple(pose[:2]), fp)
         except NoPath:
             point = None
-        if point is not None and self._escapes < self.escape_tries:
+        if point is not None and self._escapes < self.settings.recovery.escape_tries:
             self._escapes += 1
             self.counters.escapes += 1
             self._event(self.t, f"too close to an obstacle at ({pose[0]:.2f}, {pose[1]:.2f}): driving to "
@@ -492,26 +435,29 @@ class RoundAgent:
             self.mode, self._mode_t0 = "escape", self.t
             return
         n = self._no_path[self.target] = self._no_path.get(self.target, 0) + 1
-        if n >= self.give_up_after:
+        if n >= self.settings.tasks.give_up_after:
             self._no_path.pop(self.target, None)
             self._event(self.t, f"no path to {self.target} {n} times: giving it up")
             if carrying:
-                self.place_failed[self.target] = max(self.place_failed.get(self.target, 0), self.give_up_after)
+                self.place_failed[self.target] = max(self.place_failed.get(self.target, 0),
+                                                     self.settings.tasks.give_up_after)
             elif isinstance(self.task, Move):
-                self.failures[self.task.source] = max(self.failures.get(self.task.source, 0), self.give_up_after)
-        self.mode, self.need_state_after = "decide", self.t + self.state_period
+                self.failures[self.task.source] = max(self.failures.get(self.task.source, 0),
+                                                      self.settings.tasks.give_up_after)
+        self.mode, self.need_state_after = "decide", self.t + self.settings.tasks.state_period
 
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
         """Start the leg to the destination of ``dest`` (best first) that takes the least time among those of
         the best rank (:meth:`TaskPolicy.destination_class`; every outgoing slot is of one rank), by
         :meth:`_leg_time`; with ``choose_by_time`` off, to ``self.target`` (or ``dest[0]``)."""
         carrying = self.carrying is not None
-        if not self.choose_by_time or (carrying and self.carry_arcs) or len(dest) < 2:
+        if not self.settings.tasks.choose_by_time or (carrying and self.settings.carry.arcs) or len(dest) < 2:
             if self.target not in dest:
                 self.target = dest[0]
             self._go(mode, pose)
             return
-        if carrying and self.reserve_outgoing and self.carrying is PartType.BLUE and isinstance(self.task, Move):
+        if (carrying and self.settings.tasks.reserve_outgoing and self.carrying is PartType.BLUE
+                and isinstance(self.task, Move)):
             if self.policy.is_output(self.task.source):  # the slots it reaches turning one way only
                 near = self.policy.outgoing_near_outputs(self.state)[:2]
                 dest = [d for d in dest if d in near] or dest
@@ -541,7 +487,7 @@ class RoundAgent:
         path = leg.path
         self.path = path
         self.follower.limits = self.limits if self.carrying is None else self.carry_limits
-        if self.smooth:
+        if self.settings.legs.smooth:
             self.follower.start(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2],
                                 end_speed=leg.end_speed)
         else:
@@ -558,7 +504,7 @@ class RoundAgent:
         it would drive with, the robot starting at rest), plus the docking approach from its end to the dock
         or place pose at the docking speed."""
         f = PathFollower(self.carry_limits if carrying else self.limits, self.dt)
-        if self.smooth:
+        if self.settings.legs.smooth:
             f.start(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2], end_speed=leg.end_speed)
         else:
             f.start(leg.smooth, final_heading=leg.goal[2])
@@ -586,8 +532,8 @@ class RoundAgent:
             goal = pl.approach_pose(slot, self.d_dock, fp)
         except NoPath:
             return False
-        cp = CarryPlanner(pl.obstacles, fp, radius=self.carry_radius, max_expansions=5000,
-                          inflate=self.carry_inflate)
+        cp = CarryPlanner(pl.obstacles, fp, radius=self.settings.carry.radius, max_expansions=5000,
+                          inflate=self.settings.carry.inflate)
         bx, by = -math.cos(goal[2]), -math.sin(goal[2])
         sp = None
         err = NoCarryPath("no straight line along the normal is clear")
@@ -622,7 +568,7 @@ class RoundAgent:
                 sp = SmoothPath(sp.pieces[:-1] + (piece,))
         self.path = Path(tuple((float(x), float(y)) for x, y in sp.points[::5]) + (tuple(map(float, goal[:2])),),
                          fp.radius)
-        self.follower.limits = replace(self.limits, a_lat=self.carry_a_lat)  # gentle arcs: the part slides
+        self.follower.limits = replace(self.limits, a_lat=self.settings.carry.a_lat)  # gentle arcs: the part slides
         self.follower.start(sp, final_heading=None, end_speed=self.docker.entry_speed("place"), no_spin=True)
         self.mode = mode
         self._mode_t0 = self.t
@@ -636,7 +582,7 @@ class RoundAgent:
         robot will have afterwards."""
         slot = self.field.slot(self.target.zone, self.target.number)
         fp = self.fp_carry if carrying else self.fp_empty
-        pl = PathPlanner(self._obstacles(exclude=self.target), margin=self.carry_margin if carrying else 0.01)
+        pl = PathPlanner(self._obstacles(exclude=self.target), margin=self.settings.carry.margin if carrying else 0.01)
         try:
             x, y, _ = pl.approach_pose(slot, self.d_dock, fp)
             d = math.hypot(x - slot.xy[0], y - slot.xy[1])
@@ -670,7 +616,7 @@ class RoundAgent:
             self.state = self.state.with_slot(self.task.source, None)  # expected until the server says
             self.target = self.task.target
             dest = self._usable(self.policy.destinations(self.state.with_slot(self.task.source, None), self.carrying))
-            if not self.choose_by_time and self.target not in dest:  # the planned place was taken meanwhile
+            if not self.settings.tasks.choose_by_time and self.target not in dest:  # the planned place was taken
                 self.target = dest[0] if dest else None
             if not dest:
                 self.mode, self.need_state_after = "decide", self.t
@@ -703,7 +649,7 @@ class RoundAgent:
             self.counters.pick_failures += 1
             self.magnet = False
             self.attempts += 1
-            if reason == "no_contact" and self.attempts < self.retries:
+            if reason == "no_contact" and self.attempts < self.settings.dock.retries:
                 self._go("to_pick", pose)  # back to the approach pose, then try again
                 return
         else:

@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..simtwo.ports import SERVER_UDP_PORT
-
 NAME = "agent"
 HELP = "run the autonomous robot: factory-state server, pose from raf localize, cmd_vel and electromagnet out"
 ORDER = 37
@@ -13,49 +11,63 @@ Run the agent node next to `raf bridge` and `raf localize`. It asks the factory-
 list and the factory's state (UDP), plans the round, and drives on the `pose` topic (never ground truth).
 docs/agent.md describes what it does.
 
+Settings: every one is in agent/settings.py (the round agent's included); `--config FILE` (the shape of
+config/agent.yaml), then the options below, then `--set NAME=VALUE` (`dock.approach_speed=0.16` or
+`dock/approach_speed=0.16`). `--print-params` shows the result.
+
 examples:
   raf agent                                  # next to raf sim + raf bridge + raf localize
-  raf agent --server-port 44832 --max-input-age 0.3
+  raf agent --server-port 44832 --set max_input_age=0.3
+  raf agent --config agent.yaml --set dock.approach_speed=0.16
 """
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ..ros.cli import add_node_arguments
+    from ..agent.settings import AgentSettings, Server
+    from ..ros.cli import add_node_arguments, add_settings_arguments
 
-    parser.add_argument("--robot", default="simtwo", help="robot file name or path (default simtwo)")
-    parser.add_argument("--server-host", default="127.0.0.1", help="factory-state server host")
-    parser.add_argument("--server-port", type=int, default=SERVER_UDP_PORT,
-                        help=f"factory-state server UDP port (default {SERVER_UDP_PORT})")
-    parser.add_argument("--max-input-age", type=float, default=0.5,
-                        help="seconds after which pose/odom count as stale (the robot stops)")
-    parser.add_argument("--command-latency", type=float, default=0.08, metavar="S",
-                        help="seconds from publishing cmd_vel to the simulator's cycle that runs it: the pose is "
-                             "predicted that far ahead through the commands in flight (default 0.08: SimTwo's and "
-                             "raf sim's two cycles; 0: no prediction beyond now)")
+    add_settings_arguments(parser, "config/agent.yaml", "dock.approach_speed=0.16")
+    parser.add_argument("--robot", help=f"robot file name or path (the setting robot; default {AgentSettings.robot})")
+    parser.add_argument("--server-host", help=f"factory-state server host (server.host; default {Server.host})")
+    parser.add_argument("--server-port", type=int,
+                        help=f"factory-state server UDP port (server.port; default {Server.port})")
+    parser.add_argument("--defaults", action="store_true",
+                        help="with --print-params: the defaults alone, as config/agent.yaml holds them")
     add_node_arguments(parser, "raf_agent")
 
 
-def run(args) -> int:
-    from ..errors import ConfigError
+def settings_tree(args) -> dict:
+    """The settings the command line gives, as a nested tree: ``--config``, the options, ``--set``."""
     from ..field import DEFAULT_FIELD
+    from ..settings import deep_update, parse_set, read_yaml
 
-    if not args.max_input_age > 0:
-        raise ConfigError(f"--max-input-age must be > 0 s, got {args.max_input_age}")
-    if not 0 <= args.command_latency <= 1:
-        raise ConfigError(f"--command-latency must be 0..1 s, got {args.command_latency}")
-    from ..ros.agent_node import AgentNodeConfig
+    tree: dict = read_yaml(args.config, "--config") if args.config else {}
+    if getattr(args, "field", DEFAULT_FIELD) != DEFAULT_FIELD:
+        tree["field"] = args.field
+    opts: dict = {}
+    if args.robot is not None:
+        opts["robot"] = args.robot
+    if args.server_host is not None:
+        opts.setdefault("server", {})["host"] = args.server_host
+    if args.server_port is not None:
+        opts.setdefault("server", {})["port"] = args.server_port
+    deep_update(tree, opts)
+    deep_update(tree, parse_set(args.set))
+    return tree
 
-    cfg = AgentNodeConfig(field=getattr(args, "field", DEFAULT_FIELD), robot=args.robot,
-                          server_host=args.server_host, server_port=args.server_port,
-                          max_input_age=args.max_input_age, command_latency=args.command_latency)
+
+def run(args) -> int:
+    from ..agent.settings import agent_settings
+
+    params = {} if args.defaults else settings_tree(args)
+    cfg = agent_settings(params)  # a bad name or value: a clear error before the middleware starts
     if getattr(args, "print_params", False):
-        print(cfg)
+        from ..agent.settings import HEADER
+        from ..settings import to_yaml
+
+        print(to_yaml(cfg, HEADER if args.defaults else ""), end="")
         return 0
-    from dataclasses import asdict
-
     from ..ros.cli import run_node
-
-    params = asdict(cfg)
 
     def make_node(node):
         from ..ros.agent_node import AgentNode, config_from_params, node_params
@@ -64,4 +76,4 @@ def run(args) -> int:
         return AgentNode(config_from_params(node_params(node, params)), node).start()
 
     return run_node(args, "agent", params, make_node, lambda n: f"{args.name} running (field {n.field.name}, "
-                                                           f"server udp {cfg.server_host}:{cfg.server_port})")
+                                                           f"server udp {cfg.server.host}:{cfg.server.port})")

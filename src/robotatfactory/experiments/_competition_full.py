@@ -115,7 +115,8 @@ def _udp_port() -> int:
 
 
 def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path: bool = False,
-                    field_name: str | None = None, simulator: str = "standin", localize: tuple[str, ...] = ()) -> dict:
+                    field_name: str | None = None, simulator: str = "standin", localize: tuple[str, ...] = (),
+                    agent: tuple[str, ...] = ()) -> dict:
     """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
     :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``).
 
@@ -158,7 +159,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                       "--server-port", str(server_port), "--trace", str(trace_path), "--end-after-max",
                       str(END_AFTER_MAX), "--status-every", "5", env=env, may_exit=True)
             _wait_logged(procs, "referee", "running", 60.0)
-        procs.raf("agent", *field_args, "agent", "--server-port", str(server_port), env=env)
+        procs.raf("agent", *field_args, "agent", "--set", f"server.port={server_port}",
+                  *[a for s in agent for a in ("--set", s)], env=env)
         _wait_logged(procs, "agent", "running", 60.0)
         if simtwo:
             procs.raf("sim", *field_args, "simtwo", "run", "--port", str(sim_port), "--bridge",

@@ -29,8 +29,9 @@ worst time of the last scoring delivery, and the targets of the issue:
 - median last-delivery time: round 1 <= 60 s, round 2 <= 80 s, round 3 <= 120 s (simulated);
 - full_stack: the agent's pose input within 2 cm of the truth while it picks or places, in every run.
 
-Options of mode bare_truth: ``--sim NAME=VALUE`` (a SimConfig field, e.g. ``magnet=weld``), ``--agent
-NAME=VALUE`` (RoundAgent settings), ``--drive NAME=VALUE`` (DriveLimits), ``--pose-noise M,RAD``,
+``--agent NAME=VALUE`` (an agent setting, agent/settings.py, e.g. ``dock.place_speed=0.12`` or
+``drive.k_heading=8``) in every mode: the whole stack gives it to ``raf agent`` (``--set``). Options of mode
+bare_truth: ``--sim NAME=VALUE`` (a SimConfig field, e.g. ``magnet=weld``), ``--pose-noise M,RAD``,
 ``--pose-delay CYCLES`` and ``--cmd-delay CYCLES`` (the agent's pose noisy and late, its commands late);
 per run also the time split per ``RoundAgent.activity``.
 
@@ -67,14 +68,6 @@ for _m in (*MODES, SIMTWO_MODE):
         TARGETS[f"{_m}_r{_r}_parts_knocked_out"] = "== 0 (out of their slots)"
         if _m != "bare_truth":
             TARGETS[f"{_m}_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
-AGENT_SETTINGS = ("place_straight", "place_min_radius", "pick_straight", "pick_min_radius", "min_radius", "smooth",
-                  "uncertainty_limit", "carry_arcs", "carry_radius", "carry_a_lat", "carry_inflate", "v_dock",
-                  "v_place", "place_standoff", "carry_w_max", "carry_alpha_max", "carry_v_max", "carry_v_back",
-                  "carry_margin", "choose_by_time", "reserve_outgoing", "join_inflate", "carry_long_spin",
-                  "carry_w_long_spin", "escape_tries", "escape_time")
-DRIVE_SETTINGS = ("v_max", "a_max", "k_heading", "k_drive", "a_lat", "v_wheel", "slow_distance", "lookahead", "heading_tolerance", "w_max",
-                  "alpha_max", "v_final")
-
 
 def add_arguments(parser) -> None:
     parser.add_argument("--mode", choices=MODES, default="full_stack",
@@ -97,9 +90,6 @@ def add_arguments(parser) -> None:
     parser.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--jobs", type=int, default=2, help="runs at once (default 2: the machine's cores)")
     parser.add_argument("--limit", type=float, default=300.0, help="simulated seconds per run (default 300)")
-    parser.add_argument("--drive", metavar="NAME=VALUE", action="append", default=[],
-                        help="a DriveLimits setting for the agent, e.g. k_heading=8 (repeatable; "
-                             f"one of {', '.join(DRIVE_SETTINGS)})")
     parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
                         help="a SimConfig setting of the bare stand-in (repeatable), e.g. magnet=weld where the "
                              "simulator has that option; the default is the simulator's own default")
@@ -120,9 +110,9 @@ def add_arguments(parser) -> None:
                         help="full_stack: a setting of raf localize (its --set, repeatable), e.g. "
                              "scan_match/enabled=false; checked before any run starts")
     parser.add_argument("--agent", metavar="NAME=VALUE", action="append", default=[],
-                        help="a RoundAgent setting (repeatable; one of " + ", ".join(AGENT_SETTINGS)
-                             + "; smooth=0: stop and turn at every corner, the earlier behaviour; carry_arcs=0: turn on the spot "
-                             "with a part too)")
+                        help="an agent setting (agent/settings.py; config/agent.yaml lists them all), e.g. "
+                             "dock.place_speed=0.12, drive.k_heading=8 or legs.smooth=false (repeatable); the bare "
+                             "agent and raf agent on the whole stack both take them")
 
 
 def _name_values(items, option: str, allowed, what: str) -> list[tuple[str, str, str]]:
@@ -139,28 +129,19 @@ def _name_values(items, option: str, allowed, what: str) -> list[tuple[str, str,
     return out
 
 
-def _number(option: str, item: str, value: str, convert=float):
-    from ..errors import ConfigError
-
-    try:
-        return convert(value)
-    except ValueError:
-        raise ConfigError(f"{option} {item!r}: {value!r} is not a {'whole ' if convert is int else ''}number") from None
-
-
 def parse_agent(items) -> dict:
-    """``--agent NAME=VALUE`` items: RoundAgent settings, typed as the setting's default (a switch: 0 or 1)."""
-    from dataclasses import fields
+    """``--agent NAME=VALUE`` items as the nested tree of agent settings they set, checked now (a bad name or
+    value is a ConfigError before any run starts)."""
+    from ..agent.settings import agent_settings
+    from ..errors import ConfigError
+    from ..settings import parse_set
 
-    from ..agent.behaviour import RoundAgent
-
-    kinds = {f.name: type(f.default) for f in fields(RoundAgent)}
-    out = {}
-    for item, name, value in _name_values(items, "--agent", AGENT_SETTINGS, "one of " + ", ".join(AGENT_SETTINGS)):
-        kind = kinds.get(name, float)
-        out[name] = (bool(_number("--agent", item, value, int)) if kind is bool
-                     else _number("--agent", item, value, int) if kind is int else _number("--agent", item, value))
-    return out
+    tree = parse_set(list(items or ()))
+    try:
+        agent_settings(tree)
+    except ConfigError as e:
+        raise ConfigError(f"--agent: {e}") from None
+    return tree
 
 
 def parse_sim(items) -> dict:
@@ -179,14 +160,8 @@ def parse_sim(items) -> dict:
     return out
 
 
-def parse_drive(items) -> dict:
-    return {name: _number("--drive", item, value)
-            for item, name, value in _name_values(items, "--drive", DRIVE_SETTINGS,
-                                                  "one of " + ", ".join(DRIVE_SETTINGS))}
-
-
-def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | None = None,
-               field_name: str | None = None, record_path: bool = False, agent_options: dict | None = None,
+def play_round(round_no: int, seed: int, limit: float = 300.0,
+               field_name: str | None = None, record_path: bool = False, agent: dict | None = None,
                sim_options: dict | None = None, pose_noise: tuple[float, float] = (0.0, 0.0),
                pose_delay: int = 0, pose_predict: bool = False, cmd_delay: int = 0) -> dict:
     """One round on the bare stand-in with ground truth as the agent's pose; a flat dict of the run's
@@ -194,7 +169,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     ``cmd_delay``: the agent's commands run that many cycles late (the whole stack's loop: 2)."""
     from ..agent.behaviour import RoundAgent
     from ..agent.client import FactoryClient
-    from ..agent.follower import DriveLimits
+    from ..agent.settings import agent_settings
     from ..competition import FactoryServer
     from ..field import load_field
     from ..robot import load_robot
@@ -204,7 +179,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
 
     field = load_field(field_name) if field_name else load_field()
     robot = load_robot()
-    limits = DriveLimits.from_robot(robot, **(drive or {}))
+    settings = agent_settings(agent)
     wall0 = time.perf_counter()
     sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, round_no=round_no, seed=seed,
                                             start_after=1.0, **(sim_options or {})))
@@ -218,7 +193,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0, drive: dict | Non
     try:
         with FactoryClient(*server.address, timeout=0.5) as client:
             client.wait_pong()
-            agent = RoundAgent(field, robot, limits=limits, **(agent_options or {}))
+            agent = RoundAgent(field, robot, settings)
             contact = False
             while sim.time < limit and agent.mode != "done":
                 if agent.wants_state:
@@ -293,23 +268,22 @@ class _PoseChannel:
 
 
 def _job(spec):
-    round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay, *rest = spec
+    round_no, seed, limit, field_name, record, agent, sim_options, noise, delay, *rest = spec
     try:
-        return play_round(round_no, seed, limit, drive, field_name, record, agent_options, sim_options, noise, delay,
-                          *rest)
+        return play_round(round_no, seed, limit, field_name, record, agent, sim_options, noise, delay, *rest)
     except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
         return _failed(round_no, seed, e)
 
 
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None,
-              simulator: str = "standin", localize: tuple[str, ...] = ()) -> dict:
+              simulator: str = "standin", localize: tuple[str, ...] = (), agent: tuple[str, ...] = ()) -> dict:
     from ._competition_full import SimStartError, play_full_stack
 
     tries = 3
     while True:
         tries -= 1
         try:
-            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize)
+            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent)
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
                 return _failed(round_no, seed, e)
@@ -542,7 +516,6 @@ def run(args, out_dir: Path | None) -> dict:
         raise ConfigError(f"--rounds {args.rounds!r}: rounds are 1, 2 and 3")
     if args.seeds < 1:
         raise ConfigError("--seeds must be at least 1")
-    drive = parse_drive(args.drive)
     field_name = getattr(args, "field", None)
     if simulator == "simtwo":  # SimTwo's scene is not the rules' field
         from ..field import DEFAULT_FIELD
@@ -550,7 +523,8 @@ def run(args, out_dir: Path | None) -> dict:
 
         field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
     first = int(args.first_seed)
-    agent_options = parse_agent(getattr(args, "agent", None))
+    agent_items = tuple(getattr(args, "agent", None) or ())
+    agent_options = parse_agent(agent_items)
     sim_options = parse_sim(getattr(args, "sim", None))
     try:
         noise = tuple(float(x) for x in str(getattr(args, "pose_noise", "0,0")).split(","))
@@ -561,7 +535,7 @@ def run(args, out_dir: Path | None) -> dict:
     cmd_delay = int(getattr(args, "cmd_delay", 0))
     if delay < 0 or cmd_delay < 0:
         raise ConfigError("--pose-delay and --cmd-delay must be >= 0")
-    specs = [(r, s, float(args.limit), drive, field_name, out_dir is not None and s == first, agent_options,
+    specs = [(r, s, float(args.limit), field_name, out_dir is not None and s == first, agent_options,
               sim_options, noise, delay, bool(getattr(args, "pose_predict", False)), cmd_delay)
              for r in rounds for s in range(first, first + args.seeds)]
     t0 = time.perf_counter()
@@ -577,18 +551,18 @@ def run(args, out_dir: Path | None) -> dict:
 
         load_config(overrides=parse_set(list(localize)))  # a bad name or value: ConfigError now, not in each run
     if mode.endswith("full_stack"):  # realtime: each run is its own private graph; --jobs of them at once (threads)
-        if drive or agent_options or sim_options or any(noise) or delay or cmd_delay:
-            raise ConfigError("--drive, --agent, --sim, --pose-noise, --pose-delay and --cmd-delay are not passed to the whole "
-                              "stack (full_stack): the nodes use their defaults and the EKF's pose")
+        if sim_options or any(noise) or delay or cmd_delay:
+            raise ConfigError("--sim, --pose-noise, --pose-delay and --cmd-delay are bare_truth's: the whole stack "
+                              "(full_stack) runs raf sim's defaults and the agent on the EKF's pose")
         if getattr(args, "analyse", None):  # the runs kept in a directory, measured again with this code
             runs = [_reanalysed(Path(args.analyse), r, s, rec, field_name, simulator)
-                    for r, s, _l, _d, _f, rec, *_ in specs]
+                    for r, s, _l, _f, rec, *_ in specs]
         else:
             from concurrent.futures import ThreadPoolExecutor
 
             with ThreadPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
-                runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[5], field_name, simulator,
-                                                          localize), specs))
+                runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[4], field_name, simulator,
+                                                          localize, agent_items), specs))
     elif jobs == 1 or len(specs) == 1:
         runs = [_job(s) for s in specs]
     else:
@@ -600,7 +574,6 @@ def run(args, out_dir: Path | None) -> dict:
         if "error" in r:
             print(f"round {r['round']} seed {r['seed']}: {r['error']}", file=sys.stderr)
     out = summarize(mode, runs)
-    out["drive_settings"] = json.dumps(drive) if drive else "defaults"
     out["agent_settings"] = json.dumps(agent_options) if agent_options else "defaults"
     out["sim_settings"] = json.dumps(sim_options) if sim_options else "defaults"
     out["pose_noise_m_rad"] = ",".join(f"{x:g}" for x in noise)

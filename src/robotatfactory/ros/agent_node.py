@@ -12,15 +12,16 @@ Talks to the factory-state server over UDP (a thread polls it whenever the agent
 never waits on the network).
 
 Every control period (the robot's, 40 ms, ROS time: simulation time under ``/use_sim_time``) it steps the
-agent with the latest pose brought forward to now with odometry's speeds (:mod:`..agent.predict`), or with None when the pose or odometry is older than ``max_input_age``
-seconds (the agent then brakes to a stop). Bad messages are counted and skipped.
+agent with the latest pose brought forward to now with odometry's speeds (:mod:`..agent.predict`), or with
+None when the pose or odometry is older than ``max_input_age`` seconds (the agent then brakes to a stop). Bad
+messages are counted and skipped. Its settings, the round agent's included, are one
+:class:`~..agent.settings.AgentSettings`, read from the node's parameters.
 """
 from __future__ import annotations
 
 import math
 import threading
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -33,10 +34,10 @@ from ..agent.behaviour import RoundAgent
 from ..agent.client import FactoryClient, ServerReplyError, ServerTimeout
 from ..agent.footprint import pose_in_front
 from ..agent.predict import InFlight, extrapolate
+from ..agent.settings import AgentSettings, agent_settings
 from ..agent.tasks import Move, Wait, plan_round
 from ..field import load_field
 from ..robot import load_robot
-from ..simtwo.ports import SERVER_UDP_PORT
 from . import messages as rm
 from .mw import QoS
 from .mw.base import OK, WARN, Node
@@ -44,29 +45,16 @@ from .mw.base import OK, WARN, Node
 SUBSCRIBED = ("pose", "odom", "contact")  # the only inputs; a test checks no other is subscribed
 
 
-@dataclass(frozen=True)
-class AgentNodeConfig:
-    """The node's settings: field and robot names, the server's address, the staleness limit (s)."""
-
-    field: str = "rules2026"
-    robot: str = "simtwo"
-    server_host: str = "127.0.0.1"
-    server_port: int = SERVER_UDP_PORT
-    max_input_age: float = 0.5
-    map_frame: str = "map"
-    command_latency: float = 0.08  # s from publishing cmd_vel to the cycle that runs it (agent/predict.py)
-
-
 class AgentNode:
     """The agent on a middleware node (:mod:`.mw`): ``start()`` subscribes, publishes and starts the control
     timer (node clock), ``stop()`` stops the robot."""
 
-    def __init__(self, cfg: AgentNodeConfig, node: Node):
+    def __init__(self, cfg: AgentSettings, node: Node):
         self.cfg = cfg
         self.node = node
         self.field = load_field(cfg.field)
         self.robot = load_robot(cfg.robot)
-        self.agent = RoundAgent(self.field, self.robot)
+        self.agent = RoundAgent(self.field, self.robot, cfg)
         self.lock = threading.RLock()
         self.pose: tuple[float, float, float] | None = None
         self.pose_cov: np.ndarray | None = None  # 3x3 (x, y, theta) of the latest pose
@@ -98,7 +86,7 @@ class AgentNode:
             node.subscribe("odom", Odometry, self.on_odom, QoS.RELIABLE, 5),
             node.subscribe("contact", Bool, self.on_contact, QoS.RELIABLE, 5),
         ]
-        self.client = FactoryClient(self.cfg.server_host, self.cfg.server_port, timeout=0.2, retries=2)
+        self.client = FactoryClient(self.cfg.server.host, self.cfg.server.port, timeout=0.2, retries=2)
         self._running = True
         self._poller = threading.Thread(target=self._poll_loop, name="raf-agent-server", daemon=True)
         self._poller.start()
@@ -158,7 +146,8 @@ class AgentNode:
             return
         now = self.node.now_s()
         with self.lock:
-            fresh = (now - self.pose_stamp <= self.cfg.max_input_age and now - self.odom_stamp <= self.cfg.max_input_age)
+            age = self.cfg.max_input_age
+            fresh = now - self.pose_stamp <= age and now - self.odom_stamp <= age
             # the estimate brought forward to now with the measured speeds (the EKF's stamp is older), then
             # through the commands in flight: the pose when this cycle's command will start to act
             pose = self.in_flight.ahead(extrapolate(self.pose, *self.twist, min(now - self.pose_stamp,
@@ -322,24 +311,10 @@ class AgentNode:
         return arr
 
 
-def config_from_params(p: dict) -> AgentNodeConfig:
-    """The node's settings from its private parameters (``~server_port`` ...); unknown keys are an error."""
-    from dataclasses import fields
-
-    from ..errors import ConfigError
-
-    known = {f.name: f.type for f in fields(AgentNodeConfig)}
-    unknown = sorted(set(p) - set(known))
-    if unknown:
-        raise ConfigError(f"unknown agent parameter(s) {', '.join(unknown)} (known: {', '.join(known)})")
-    cfg = AgentNodeConfig(**p)
-    if not (isinstance(cfg.server_port, int) and 0 < cfg.server_port < 65536):
-        raise ConfigError(f"server_port must be 1..65535, got {cfg.server_port!r}")
-    if not (isinstance(cfg.max_input_age, (int, float)) and cfg.max_input_age > 0):
-        raise ConfigError(f"max_input_age must be > 0 s, got {cfg.max_input_age!r}")
-    if not (isinstance(cfg.command_latency, (int, float)) and 0 <= cfg.command_latency <= 1):
-        raise ConfigError(f"command_latency must be 0..1 s, got {cfg.command_latency!r}")
-    return cfg
+def config_from_params(p: dict) -> AgentSettings:
+    """The node's settings from its private parameters (the tree of :class:`AgentSettings`:
+    ``~server/port`` on ROS 1, ``server.port`` on ROS 2); an unknown name or a bad value is a ConfigError."""
+    return agent_settings(p)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -349,27 +324,23 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def default_params() -> dict:
-    """The node's parameters with their defaults (what ROS 2 declares)."""
-    from dataclasses import asdict
+    """The node's parameters with their defaults (what ROS 2 declares): every agent setting."""
+    from ..settings import tree
 
-    return asdict(AgentNodeConfig())
-
-
-_DESCRIPTIONS = {
-    "field": "competition map (shipped name or a field .json)",
-    "robot": "robot file name or path",
-    "server_host": "factory-state server host",
-    "server_port": "factory-state server UDP port",
-    "max_input_age": "s after which pose/odom count as stale (the robot stops)",
-    "map_frame": "frame of agent/path and agent/markers",
-    "command_latency": "s from publishing cmd_vel to the simulator's cycle that runs it (the pose is predicted "
-                       "that far ahead; 0.08 on SimTwo and raf sim)",
-}
-_RANGES = {"server_port": (1, 65535), "max_input_age": (1e-3, 1e9), "command_latency": (0.0, 1.0)}
+    return tree(AgentSettings())
 
 
 def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
-    return _DESCRIPTIONS.get(name, ""), _RANGES.get(name)
+    """(description, (min, max) or None) of a parameter (``dock.approach_speed``): agent/settings.py's."""
+    from ..settings import descriptions
+
+    global _DESCRIPTIONS
+    if _DESCRIPTIONS is None:
+        _DESCRIPTIONS = descriptions(AgentSettings)
+    return _DESCRIPTIONS.get(name, ("", None))
+
+
+_DESCRIPTIONS: dict | None = None
 
 
 def node_params(node: Node, given: dict | None = None) -> dict:

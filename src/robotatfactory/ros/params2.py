@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from .mw.base import typed_like
+from .mw.base import flatten, typed_like
 
 ROOT = Path(__file__).resolve().parents[3]
 OUT_DIR = ROOT / "config" / "ros2"
@@ -37,6 +37,12 @@ OUT_DIR = ROOT / "config" / "ros2"
 
 def _bridge_defaults() -> dict:
     from .config import default_params
+
+    return default_params()
+
+
+def _agent_defaults() -> dict:
+    from .agent_node import default_params
 
     return default_params()
 
@@ -65,6 +71,7 @@ NODES = {
     "bridge": NodeFile("bridge", "raf_bridge", ROOT / "config" / "bridge.yaml", _bridge_defaults),
     "localization": NodeFile("localization", "raf_localization", ROOT / "config" / "localization.yaml",
                              _localization_defaults),
+    "agent": NodeFile("agent", "raf_agent", ROOT / "config" / "agent.yaml", _agent_defaults),
 }
 
 
@@ -149,9 +156,11 @@ def render(kind: str) -> str:
         for k, v in d.items():
             pad = " " * indent
             name = f"{prefix}{k}"
-            if isinstance(v, dict) and v:
+            if isinstance(v, dict) and v and any(x is not None for x in flatten(v, ".").values()):
                 lines.append(f"{pad}{k}:")
                 walk(v, indent + 2, name + ".")
+            elif v is None or isinstance(v, dict):  # unset (no ROS 2 parameter value): the node declares it unset
+                lines.append(f"{pad}# {k}: (unset)")
             else:
                 text = f"{pad}{k}: {scalar(v)}"
                 note = comments.get(name, "")
