@@ -446,3 +446,26 @@ def test_images_of_another_size_are_a_config_error(tmp_path):
     _write_bag(bag, [(0.1 * k, np.full((240, 320, 3), 128, np.uint8)) for k in range(3)])
     with pytest.raises(ConfigError, match="320x240"):
         calibrate.run(_calibrate_args(bag, tmp_path / "c.yaml"))
+
+
+def test_a_calibration_file_is_parsed_once_into_the_camera_the_bridge_and_the_localizer_share(tmp_path, fitted,
+                                                                                              monkeypatch):
+    from robotatfactory.commands import localize
+    from robotatfactory.localization.calibration import fileformat
+    from robotatfactory.localization.config import from_dict, robot_for
+    from robotatfactory.ros.config import load_config
+
+    p = cal.write_calibration(tmp_path / "once.yaml", replace(fitted.camera, distortion=(-0.02, 0, 0, 0, 0)), {})
+    parsed = []
+    real = fileformat._parse
+    monkeypatch.setattr(fileformat, "_parse", lambda path: parsed.append(path) or real(path))
+    # raf localize's path: the command's settings, their check, the node's settings, the robot's camera
+    largs = argparse.Namespace(config=None, field="rules2026", frame_prefix=None, set=[], calibration=str(p))
+    settings = localize.build_settings(largs)
+    from_dict(settings)  # the command checks them
+    robot = robot_for(from_dict(settings))  # the node reads them again
+    bridge_camera = load_config({"camera": {"calibration": str(p)}}).camera
+    assert len(parsed) == 1
+    assert bridge_camera == robot.camera  # one camera object's values, on both sides
+    p.write_text(p.read_text().replace("-0.02", "-0.035"))  # a changed file is read again
+    assert load_config({"camera": {"calibration": str(p)}}).distortion[0] == -0.035 and len(parsed) == 2

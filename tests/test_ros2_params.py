@@ -117,6 +117,10 @@ LOADER = textwrap.dedent("""
             from robotatfactory.ros.config import default_params, describe_param, load_config
             got = n.params(default_params(), describe_param)
             load_config(got)
+        elif kind == "agent":
+            from robotatfactory.ros.agent_node import config_from_params, node_params
+            got = node_params(n)
+            config_from_params(got)
         else:
             from robotatfactory.localization.config import from_dict
             from robotatfactory.ros.localization_node import node_params
@@ -143,6 +147,8 @@ def test_the_file_loads_into_the_ros2_node(kind, tmp_path):
     params = doc[f"/**/{NODES[kind].node}"]["ros__parameters"]
     if kind == "bridge":
         params["udp"]["port"] = 9999
+    elif kind == "agent":
+        params["dock"]["place_speed"] = 0.12
     else:
         params["node"]["log_period"] = 7.0
     f = tmp_path / "p.yaml"
@@ -156,6 +162,9 @@ def test_the_file_loads_into_the_ros2_node(kind, tmp_path):
     if kind == "bridge":
         assert got["udp"]["port"] == 9999
         expect["udp"]["port"] = 9999
+    elif kind == "agent":
+        assert got["dock"]["place_speed"] == 0.12 and got["drive"]["k_heading"] is None  # unset: declared unset
+        expect["dock"]["place_speed"] = 0.12
     else:
         assert got["node"]["log_period"] == 7.0
         expect["node"]["log_period"] = 7.0

@@ -30,8 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cam.add_argument("--camera", metavar="ENDPOINT", help=f"ZMQ endpoint of the camera (default tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT})")
     cam.add_argument("--no-camera", action="store_true", help="do not subscribe to the camera")
     parser.add_argument("--calibration", metavar="FILE",
-                        help="camera calibration YAML from raf calibrate: camera_info K and D and the camera TF "
-                             "(after --config, before --set)")
+                        help="camera calibration YAML from raf calibrate (the setting camera/calibration): "
+                             "camera_info K and D and the camera TF")
     add_node_arguments(parser, "raf_bridge")
 
 
@@ -53,24 +53,14 @@ def build_params(args) -> dict:
     if args.no_camera:
         opts.setdefault("camera", {})["enabled"] = False
     if getattr(args, "calibration", None):
-        opts.setdefault("camera", {}).update(calibration_params(args.calibration))
+        from pathlib import Path
+
+        opts.setdefault("camera", {})["calibration"] = str(Path(args.calibration).resolve())
     if args.frame_prefix is not None:
         opts["frame_prefix"] = args.frame_prefix
     deep_update(params, opts)
     deep_update(params, parse_set(args.set))
     return params
-
-
-def calibration_params(path: str) -> dict:
-    """The bridge's ``camera/...`` parameters set by a calibration file (``raf calibrate``)."""
-    from ..localization.calibration import load_calibration
-
-    c = load_calibration(path).camera
-    out = {k: c[k] for k in ("fx", "fy", "cx", "cy", "xyz", "pitch_down_deg", "roll_deg", "width", "height")
-           if k in c}
-    if "distortion" in c:
-        out["distortion"] = [float(v) for v in c["distortion"]] + [0.0] * (5 - len(c["distortion"]))
-    return out
 
 
 def run(args) -> int:

@@ -43,10 +43,7 @@ def build_settings(args) -> dict:
         d["field"] = args.field
     if args.frame_prefix is not None:
         d["frame_prefix"] = args.frame_prefix
-    if getattr(args, "calibration", None):
-        from ..localization.calibration import load_calibration
-
-        load_calibration(args.calibration)  # a bad file is an error now, not in the node
+    if getattr(args, "calibration", None):  # checked with the settings (from_dict), before the node starts
         d["calibration"] = str(Path(args.calibration).resolve())
     deep_update(d, parse_set(args.set))
     return d

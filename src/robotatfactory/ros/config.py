@@ -11,7 +11,7 @@ import copy
 import ipaddress
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ..errors import ConfigError
@@ -87,7 +87,7 @@ def default_params(robot: RobotSpec | None = None) -> dict:
             "delivery_lag": 0.001,
         },
         "camera": {
-            "enabled": True, "endpoint": f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}",
+            "enabled": True, "endpoint": f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}", "calibration": "",
             "xyz": list(cam.xyz), "pitch_down_deg": cam.pitch_down_deg, "roll_deg": cam.roll_deg,
             "distortion": list(cam.distortion),
             "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
@@ -377,6 +377,30 @@ def _control(p: dict) -> tuple[str, int] | None:
     return host, int(port)
 
 
+def _calibrated(cfg: BridgeConfig, path: str, defaults: dict) -> BridgeConfig:
+    """``cfg`` with the camera of a calibration file (raf calibrate), parsed once into the camera object raf
+    localize makes of it too (``Calibration.apply``). A camera/* value set to something else than the robot
+    file's (``--set camera/cy=240.25``, a launch file's) is a deliberate override and stays."""
+    from ..localization.calibration import load_calibration
+
+    try:
+        cam = load_calibration(path).apply(cfg.camera)
+    except ConfigError as e:
+        raise ConfigError(f"parameter ~camera/calibration: {e}") from None
+    out = {}
+    for key, attr, value in (("xyz", "camera_xyz", tuple(cam.xyz)), ("pitch_down_deg", "camera_pitch_down_deg",
+                                                                      cam.pitch_down_deg),
+                             ("roll_deg", "camera_roll_deg", cam.roll_deg),
+                             ("distortion", "distortion", tuple(cam.distortion)),
+                             ("fx", "fx", cam.fx), ("fy", "fy", cam.fy), ("cx", "cx", cam.cx), ("cy", "cy", cam.cy)):
+        given = getattr(cfg, attr)
+        default = defaults[key]
+        unchanged = (list(given) == [float(v) for v in default]) if isinstance(given, tuple) else \
+            given == float(default)
+        out[attr] = value if unchanged else given
+    return replace(cfg, **out)
+
+
 def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -> BridgeConfig:
     """Defaults merged with ``overrides`` (nested dict as in config/bridge.yaml), validated."""
     base = default_params(robot)
@@ -474,6 +498,9 @@ def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -
     if not (0 <= cfg.cx <= cfg.width and 0 <= cfg.cy <= cfg.height):
         raise ConfigError(f"parameters ~camera/cx, ~camera/cy ({cfg.cx}, {cfg.cy}) must lie in the "
                           f"{cfg.width}x{cfg.height} image")
+    calibration = _str(p, ("camera", "calibration"))
+    if calibration:
+        cfg = _calibrated(cfg, calibration, base["camera"])
     _check_field(cfg.field)
     return cfg
 

@@ -72,7 +72,27 @@ class Calibration:
 
 
 def load_calibration(path: str | Path) -> Calibration:
-    """Read and check a calibration YAML (``camera:`` mapping; ``fit:`` optional)."""
+    """Read and check a calibration YAML (``camera:`` mapping; ``fit:`` optional), once per process: every
+    consumer (the command's check, the settings, the node, the camera object) gets the same
+    :class:`Calibration` until the file changes."""
+    p = Path(path)
+    try:
+        st = p.stat()
+        key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        key = None  # missing: _parse says so
+    if key is not None and key in _LOADED:
+        return _LOADED[key]
+    cal = _parse(path)
+    if key is not None:
+        _LOADED[key] = cal
+    return cal
+
+
+_LOADED: dict[tuple, Calibration] = {}
+
+
+def _parse(path: str | Path) -> Calibration:
     from ...settings import read_yaml
 
     d = read_yaml(path, "calibration file")
