@@ -160,7 +160,7 @@ def _value(path: str, v: Any, f: dataclasses.Field) -> Any:
     elif kind in (tuple, list):
         if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
             raise bad
-        v = tuple(v)
+        v = tuple(tuple(x) if isinstance(x, list) else x for x in v)
     if m["choices"] and v not in m["choices"]:
         raise bad
     return v
@@ -184,6 +184,8 @@ def build(cls: type, values: Mapping | None = None, where: str = ""):
     for name, v in values.items():
         f, path = fields[name], _join(where, name)
         sub = f.metadata.get("section")
+        if not sub and "kind" not in f.metadata:  # a plain field: set in code, not from settings
+            raise ConfigError(f"{path} is not a setting (set in code only)")
         kw[name] = build(sub, v, path) if sub else _value(path, v, f)
     obj = cls(**kw)
     if hasattr(obj, "check"):
@@ -191,10 +193,15 @@ def build(cls: type, values: Mapping | None = None, where: str = ""):
     return obj
 
 
+def _settings_fields(obj) -> list:
+    """The fields of a settings dataclass that are settings or sections (not the plain ones set in code)."""
+    return [f for f in dataclasses.fields(obj) if "kind" in f.metadata or f.metadata.get("section")]
+
+
 def tree(obj) -> dict:
     """A settings object as the nested mapping :func:`build` reads (tuples as lists: YAML's and ROS's)."""
     out = {}
-    for f in dataclasses.fields(obj):
+    for f in _settings_fields(obj):
         v = getattr(obj, f.name)
         out[f.name] = tree(v) if f.metadata.get("section") else list(v) if isinstance(v, tuple) else v
     return out
@@ -208,7 +215,7 @@ def to_yaml(obj, header: str = "", indent: int = 0) -> str:
 
     lines = [f"# {h}".rstrip() for h in header.splitlines()] if header else []
     pad = " " * indent
-    for f in dataclasses.fields(obj):
+    for f in _settings_fields(obj):
         v, doc = getattr(obj, f.name), f.metadata.get("doc", "")
         if f.metadata.get("section"):
             empty = all(getattr(v, g.name) is None for g in dataclasses.fields(v))  # all unset: an empty mapping
@@ -229,7 +236,7 @@ def to_yaml(obj, header: str = "", indent: int = 0) -> str:
 def descriptions(cls: type, sep: str = ".", where: str = "") -> dict[str, tuple[str, tuple | None]]:
     """``{path: (doc, (lo, hi) or None)}`` of every setting of ``cls`` (ROS 2's parameter descriptors)."""
     out: dict = {}
-    for f in dataclasses.fields(cls):
+    for f in _settings_fields(cls):
         path = f"{where}{sep}{f.name}" if where else f.name
         sub = f.metadata.get("section")
         if sub:

@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
-from ..sim.config import MAGNETS, PID_TIMINGS, SPEED_CONTROLS
+from ..sim.config import (CAMERA_TIMINGS, LIDAR_UPDATES, MAGNETS, PID_TIMINGS, REPLY_TIMINGS, SPEED_CONTROLS,
+                          SimConfig)
 
 NAME = "sim"
 HELP = "run the stand-in simulator: MuJoCo physics, SimTwo's UDP/ZMQ protocol, the competition and its server"
@@ -36,11 +37,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     cam.add_argument("--camera-bind", default=f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}", metavar="ENDPOINT",
                      help=f"ZMQ PUB endpoint of the camera (default tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT})")
     cam.add_argument("--no-camera", action="store_true", help="do not render or publish camera frames")
-    g.add_argument("--camera-timing", choices=("simtwo", "grid"), default="simtwo",
+    g.add_argument("--camera-timing", choices=CAMERA_TIMINGS,
                    help="when camera frames are rendered: simtwo (default: as SimTwo's GUI loop, at the ends of "
                         "17 ms physics chunks chosen by a wall clock, not a grid of simulation time) or grid "
                         "(the idealisation: every 1/15 s of simulation time); docs/simulator.md")
-    g.add_argument("--reply-timing", choices=("simtwo", "every_cycle"), default="simtwo",
+    g.add_argument("--reply-timing", choices=REPLY_TIMINGS,
                    help="free-running: when the controller's replies are read: simtwo (default: only at the first "
                         "script call of each GUI turn of that same loop, and of several replies read at once the "
                         "first is applied, as SimTwo's ReadUDPData) or every_cycle (the idealisation: the newest "
@@ -84,16 +85,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--duration", type=float, default=None, metavar="S",
                    help="simulation seconds to run, then print the score and exit (default: until Ctrl-C)")
 
-    g = p.add_argument_group("scene and competition")
-    g.add_argument("--seed", type=int, default=0, help="seed of the round draw and the sensor noise (default 0)")
-    g.add_argument("--round", type=int, choices=(1, 2, 3), default=1, dest="round_no", help="round (default 1)")
+    g = p.add_argument_group("scene and competition (the simulator's settings: sim/config.py SimConfig)")
+    g.add_argument("--config", metavar="FILE", help="YAML of SimConfig settings, e.g. 'magnet: weld' (the options "
+                                                     "below and --set go over it)")
+    g.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
+                   help="set one SimConfig setting, e.g. lidar_update=per_ray (repeatable; last)")
+    g.add_argument("--seed", type=int, help=f"seed of the round draw and the sensor noise (default {SimConfig.seed})")
+    g.add_argument("--round", type=int, choices=(1, 2, 3), dest="round_no",
+                   help=f"round (default {SimConfig.round_no})")
     g.add_argument("--parts", default=None, metavar="RGBX",
                    help="incoming warehouse layout, slot 1 first (R, G, B or X for empty) instead of the draw")
-    g.add_argument("--processing-delay", type=float, default=10.0, metavar="S",
-                   help="machine processing time in simulation seconds (default 10)")
-    g.add_argument("--start-after", type=float, default=0.0, metavar="S",
-                   help="simulation seconds before the run starts; the server says STOP until then (default 0)")
-    g.add_argument("--robots", type=int, default=1, metavar="N",
+    g.add_argument("--processing-delay", type=float, metavar="S",
+                   help=f"machine processing time in simulation seconds (default {SimConfig.processing_delay:g})")
+    g.add_argument("--start-after", type=float, metavar="S",
+                   help="simulation seconds before the run starts; the server says STOP until then (default "
+                        f"{SimConfig.start_after:g})")
+    g.add_argument("--robots", type=int, default=SimConfig.robots, metavar="N",
                    help="robots in the scene, 1..4 (default 1). Robot k's command, bridge and camera ports are "
                         "robot 1's + 10*(k-1) (printed at start); one factory server sees them all; no control "
                         "channel with several robots; start poses: the start area's 2x2 cells or --start-pose")
@@ -104,19 +111,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--robot", default="simtwo", help="robot parameters: shipped name or a .json file (default simtwo)")
 
     g = p.add_argument_group("SimTwo fidelity (defaults behave like SimTwo; the rest are idealisations, docs/simulator.md)")
-    g.add_argument("--lidar-update", choices=("sweep", "per_ray"), default="sweep",
+    g.add_argument("--lidar-update", choices=LIDAR_UPDATES,
                    help="sweep: all rays published at once once per period, 0 before the first (SimTwo); per_ray: "
                         "each ray as soon as measured (default sweep)")
     g.add_argument("--no-lidar-self-hits", action="store_true",
                    help="let the LIDAR's rays pass through the robot's own wheels (SimTwo's hit them)")
-    g.add_argument("--speed-control", choices=SPEED_CONTROLS, default="simtwo",
+    g.add_argument("--speed-control", choices=SPEED_CONTROLS,
                    help="simtwo: SimTwo's CalcPID set once (default); simtwo_per_cycle: its integral reset every "
                         "cycle (SetMotorControllerState each cycle); ideal_pi: the stand-in's own 1 ms PI")
     g.add_argument("--pid-timing", choices=PID_TIMINGS,
-                   default="script_enabled",
                    help="when SimTwo's PID runs against the script calls: script_enabled (0 V for 9 ms after each "
                         "call, default), scene_enabled or script_holds_voltage (no gap)")
-    g.add_argument("--magnet", choices=MAGNETS, default="force",
+    g.add_argument("--magnet", choices=MAGNETS,
                    help="force: SimTwo's electromagnet, a 5 N pull along one 2 cm ray while it meets a part's plate, "
                         "every physics step: a part can hang askew, slip off or be lost (default); weld: the "
                         "idealisation, a facing plate is welded flat to the magnet and never lost")
@@ -144,7 +150,8 @@ def run(args) -> int:
     from ..errors import ConfigError
     from ..field import load_field
     from ..robot import load_robot
-    from ..sim import SimConfig, parse_pose
+    from ..sim import parse_pose
+    from ..sim.config import sim_config
     from ..sim.control import control_port_for
     from ..sim.runner import RunnerConfig, parse_address
 
@@ -170,14 +177,9 @@ def run(args) -> int:
         if args.control_port is not None or args.paused:
             raise ConfigError("--control-port and --paused need the control channel, which runs with one robot only")
     snapshot = args.snapshot is not None
-    config = SimConfig(seed=args.seed, start_pose=start_pose, robots=n, start_poses=start_poses,
-                       beacons=args.beacons,
-                       camera=not args.no_camera and not snapshot, round_no=args.round_no, parts=args.parts,
-                       processing_delay=args.processing_delay, start_after=args.start_after,
-                       camera_timing=args.camera_timing, reply_timing=args.reply_timing,
-                       lidar_update=args.lidar_update, lidar_self_hits=not args.no_lidar_self_hits,
-                       speed_control=args.speed_control, simtwo_pid_timing=args.pid_timing,
-                       magnet=args.magnet)
+    config = sim_config(sim_settings(args, start_pose, start_poses, snapshot))
+    if config.robots != n:
+        raise ConfigError(f"robots {config.robots}: give the number of robots with --robots (ports follow it)")
     if args.status_every < 0:
         raise ConfigError(f"--status-every {args.status_every}: must be >= 0")
 
@@ -196,7 +198,7 @@ def run(args) -> int:
         finally:
             sim.close()
         print(f"wrote {args.snapshot} ({args.snapshot_camera} view, field {field.name}, "
-              f"{len(sim.parts.ids)} parts, round {args.round_no})")
+              f"{len(sim.parts.ids)} parts, round {config.round_no})")
         return 0
 
     runner_config = RunnerConfig(
@@ -249,6 +251,31 @@ def run(args) -> int:
     if result.report is not None:
         print(result.report, flush=True)
     return result.exit_code
+
+
+def sim_settings(args, start_pose=None, start_poses=None, snapshot: bool = False) -> dict:
+    """The simulator's settings (SimConfig) the command line gives, as a nested tree: ``--config``, then the
+    options (an option not given leaves the setting alone), then ``--set``."""
+    from ..settings import deep_update, parse_set, read_yaml
+
+    tree: dict = read_yaml(args.config, "--config") if args.config else {}
+    given = {"seed": args.seed, "round_no": args.round_no, "parts": args.parts,
+             "processing_delay": args.processing_delay, "start_after": args.start_after,
+             "camera_timing": args.camera_timing, "reply_timing": args.reply_timing,
+             "lidar_update": args.lidar_update, "speed_control": args.speed_control,
+             "simtwo_pid_timing": args.pid_timing, "magnet": args.magnet,
+             "start_pose": list(start_pose) if start_pose else None,
+             "start_poses": [list(p) for p in start_poses] if start_poses else None}
+    deep_update(tree, {k: v for k, v in given.items() if v is not None})
+    if args.robots != 1:
+        tree["robots"] = args.robots
+    for flag, name in ((args.beacons, "beacons"), (args.no_lidar_self_hits, "lidar_self_hits")):
+        if flag:
+            tree[name] = name == "beacons"
+    if args.no_camera or snapshot:
+        tree["camera"] = False
+    deep_update(tree, parse_set(args.set))
+    return tree
 
 
 def _run_several(field, sim, runner_config) -> int:

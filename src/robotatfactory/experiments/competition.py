@@ -115,20 +115,6 @@ def add_arguments(parser) -> None:
                              "agent and raf agent on the whole stack both take them")
 
 
-def _name_values(items, option: str, allowed, what: str) -> list[tuple[str, str, str]]:
-    """``NAME=VALUE`` items of ``option`` as (item, name, value); a name not in ``allowed`` is an error."""
-    from ..errors import ConfigError
-
-    out = []
-    for item in items or ():
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if not sep or name not in allowed:
-            raise ConfigError(f"{option} {item!r}: expected NAME=VALUE with NAME {what}")
-        out.append((item, name, value))
-    return out
-
-
 def parse_agent(items) -> dict:
     """``--agent NAME=VALUE`` items as the nested tree of agent settings they set, checked now (a bad name or
     value is a ConfigError before any run starts)."""
@@ -145,19 +131,21 @@ def parse_agent(items) -> dict:
 
 
 def parse_sim(items) -> dict:
-    """``--sim NAME=VALUE`` items: SimConfig fields for the bare stand-in (a number where it parses as one)."""
-    import dataclasses
+    """``--sim NAME=VALUE`` items: SimConfig settings for the bare stand-in, checked now as ``raf sim --set``
+    checks them (a setting the run sets itself is refused)."""
+    from ..errors import ConfigError
+    from ..settings import parse_set
+    from ..sim.config import sim_config
 
-    from ..sim import SimConfig
-
-    names = {f.name for f in dataclasses.fields(SimConfig)} - {"camera", "lidar", "round_no", "seed", "start_after"}
-    out = {}
-    for _item, name, value in _name_values(items, "--sim", names, "a SimConfig field the run does not set"):
-        try:
-            out[name] = int(value) if value.strip().lstrip("-").isdigit() else float(value)
-        except ValueError:
-            out[name] = value.strip()
-    return out
+    tree = parse_set(list(items or ()))
+    fixed = sorted(set(tree) & {"camera", "lidar", "round_no", "seed", "start_after", "competition"})
+    if fixed:
+        raise ConfigError(f"--sim {', '.join(fixed)}: the experiment sets these itself (--rounds, --seeds, ...)")
+    try:
+        sim_config(tree)
+    except ConfigError as e:
+        raise ConfigError(f"--sim: {e}") from None
+    return tree
 
 
 def play_round(round_no: int, seed: int, limit: float = 300.0,
@@ -173,7 +161,8 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
     from ..competition import FactoryServer
     from ..field import load_field
     from ..robot import load_robot
-    from ..sim import SimConfig, Simulator
+    from ..sim import Simulator
+    from ..sim.config import sim_config
     from ..simtwo import Command
     from ._competition_observe import RunObserver
 
@@ -181,8 +170,8 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
     robot = load_robot()
     settings = agent_settings(agent)
     wall0 = time.perf_counter()
-    sim = Simulator(field, robot, SimConfig(camera=False, lidar=False, round_no=round_no, seed=seed,
-                                            start_after=1.0, **(sim_options or {})))
+    sim = Simulator(field, robot, sim_config({**(sim_options or {}), "camera": False, "lidar": False,
+                                              "round_no": round_no, "seed": seed, "start_after": 1.0}))
     server = FactoryServer(sim.factory, port=0, clock=lambda: sim.time).start()
     obs = RunObserver(field, robot, record_path)
     pose_in = _PoseChannel(robot, pose_noise, pose_delay, pose_predict, seed * 7919 + round_no, cmd_delay)

@@ -5,6 +5,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..errors import ConfigError
+from ..settings import setting
 
 
 @dataclass(frozen=True)
@@ -25,6 +26,7 @@ class PartPlacement:
 
 
 LIDAR_UPDATES = ("sweep", "per_ray")
+CAMERA_TIMINGS = ("simtwo", "grid")
 SPEED_CONTROLS = ("simtwo", "simtwo_per_cycle", "ideal_pi")
 PID_TIMINGS = ("script_enabled", "scene_enabled", "script_holds_voltage")
 MAGNETS = ("force", "weld")
@@ -76,37 +78,50 @@ class SimConfig:
       and within the beam is welded, centred and flat, and can never be lost).
     """
 
-    seed: int = 0
-    start_pose: tuple[float, float, float] | None = None
-    robots: int = 1
-    start_poses: tuple[tuple[float, float, float], ...] | None = None
-    beacons: bool = False
-    camera: bool = True
-    lidar: bool = True
-    lidar_noise: bool = True
-    competition: bool = True
-    round_no: int = 1
-    parts: str | None = None
-    processing_delay: float = 10.0
-    start_after: float = 0.0
-    round_duration: float = 600.0
-    extra_parts: tuple[PartPlacement, ...] = field(default_factory=tuple)
-    # -- camera timing (sim/camera.py RenderCadence): "simtwo" = when SimTwo's GUI loop renders (ends of 17 ms
-    # physics chunks on a seeded wall clock, every 4th render published); "grid" = the idealisation k/15 s
-    camera_timing: str = "simtwo"
-    # -- replies (sim/runner.py): "simtwo" = SimTwo's script reads UDP only when its GUI loop handled messages
-    # since the previous script call (a catch-up burst's later calls read nothing) and, reading several
-    # replies at once, applies the first (ReadUDPData's concatenation, first label wins); "every_cycle" =
-    # the newest reply before every cycle (the idealisation). Free-running only: lockstep waits for each reply
-    reply_timing: str = "simtwo"
-    # -- the SensorFrame's optional Parts labels (the parts' ground truth, as simtwo/control.pas sends them)
-    report_parts: bool = True
-    # --- SimTwo fidelity of physics and sensors (defaults = SimTwo; see the docstring) ---
-    lidar_update: str = "sweep"
-    lidar_self_hits: bool = True
-    speed_control: str = "simtwo"
-    simtwo_pid_timing: str = "script_enabled"
-    magnet: str = "force"
+    seed: int = setting(0, "seed of the round draw and the sensor noise", lo=0)
+    start_pose: tuple[float, float, float] | None = setting(None, "robot start pose x, y, theta (m, m, rad); "
+                                                                  "unset: the field's start pose", kind=tuple)
+    robots: int = setting(1, "robots in the scene", lo=1, hi=MAX_ROBOTS)
+    start_poses: tuple[tuple[float, float, float], ...] | None = setting(
+        None, "one start pose per robot; unset: the start area's cells", kind=tuple)
+    beacons: bool = setting(False, "LIDAR beacons in the team areas")
+    camera: bool = setting(True, "render the robot's camera")
+    lidar: bool = setting(True, "cast the 2D LIDAR")
+    lidar_noise: bool = setting(True, "SimTwo's range noise a exp(b d), seeded")
+    competition: bool = setting(True, "the round's parts, machines and referee")
+    round_no: int = setting(1, "the competition round", choices=(1, 2, 3))
+    parts: str | None = setting(None, "incoming warehouse layout, slot 1 first (R, G, B or X for empty); unset: "
+                                      "the round's draw", kind=str)
+    processing_delay: float = setting(10.0, "s of simulation time a machine processes a part", lo=0.0)
+    start_after: float = setting(0.0, "s of simulation time before the run may start (the server says STOP)",
+                                 lo=0.0)
+    round_duration: float = setting(600.0, "s of simulation time a round lasts", lo=0.0, lo_open=True)
+    extra_parts: tuple[PartPlacement, ...] = field(default_factory=tuple)  # by hand (tests), not a setting
+    camera_timing: str = setting("simtwo", "when camera frames are rendered: simtwo (as SimTwo's GUI loop: the "
+                                           "ends of 17 ms physics chunks on a seeded wall clock, every 4th "
+                                           "render published) or grid (the idealisation k/15 s)",
+                                 choices=CAMERA_TIMINGS)
+    reply_timing: str = setting("simtwo", "free-running: simtwo (SimTwo's script reads UDP only when its GUI loop "
+                                          "handled messages since its previous call, and of several replies "
+                                          "applies the first) or every_cycle (the newest reply before every "
+                                          "cycle, the idealisation)", choices=REPLY_TIMINGS)
+    report_parts: bool = setting(True, "the SensorFrame's optional Parts labels (the parts' ground truth, as "
+                                       "simtwo/control.pas sends them)")
+    lidar_update: str = setting("sweep", "sweep (SimTwo: all rays replaced once per period, 0 before the first) "
+                                         "or per_ray (each ray as soon as measured, the idealisation)",
+                                choices=LIDAR_UPDATES)
+    lidar_self_hits: bool = setting(True, "rays hit the robot's own wheels as SimTwo's ODE rays do (false: "
+                                          "they pass through, the idealisation)")
+    speed_control: str = setting("simtwo", "simtwo (SimTwo's CalcPID set once), simtwo_per_cycle (its integral "
+                                           "reset every cycle) or ideal_pi (the stand-in's own 1 ms PI)",
+                                 choices=SPEED_CONTROLS)
+    simtwo_pid_timing: str = setting("script_enabled", "when SimTwo's PID runs against the script calls: "
+                                                       "script_enabled (0 V for 9 ms after each call), "
+                                                       "scene_enabled or script_holds_voltage (no gap)",
+                                     choices=PID_TIMINGS)
+    magnet: str = setting("force", "force (SimTwo's electromagnet: a 5 N pull along one ray; a part can hang "
+                                   "askew, slip off or be lost) or weld (the idealisation: never lost)",
+                          choices=MAGNETS)
 
     def __post_init__(self):
         if self.start_pose is not None:
@@ -127,7 +142,7 @@ class SimConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError(f"seed {self.seed!r}: must be a non-negative integer")
         for name, allowed in (("lidar_update", LIDAR_UPDATES), ("speed_control", SPEED_CONTROLS),
-                              ("reply_timing", REPLY_TIMINGS),
+                              ("reply_timing", REPLY_TIMINGS), ("camera_timing", CAMERA_TIMINGS),
                               ("simtwo_pid_timing", PID_TIMINGS), ("magnet", MAGNETS)):
             if getattr(self, name) not in allowed:
                 raise ConfigError(f"{name} {getattr(self, name)!r}: expected one of {', '.join(allowed)}")
@@ -142,3 +157,11 @@ def parse_pose(text: str) -> tuple[float, float, float]:
     if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
         raise ConfigError(f"pose {text!r}: expected x,y,theta as three finite numbers (m, m, rad)")
     return vals  # type: ignore[return-value]
+
+
+def sim_config(values: dict | None = None) -> SimConfig:
+    """:class:`SimConfig` from a nested mapping (``raf sim --config/--set``, an experiment's ``--sim``): every
+    value checked against its setting (kind, range, choices; robotatfactory.settings.build)."""
+    from ..settings import build
+
+    return build(SimConfig, values)
