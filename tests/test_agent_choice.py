@@ -22,7 +22,7 @@ def carrying_agent(field, robot, state, source, **kw):
     agent.mode = "pick"
     slot = field.slot(source.zone, source.number)
     pl = PathPlanner(agent._obstacles(exclude=source), margin=agent.settings.carry.margin)
-    pose = pl.approach_pose(slot, agent.d_dock, agent.fp_carry)
+    pose = pl.approach_pose(slot, agent.legs.d_dock, agent.legs.fp_carry)
     return agent, pose
 
 
@@ -31,7 +31,8 @@ def test_the_destination_its_leg_reaches_soonest(field, robot):
     state = FactoryState.from_letters("XXXX", machine_B="XXXX")  # the part is on the magnet, nothing else
     agent, pose = carrying_agent(field, robot, state, src)
     dest = agent.policy.destinations(state, B, src)
-    times = {d: agent._leg_time(agent._plan_leg("to_place", pose, d, True), pose, True) for d in dest}
+    legs, obstacles = agent.legs, agent._obstacles()
+    times = {d: legs.leg_time(legs.plan(obstacles, pose, d, True, "place"), pose, True) for d in dest}
     agent._go_fastest("to_place", pose, dest)
     assert agent.mode == "to_place" and agent.target == min(times, key=times.get)
     # from machine B's output 2: outgoing 3 or 4, straight down; outgoing 1 is the farthest

@@ -24,7 +24,7 @@ def _cornered_pose(field, robot):
         for y in np.arange(-0.55, 0.55, 0.01):
             if obs.clearance_at(x, y) < 0.02:
                 continue
-            p = pl.escape_point((x, y), agent.fp_empty)
+            p = pl.escape_point((x, y), agent.legs.fp_empty)
             if p is not None and 0.11 < math.hypot(p[0] - x, p[1] - y) < 0.2:
                 return (float(x), float(y), math.atan2(p[1] - y, p[0] - x) + math.pi)  # facing away from it
     raise AssertionError("no cornered spot on this field")

@@ -10,9 +10,14 @@ Each module has one job and is usable and testable alone:
 * :mod:`.footprint` -- the robot's outline (m, base_link frame) and the docking geometry of a slot.
 * :mod:`.obstacles` -- walls, ribs, parts and the floor's edge: exact polygons and a clearance grid.
 * :mod:`.planner` -- collision-free paths on the field map for the robot's footprint (grid A*, smoothed).
+* :mod:`.smooth` -- a polyline's corners rounded into arcs, and the pieces a follower drives.
+* :mod:`.hybrid` -- paths of forward arcs and straight reversing, for carrying on SimTwo's magnet.
+* :mod:`.legs` -- a leg to a slot (carrying or not) planned, timed, or why it cannot be.
 * :mod:`.follower` -- a path follower on the pose estimate with a speed profile and acceleration limits.
 * :mod:`.docking` -- the final approach: pick with the contact switch and the magnet, place, back out.
 * :mod:`.predict` -- a pose estimate brought forward to now (the estimate's age at constant speeds).
+* :mod:`.recovery` -- the pose's uncertainty, re-localizing, and telling a stuck robot.
+* :mod:`.settings` -- every setting of the agent and its node, once (:class:`AgentSettings`).
 * :mod:`.behaviour` -- the round's per-cycle state machine tying them together (:class:`RoundAgent`).
 
 docs/agent.md describes the decisions and what was measured.

@@ -9,6 +9,10 @@ answer to :meth:`RoundAgent.on_state`; the agent decides only on a state seen af
 finished, so every decision is re-planned from what the server says. It does not move before it has
 the part list (the first state).
 
+Each leg (to a part, or carrying it to a slot) is planned by :class:`~.legs.LegPlanner` (:mod:`.legs`); the
+state machine decides when to plan, starts the follower on the plan and handles a failure (re-plan, escape,
+give up).
+
 Events (``events``: list of (t, text)) say what it did: the task chosen, picked, placed, failures.
 """
 from __future__ import annotations
@@ -16,23 +20,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-import numpy as np
-
 from ..competition.parts import PartType
 from .delay import DelayEstimator, lanes_of
 from .docking import Docker, DockSettings
 from .follower import DriveLimits, PathFollower
-from .footprint import carrying_footprint, dock_distance, robot_footprint
-from .obstacles import FieldObstacles, PartObstacle, square_polygon
+from .hybrid import NoCarryPath
+from .legs import LegPlan, LegPlanner
+from .obstacles import FieldObstacles
+from .planner import NoPath
 from .recovery import Relocalizer, StuckDetector, uncertainty_of
 from .settings import AgentSettings
-from .hybrid import CarryPlanner, NoCarryPath
-from .planner import NoPath, Path, PathPlanner
-from .smooth import Piece, SmoothPath
-from .state import ZONES, FactoryState, SlotRef
+from .state import FactoryState, SlotRef
 from .tasks import Done, Move, TaskPolicy, Wait
-
-MACHINE_CLEARANCE = 0.2  # m from a machine input after placing (the machine needs > 0.17 m)
 
 
 @dataclass(frozen=True)
@@ -59,20 +58,6 @@ class AgentCounters:
     blocked: int = 0  # legs found stuck or timed out and re-planned around the spot
     parts_lost: int = 0  # the contact switch released while carrying
     replans_off_path: int = 0  # legs planned again because the robot was far off its path
-
-
-@dataclass(frozen=True)
-class LegPlan:
-    """A planned leg: the planner's polyline ``path``, what the follower drives (``smooth``: a SmoothPath, or the
-    polyline without smoothing), the approach pose ``goal`` (x, y, theta) it ends at, whether it arrives along
-    the slot's normal (``aligned``: the docking follows on at ``end_speed`` m/s) and the slot."""
-
-    path: Path
-    smooth: object
-    goal: tuple
-    aligned: bool
-    end_speed: float
-    slot: object
 
 
 @dataclass
@@ -105,9 +90,7 @@ class RoundAgent:
         dl = self.docker
         dl.place_limits = replace(dl.place_limits, w_max=min(dl.place_limits.w_max, self.carry_limits.w_max),
                                   alpha_max=min(dl.place_limits.alpha_max, self.carry_limits.alpha_max))
-        self.fp_empty = robot_footprint(r)
-        self.fp_carry = carrying_footprint(r, f.part)
-        self.d_dock = dock_distance(r, f.part)
+        self.legs = LegPlanner(f, r, self.settings, self.limits, self.carry_limits, self.dt, self.docker.entry_speed)
         self.mode = "wait_start"
         self.state: FactoryState | None = None
         self.state_time = -math.inf
@@ -137,6 +120,11 @@ class RoundAgent:
         self._no_contact = 0
         self._no_path: dict = {}  # consecutive legs without a path per target (SlotRef)
         self._escapes = 0  # escape drives since the last leg that started
+
+    @property
+    def d_dock(self) -> float:
+        """Distance (m) from a slot's centre to base_link docked there (the leg planner's)."""
+        return self.legs.d_dock
 
     # ------------------------------------------------------------------------------------------ inputs
     @property
@@ -293,18 +281,14 @@ class RoundAgent:
         return ok or dest
 
     def _obstacles(self, exclude: SlotRef | None = None) -> FieldObstacles:
-        parts = []
-        for zone in ZONES:
-            for n, p in enumerate(self.state.zone(zone), start=1):
-                if p is not None and SlotRef(zone, n) != exclude:
-                    s = self.field.slot(zone, n)
-                    parts.append(PartObstacle(*s.xy, s.facing))
+        """The field as legs are planned on now: the parts of the last state (but the one in ``exclude``) and the
+        blocked spots still remembered (those past their time are forgotten here)."""
         self.blocked_spots = [b for b in self.blocked_spots if b[2] > self.t]
-        return FieldObstacles(self.field, parts, extra=[square_polygon(x, y, 0.06) for x, y, _ in self.blocked_spots])
+        return self.legs.obstacles(self.state, self.blocked_spots, exclude)
 
     def _can_turn(self, pose) -> bool:
         """The exact outline (carrying or not, 5 mm margin) at ``pose`` touches nothing."""
-        fp = self.fp_carry if self.carrying is not None else self.fp_empty
+        fp = self.legs.footprint(self.carrying is not None)
         if getattr(self, "_turn_obstacles", None) is None or self._turn_obstacles[0] != self.state_time:
             self._turn_obstacles = (self.state_time, self._obstacles() if self.state is not None else
                                     FieldObstacles(self.field, []))
@@ -343,7 +327,7 @@ class RoundAgent:
         block_memory s and re-plan the leg around it (at most ``replans`` times per leg)."""
         self._leg_replans += 1
         self.counters.blocked += 1
-        fp = self.fp_carry if self.carrying is not None else self.fp_empty
+        fp = self.legs.footprint(self.carrying is not None)
         ahead = (fp.front + 0.03) if self._v >= 0 else (fp.back - 0.03)
         x = pose[0] + ahead * math.cos(pose[2])
         y = pose[1] + ahead * math.sin(pose[2])
@@ -361,49 +345,16 @@ class RoundAgent:
         self.follower.stop()
         self.mode, self.need_state_after = "decide", self.t
 
-    def _plan_leg(self, mode: str, pose, target: SlotRef, carrying: bool):
-        """The leg to ``target``'s approach pose from ``pose`` as :meth:`_go` would drive it (no side effects):
-        a :class:`LegPlan`. Raises NoPath."""
-        fp = self.fp_carry if carrying else self.fp_empty
-        slot = self.field.slot(target.zone, target.number)
-        pl = PathPlanner(self._obstacles(), margin=0.01 if not carrying else self.settings.carry.margin)
-        goal = pl.approach_pose(slot, self.d_dock, fp)
-        goals = [goal]
-        if carrying and self.settings.legs.place_standoff > 0:  # a place: room to settle on the normal first
-            d = self.settings.legs.place_standoff
-            g2 = (goal[0] - d * math.cos(goal[2]), goal[1] - d * math.sin(goal[2]), goal[2])
-            if pl.is_free(g2[:2], fp):
-                goals = [g2, goal]
-        join = self.settings.legs.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
-        if self.settings.legs.smooth:  # the last leg along the slot's normal: docking follows on at speed
-            for g in goals:  # the leg ending farther out if it can arrive along the normal there
-                path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
-                if aligned:
-                    break
-            goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
-            if not aligned and len(goals) > 1:
-                path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp, join_inflate=join)
-            lg = self.settings.legs
-            sp = pl.smooth(path, fp, final_straight=(lg.place_straight if carrying else lg.pick_straight)
-                           if aligned else 0.0, min_radius=self.settings.legs.min_radius,
-                           final_min_radius=lg.place_min_radius if carrying else lg.pick_min_radius)
-            end_speed = self.docker.entry_speed("pick" if mode == "to_pick" else "place") if aligned else 0.0
-        else:
-            goal = goals[0]
-            path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
-            sp, end_speed = path.points, 0.0
-        return LegPlan(path, sp, goal, aligned, end_speed, slot)
-
     def _go(self, mode: str, pose) -> None:
+        """Plan the leg to ``self.target`` from ``pose`` and start it in ``mode`` (``to_pick`` / ``to_place``);
+        no path: :meth:`_no_leg`."""
         carrying = self.carrying is not None
         self.follower.limits = self.limits if not carrying else self.carry_limits
-        if carrying and self.settings.carry.arcs:
-            slot = self.field.slot(self.target.zone, self.target.number)
-            pl = PathPlanner(self._obstacles(), margin=self.settings.carry.margin)
-            if self._go_carrying(mode, pose, pl, slot):
-                return
+        obstacles = self._obstacles()
+        if carrying and self.settings.carry.arcs and self._go_on_arcs(mode, pose, obstacles):
+            return
         try:
-            leg = self._plan_leg(mode, pose, self.target, carrying)
+            leg = self.legs.plan(obstacles, pose, self.target, carrying, _dock_of(mode))
         except NoPath as e:
             self.counters.no_path += 1
             self._event(self.t, f"no path to {self.target}: {e}")
@@ -419,12 +370,7 @@ class RoundAgent:
         (up to ``escape_tries`` times); a target without a path ``give_up_after`` times running is given up
         (its part left alone, or, carrying, another destination preferred), as a failed pick or place is."""
         carrying = self.carrying is not None
-        fp = self.fp_carry if carrying else self.fp_empty
-        pl = PathPlanner(self._obstacles(), margin=self.settings.carry.margin if carrying else 0.01)
-        try:
-            point = pl.escape_point(tuple(pose[:2]), fp)
-        except NoPath:
-            point = None
+        point = self.legs.escape_point(self._obstacles(), pose, carrying)
         if point is not None and self._escapes < self.settings.recovery.escape_tries:
             self._escapes += 1
             self.counters.escapes += 1
@@ -449,7 +395,7 @@ class RoundAgent:
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
         """Start the leg to the destination of ``dest`` (best first) that takes the least time among those of
         the best rank (:meth:`TaskPolicy.destination_class`; every outgoing slot is of one rank), by
-        :meth:`_leg_time`; with ``choose_by_time`` off, to ``self.target`` (or ``dest[0]``)."""
+        :meth:`.LegPlanner.leg_time`; with ``choose_by_time`` off, to ``self.target`` (or ``dest[0]``)."""
         carrying = self.carrying is not None
         if not self.settings.tasks.choose_by_time or (carrying and self.settings.carry.arcs) or len(dest) < 2:
             if self.target not in dest:
@@ -466,14 +412,15 @@ class RoundAgent:
                 dest = [d for d in dest if d not in keep] or dest
         best_class = min(self.policy.destination_class(self.state, d) for d in dest)
         best = None
+        obstacles = self._obstacles()
         for d in dest:
             if self.policy.destination_class(self.state, d) != best_class:
                 continue
             try:
-                leg = self._plan_leg(mode, pose, d, carrying)
+                leg = self.legs.plan(obstacles, pose, d, carrying, _dock_of(mode))
             except NoPath:
                 continue
-            cost = self._leg_time(leg, pose, carrying)
+            cost = self.legs.leg_time(leg, pose, carrying)
             if best is None or cost < best[0] - 1e-6:
                 best = (cost, d, leg)
         if best is None:  # no path to any: the usual failure handling
@@ -483,7 +430,8 @@ class RoundAgent:
         self.target = best[1]
         self._start_leg(mode, best[2])
 
-    def _start_leg(self, mode: str, leg) -> None:
+    def _start_leg(self, mode: str, leg: LegPlan) -> None:
+        """Drive the planned leg ``leg`` in ``mode``, with a time budget."""
         path = leg.path
         self.path = path
         self.follower.limits = self.limits if self.carrying is None else self.carry_limits
@@ -499,77 +447,20 @@ class RoundAgent:
         lim = self.limits  # generous: three times the straight-line time, plus every turn and 10 s
         self._budget = 10.0 + 3.0 * path.length / lim.v_max + len(path.points) * math.pi / lim.w_max * 2
 
-    def _leg_time(self, leg, pose, carrying: bool, limit: float = 40.0) -> float:
-        """Seconds the leg ``leg`` would take from ``pose`` (a kinematic run of the follower with the limits
-        it would drive with, the robot starting at rest), plus the docking approach from its end to the dock
-        or place pose at the docking speed."""
-        f = PathFollower(self.carry_limits if carrying else self.limits, self.dt)
-        if self.settings.legs.smooth:
-            f.start(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2], end_speed=leg.end_speed)
-        else:
-            f.start(leg.smooth, final_heading=leg.goal[2])
-        x, y, th = (float(v) for v in pose[:3])
-        t, dt = 0.0, self.dt
-        while t < limit:
-            o = f.step((x, y, th))
-            if o.done:
-                break
-            x += o.v * math.cos(th) * dt
-            y += o.v * math.sin(th) * dt
-            th += o.w * dt
-            t += dt
-        slot = leg.slot
-        d_end = math.hypot(leg.goal[0] - slot.xy[0], leg.goal[1] - slot.xy[1]) - self.d_dock
-        v = self.docker.entry_speed("place" if carrying else "pick")
-        return t + max(d_end, 0.0) / v
-
-    def _go_carrying(self, mode: str, pose, pl: PathPlanner, slot) -> bool:
-        """The leg to a place on arcs only (:mod:`.hybrid`): to a point on the slot's normal, then straight to
-        the approach pose and on into the place at speed. False when no such path is found (the caller
-        plans the usual path, with turns on the spot)."""
-        fp = self.fp_carry
+    def _go_on_arcs(self, mode: str, pose, obstacles: FieldObstacles) -> bool:
+        """Start the place leg on arcs only (:meth:`.LegPlanner.plan_on_arcs`), never turning on the spot, at
+        gentle lateral accelerations. False when there is no such leg (the caller plans the usual one)."""
         try:
-            goal = pl.approach_pose(slot, self.d_dock, fp)
+            leg = self.legs.plan_on_arcs(obstacles, pose, self.target)
         except NoPath:
             return False
-        cp = CarryPlanner(pl.obstacles, fp, radius=self.settings.carry.radius, max_expansions=5000,
-                          inflate=self.settings.carry.inflate)
-        bx, by = -math.cos(goal[2]), -math.sin(goal[2])
-        sp = None
-        err = NoCarryPath("no straight line along the normal is clear")
-        for d in (0.12, 0.06, 0.0):  # a straight line along the normal before the approach pose, if it can
-            target = (goal[0] + d * bx, goal[1] + d * by, goal[2]) if d > 0 else goal
-            if d > 0 and not all(cp.free(goal[0] + u * d * bx, goal[1] + u * d * by, goal[2])
-                                 for u in np.linspace(0, 1, 6)):
-                continue
-            try:
-                sp = cp.plan(tuple(pose), target)
-                break
-            except NoCarryPath as e:
-                err = e
-        if sp is None:
+        except NoCarryPath as err:
             self._event(self.t, f"{err}: turning on the spot instead")
             return False
-        if d == 0.0:
-            target = goal
-        if target is not goal:  # the straight line on to the approach pose: forwards, along the normal
-            last = sp.pieces[-1]
-            n = max(2, int(math.hypot(goal[0] - target[0], goal[1] - target[1]) / 0.01) + 1)
-            line = np.linspace(last.xy[-1], goal[:2], n)
-            h = math.atan2(goal[1] - line[0][1], goal[0] - line[0][0])
-            if last.reverse:  # the search ended backing up: a stop, then a forward piece
-                ss = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
-                sp = SmoothPath(sp.pieces + (Piece(line, ss, np.full(n, h), np.zeros(n)),))
-            else:
-                xy = np.concatenate([last.xy, line[1:]])
-                ss = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
-                psi = np.concatenate([last.psi, np.full(n - 1, h)])
-                piece = Piece(xy, ss, psi, np.concatenate([last.kappa, np.zeros(n - 1)]))
-                sp = SmoothPath(sp.pieces[:-1] + (piece,))
-        self.path = Path(tuple((float(x), float(y)) for x, y in sp.points[::5]) + (tuple(map(float, goal[:2])),),
-                         fp.radius)
+        sp = leg.smooth
+        self.path = leg.path
         self.follower.limits = replace(self.limits, a_lat=self.settings.carry.a_lat)  # gentle arcs: the part slides
-        self.follower.start(sp, final_heading=None, end_speed=self.docker.entry_speed("place"), no_spin=True)
+        self.follower.start(sp, final_heading=None, end_speed=leg.end_speed, no_spin=True)
         self.mode = mode
         self._mode_t0 = self.t
         self.stuck.reset()
@@ -577,32 +468,19 @@ class RoundAgent:
         self._budget = 10.0 + 3.0 * sp.length / self.limits.v_max + 2.0 * len(sp.pieces)
         return True
 
-    def _retreat(self, carrying: bool) -> float:
-        """Distance from the slot centre to back out to (m): the approach distance of the footprint the
-        robot will have afterwards."""
-        slot = self.field.slot(self.target.zone, self.target.number)
-        fp = self.fp_carry if carrying else self.fp_empty
-        pl = PathPlanner(self._obstacles(exclude=self.target), margin=self.settings.carry.margin if carrying else 0.01)
-        try:
-            x, y, _ = pl.approach_pose(slot, self.d_dock, fp)
-            d = math.hypot(x - slot.xy[0], y - slot.xy[1])
-        except NoPath:  # (a remembered blocked spot in front of the slot): the turning circle's distance
-            d = self.d_dock + fp.radius - fp.front + 0.02
-        if slot.role == "input":  # a machine starts only once base_link is 0.17 m from its input
-            d = max(d, MACHINE_CLEARANCE)
-        return d
-
     def _start_dock(self, pose) -> None:
         slot = self.field.slot(self.target.zone, self.target.number)
         v0 = self.follower.v
         self.follower.v = self.follower.w = 0.0  # the docker drives from here (at the speed it arrived with)
         if self.mode == "to_pick":
-            self.docker.start_pick(slot, pose, self._retreat(carrying=True), v0=v0)
+            retreat = self.legs.retreat(self._obstacles(exclude=self.target), self.target, carrying=True)
+            self.docker.start_pick(slot, pose, retreat, v0=v0)
             self._event(self.t, f"docking to pick the {self.task.part.label} part at {self.target}")
             self.mode = "pick"
             self._mode_t0 = self.t
         else:
-            self.docker.start_place(slot, pose, self._retreat(carrying=False), v0=v0)
+            retreat = self.legs.retreat(self._obstacles(exclude=self.target), self.target, carrying=False)
+            self.docker.start_place(slot, pose, retreat, v0=v0)
             self._event(self.t, f"docking to place the {self.carrying.label} part in {self.target}")
             self._released_t = None
             self.mode = "place"
@@ -673,3 +551,8 @@ class RoundAgent:
 
     def _event(self, t: float, text: str) -> None:
         self.events.append((t, text))
+
+
+def _dock_of(mode: str) -> str:
+    """The docking a leg in ``mode`` leads to: ``pick`` after ``to_pick``, else ``place``."""
+    return "pick" if mode == "to_pick" else "place"

@@ -1,0 +1,221 @@
+"""Leg planning: "go to this slot, carrying a part or not" turned into a planned, smoothed path, or a failure.
+
+A *leg* is the drive from the robot's pose to a slot's approach pose, after which the docking follows on
+(:mod:`.docking`). :class:`LegPlanner` owns what planning needs and does not change: the field, the robot's
+outlines (empty and carrying), the dock distance, the settings, the drive limits (for the time a leg takes)
+and the docking's entry speeds. What changes during a round comes in as arguments: the obstacles as they are
+now (:meth:`LegPlanner.obstacles` from the server's last state, the blocked spots remembered and the slot
+left out), the pose, the target slot and whether a part is carried. No side effects: the caller
+(:class:`~.behaviour.RoundAgent`) starts the follower on the :class:`LegPlan` and decides what a failure
+(:class:`~.planner.NoPath`, :class:`~.hybrid.NoCarryPath`) means.
+
+- :meth:`~LegPlanner.plan`: the usual leg (grid A* to the approach pose, arriving along the slot's normal
+  where it can, corners rounded into arcs);
+- :meth:`~LegPlanner.plan_on_arcs`: a place leg of forward arcs and straight reversing only (``carry.arcs``);
+- :meth:`~LegPlanner.leg_time`: the seconds a leg would take (a kinematic run of the follower);
+- :meth:`~LegPlanner.escape_point`: the nearest point clear for the outline (a robot too close to something);
+- :meth:`~LegPlanner.retreat`: how far from the slot to back out after docking.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .follower import DriveLimits, PathFollower
+from .footprint import Footprint, carrying_footprint, dock_distance, robot_footprint
+from .hybrid import CarryPlanner, NoCarryPath
+from .obstacles import FieldObstacles, PartObstacle, square_polygon
+from .planner import NoPath, Path, PathPlanner
+from .settings import AgentSettings
+from .smooth import Piece, SmoothPath
+from .state import ZONES, FactoryState, SlotRef
+
+MACHINE_CLEARANCE = 0.2  # m from a machine input after placing (the machine needs > 0.17 m)
+BLOCKED_SPOT_SIDE = 0.06  # m, the square a blocked spot becomes on the map
+
+
+@dataclass(frozen=True)
+class LegPlan:
+    """A planned leg: the planner's polyline ``path``, what the follower drives (``smooth``: a SmoothPath, or the
+    polyline without smoothing), the approach pose ``goal`` (x, y, theta) it ends at, whether it arrives along
+    the slot's normal (``aligned``: the docking follows on at ``end_speed`` m/s) and the slot."""
+
+    path: Path
+    smooth: object
+    goal: tuple
+    aligned: bool
+    end_speed: float
+    slot: object
+
+
+class LegPlanner:
+    """Plans legs on one field for one robot (see the module docstring).
+
+    ``limits`` / ``carry_limits``: the follower's limits empty and with a part on the magnet; ``dt``: the
+    control period (s); ``entry_speed("pick" | "place")``: the speed (m/s) a leg may arrive at the approach
+    pose with when that docking follows on (:meth:`.docking.Docker.entry_speed`)."""
+
+    def __init__(self, field, robot, settings: AgentSettings, limits: DriveLimits, carry_limits: DriveLimits,
+                 dt: float, entry_speed: Callable[[str], float]):
+        self.field = field
+        self.settings = settings
+        self.limits = limits
+        self.carry_limits = carry_limits
+        self.dt = float(dt)
+        self.entry_speed = entry_speed
+        self.fp_empty = robot_footprint(robot)
+        self.fp_carry = carrying_footprint(robot, field.part)
+        self.d_dock = dock_distance(robot, field.part)
+
+    def footprint(self, carrying: bool) -> Footprint:
+        """The robot's outline, with a part on the magnet or not."""
+        return self.fp_carry if carrying else self.fp_empty
+
+    def obstacles(self, state: FactoryState, blocked=(), exclude: SlotRef | None = None) -> FieldObstacles:
+        """The field with the parts of ``state`` (but the one in ``exclude``) and a small square on each
+        blocked spot ``blocked`` ((x, y, ...) in m; the caller drops those it no longer remembers)."""
+        parts = []
+        for zone in ZONES:
+            for n, p in enumerate(state.zone(zone), start=1):
+                if p is not None and SlotRef(zone, n) != exclude:
+                    s = self.field.slot(zone, n)
+                    parts.append(PartObstacle(*s.xy, s.facing))
+        return FieldObstacles(self.field, parts,
+                              extra=[square_polygon(x, y, BLOCKED_SPOT_SIDE) for x, y, *_ in blocked])
+
+    def path_planner(self, obstacles: FieldObstacles, carrying: bool) -> PathPlanner:
+        """A grid planner on ``obstacles`` with the margin of the empty or carrying robot."""
+        return PathPlanner(obstacles, margin=self.settings.carry.margin if carrying else 0.01)
+
+    # ------------------------------------------------------------------------------------------ legs
+    def plan(self, obstacles: FieldObstacles, pose, target: SlotRef, carrying: bool, dock: str) -> LegPlan:
+        """The leg from ``pose`` to ``target``'s approach pose, the ``dock`` ("pick" or "place") following on:
+        arriving along the slot's normal where it can (then at the docking's entry speed), else with a turn
+        on the spot farther out. Raises NoPath."""
+        fp = self.footprint(carrying)
+        slot = self.field.slot(target.zone, target.number)
+        pl = self.path_planner(obstacles, carrying)
+        goal = pl.approach_pose(slot, self.d_dock, fp)
+        goals = [goal]
+        if carrying and self.settings.legs.place_standoff > 0:  # a place: room to settle on the normal first
+            d = self.settings.legs.place_standoff
+            g2 = (goal[0] - d * math.cos(goal[2]), goal[1] - d * math.sin(goal[2]), goal[2])
+            if pl.is_free(g2[:2], fp):
+                goals = [g2, goal]
+        join = self.settings.legs.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
+        if self.settings.legs.smooth:  # the last leg along the slot's normal: docking follows on at speed
+            for g in goals:  # the leg ending farther out if it can arrive along the normal there
+                path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
+                if aligned:
+                    break
+            goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
+            if not aligned and len(goals) > 1:
+                path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp, join_inflate=join)
+            lg = self.settings.legs
+            sp = pl.smooth(path, fp, final_straight=(lg.place_straight if carrying else lg.pick_straight)
+                           if aligned else 0.0, min_radius=self.settings.legs.min_radius,
+                           final_min_radius=lg.place_min_radius if carrying else lg.pick_min_radius)
+            end_speed = self.entry_speed(dock) if aligned else 0.0
+        else:
+            goal = goals[0]
+            path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
+            sp, end_speed = path.points, 0.0
+        return LegPlan(path, sp, goal, aligned, end_speed, slot)
+
+    def plan_on_arcs(self, obstacles: FieldObstacles, pose, target: SlotRef) -> LegPlan:
+        """The leg to a place on arcs only (:mod:`.hybrid`; carrying): to a point on the slot's normal, then
+        straight to the approach pose and on into the place at the place's entry speed. Raises NoPath when the
+        slot has no approach pose, NoCarryPath (saying why) when no such path is found (the caller plans the
+        usual leg, with turns on the spot)."""
+        fp = self.fp_carry
+        slot = self.field.slot(target.zone, target.number)
+        pl = self.path_planner(obstacles, carrying=True)
+        goal = pl.approach_pose(slot, self.d_dock, fp)
+        cp = CarryPlanner(pl.obstacles, fp, radius=self.settings.carry.radius, max_expansions=5000,
+                          inflate=self.settings.carry.inflate)
+        bx, by = -math.cos(goal[2]), -math.sin(goal[2])
+        sp = None
+        err = NoCarryPath("no straight line along the normal is clear")
+        for d in (0.12, 0.06, 0.0):  # a straight line along the normal before the approach pose, if it can
+            aim = (goal[0] + d * bx, goal[1] + d * by, goal[2]) if d > 0 else goal
+            if d > 0 and not all(cp.free(goal[0] + u * d * bx, goal[1] + u * d * by, goal[2])
+                                 for u in np.linspace(0, 1, 6)):
+                continue
+            try:
+                sp = cp.plan(tuple(pose), aim)
+                break
+            except NoCarryPath as e:
+                err = e
+        if sp is None:
+            raise err
+        if d == 0.0:
+            aim = goal
+        if aim is not goal:  # the straight line on to the approach pose: forwards, along the normal
+            last = sp.pieces[-1]
+            n = max(2, int(math.hypot(goal[0] - aim[0], goal[1] - aim[1]) / 0.01) + 1)
+            line = np.linspace(last.xy[-1], goal[:2], n)
+            h = math.atan2(goal[1] - line[0][1], goal[0] - line[0][0])
+            if last.reverse:  # the search ended backing up: a stop, then a forward piece
+                ss = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+                sp = SmoothPath(sp.pieces + (Piece(line, ss, np.full(n, h), np.zeros(n)),))
+            else:
+                xy = np.concatenate([last.xy, line[1:]])
+                ss = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+                psi = np.concatenate([last.psi, np.full(n - 1, h)])
+                piece = Piece(xy, ss, psi, np.concatenate([last.kappa, np.zeros(n - 1)]))
+                sp = SmoothPath(sp.pieces[:-1] + (piece,))
+        path = Path(tuple((float(x), float(y)) for x, y in sp.points[::5]) + (tuple(map(float, goal[:2])),),
+                    fp.radius)
+        return LegPlan(path, sp, goal, True, self.entry_speed("place"), slot)
+
+    def leg_time(self, leg: LegPlan, pose, carrying: bool, limit: float = 40.0) -> float:
+        """Seconds the leg ``leg`` would take from ``pose`` (a kinematic run of the follower with the limits
+        it would drive with, the robot starting at rest), plus the docking approach from its end to the dock
+        or place pose at the docking speed."""
+        f = PathFollower(self.carry_limits if carrying else self.limits, self.dt)
+        if self.settings.legs.smooth:
+            f.start(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2], end_speed=leg.end_speed)
+        else:
+            f.start(leg.smooth, final_heading=leg.goal[2])
+        x, y, th = (float(v) for v in pose[:3])
+        t, dt = 0.0, self.dt
+        while t < limit:
+            o = f.step((x, y, th))
+            if o.done:
+                break
+            x += o.v * math.cos(th) * dt
+            y += o.v * math.sin(th) * dt
+            th += o.w * dt
+            t += dt
+        slot = leg.slot
+        d_end = math.hypot(leg.goal[0] - slot.xy[0], leg.goal[1] - slot.xy[1]) - self.d_dock
+        v = self.entry_speed("place" if carrying else "pick")
+        return t + max(d_end, 0.0) / v
+
+    # ------------------------------------------------------------------------------------------ around a leg
+    def escape_point(self, obstacles: FieldObstacles, pose, carrying: bool) -> tuple[float, float] | None:
+        """The nearest point clear for the outline from ``pose`` (a robot too close to something to plan
+        from), or None."""
+        try:
+            return self.path_planner(obstacles, carrying).escape_point(tuple(pose[:2]), self.footprint(carrying))
+        except NoPath:
+            return None
+
+    def retreat(self, obstacles: FieldObstacles, target: SlotRef, carrying: bool) -> float:
+        """Distance from ``target``'s centre to back out to after docking there (m): the approach distance of
+        the footprint the robot will have afterwards (``carrying``), at least :data:`MACHINE_CLEARANCE` from a
+        machine input. ``obstacles``: without the part in ``target`` (the one being picked or placed)."""
+        slot = self.field.slot(target.zone, target.number)
+        fp = self.footprint(carrying)
+        pl = self.path_planner(obstacles, carrying)
+        try:
+            x, y, _ = pl.approach_pose(slot, self.d_dock, fp)
+            d = math.hypot(x - slot.xy[0], y - slot.xy[1])
+        except NoPath:  # (a remembered blocked spot in front of the slot): the turning circle's distance
+            d = self.d_dock + fp.radius - fp.front + 0.02
+        if slot.role == "input":  # a machine starts only once base_link is 0.17 m from its input
+            d = max(d, MACHINE_CLEARANCE)
+        return d
