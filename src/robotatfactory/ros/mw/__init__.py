@@ -20,14 +20,35 @@ from types import ModuleType
 from .base import QoS  # noqa: F401  (re-exported: node files use mw.QoS.SENSOR etc.)
 
 MIDDLEWARES = ("ros1", "ros2")
+#: the Python package each middleware's interpreter must be able to import
+PACKAGES = {"ros1": "rospy", "ros2": "rclpy"}
 _API: ModuleType | None = None
+
+
+def importable(middleware: str) -> bool:
+    """Whether this interpreter can import ``middleware`` (without importing it)."""
+    import importlib.util
+
+    return importlib.util.find_spec(PACKAGES[middleware]) is not None
 
 
 def available() -> list[str]:
     """The middlewares this interpreter can import (usually exactly one)."""
-    import importlib.util
+    return [m for m in MIDDLEWARES if importable(m)]
 
-    return [m for m, mod in (("ros1", "rospy"), ("ros2", "rclpy")) if importlib.util.find_spec(mod) is not None]
+
+# ---- what a middleware can do, asked by name (also for another interpreter's: nothing is imported) --------
+
+def has_master(middleware: str | None = None) -> bool:
+    """Whether ``middleware`` (default: this process's) has a master every node registers with (ROS 1's
+    roscore, which must be running first); ROS 2's nodes find each other by discovery (a domain id)."""
+    return (middleware or name()) == "ros1"
+
+
+def bag_format(middleware: str | None = None) -> str:
+    """The bag ``middleware`` (default: this process's) records: ``bag`` (a ROS 1 bag, a file) or ``mcap``
+    (a rosbag2, a directory, with MCAP storage). A middleware records only its own generation's bags."""
+    return "mcap" if (middleware or name()) == "ros2" else "bag"
 
 
 def name() -> str:
@@ -52,5 +73,13 @@ def api() -> ModuleType:
     """The implementation module (:mod:`.ros1` or :mod:`.ros2`) of this process's middleware."""
     global _API
     if _API is None:
-        _API = importlib.import_module(f"{__name__}.{name()}")
+        _API = module(name())
     return _API
+
+
+def module(middleware: str) -> ModuleType:
+    """The implementation module of ``middleware`` (importing it imports the middleware: only an interpreter
+    that has it can)."""
+    if middleware not in MIDDLEWARES:
+        raise ValueError(f"unknown middleware {middleware!r}: one of {', '.join(MIDDLEWARES)}")
+    return importlib.import_module(f"{__name__}.{middleware}")

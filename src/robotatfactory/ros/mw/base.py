@@ -19,13 +19,18 @@ the implementation's ``time_msg(ns)`` and read them with ``stamp_ns(stamp)`` (wh
 
 An implementation module also provides (module level): ``NAME``, ``time_msg(ns)``, ``duration_msg(s)``,
 ``diag_level(level)``, ``srv_types()``, ``standard_sim_types()`` (ROS 2's simulation_interfaces, or None),
-``init_node(...) -> Node``, ``run_node(...)`` (a node from the command line) and ``spin_node(...)`` (a node's
-``main`` under a launch file).
+``serialize(msg) -> bytes`` (a message as it goes over the wire: ROS 1's serialization or ROS 2's CDR),
+``require_master(hint) -> str | None`` (ROS 1: ConfigError unless a master answers, else its URI; ROS 2 has
+none: None), ``init_node(...) -> Node``, ``run_node(...)`` (a node from the command line) and
+``spin_node(...)`` (a node's ``main`` under a launch file). What can be asked by a middleware's name without
+importing it (``has_master``, ``bag_format``) is in :mod:`robotatfactory.ros.mw` itself.
 """
 from __future__ import annotations
 
 import enum
+import threading
 from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 
@@ -123,6 +128,19 @@ def throttled(fn: Callable[[str], None], period: float, text: str) -> None:
         fn(text)
 
 
+@dataclass
+class RawTopic:
+    """What a raw subscription (:meth:`Node.subscribe_raw`) tells of its topic: what a bag's connection record
+    needs."""
+
+    type: str  #: the message type as the middleware names it (``nav_msgs/Odometry``, ``nav_msgs/msg/Odometry``)
+    definition: str | None = None  #: ROS 1: the message definition (from the connection header)
+    digest: str | None = None  #: ROS 1: its MD5 sum
+    latched: bool = False  #: ROS 1: the publisher latches
+    offered_qos: list = field(default_factory=list)  #: ROS 2: each publisher's QoS profile (rclpy ``QoSProfile``)
+    qos: str = ""  #: ROS 2: the subscription's QoS in words (``reliable, transient_local``), for logs
+
+
 class Publisher(ABC):
     @abstractmethod
     def publish(self, msg) -> None: ...
@@ -186,6 +204,23 @@ class Node(ABC):
         """Call ``callback()`` every ``period`` seconds of the node's clock (simulation time under sim time)."""
 
     @abstractmethod
+    def topic_types(self) -> dict[str, str]:
+        """The topics on the graph now, each with its message type (ROS 1: the master's published topics,
+        ``pkg/Type``; ROS 2: every topic the graph lists with a type, ``pkg/msg/Type``, published or not)."""
+
+    @abstractmethod
+    def subscribe_raw(self, topic: str, msg_type: str, callback: Callable[[bytes, RawTopic], None]):
+        """Subscribe to ``topic`` (of ``msg_type``, as :meth:`topic_types` names it) without deserializing:
+        ``callback(data, info)`` gets each message as it came off the wire (ROS 1's serialization, ROS 2's CDR)
+        and what it is (:class:`RawTopic`). ROS 1 subscribes with a deep queue (1000, a 16 MB buffer,
+        TCP_NODELAY) and reads ``info`` from each message's connection header; ROS 2 with the QoS every
+        publisher matches (``ros2 bag record``'s rule: reliable only if all publishers are, transient local
+        only if all are; keep last 100) and knows ``info`` from the graph before the first message.
+
+        Returns ``(handle, info)``: ``info`` when known before the first message (ROS 2), else None (ROS 1);
+        or None when the topic has no publisher now (ROS 2). Stop it with :meth:`close`."""
+
+    @abstractmethod
     def close(self, handle) -> None:
         """Stop a subscription, publisher, service server or timer this node made (what :meth:`subscribe`,
         :meth:`publisher`, :meth:`service`, :meth:`timer` returned, or the middleware's own object): no more
@@ -246,3 +281,23 @@ class Node(ABC):
     @abstractmethod
     def spin(self) -> None:
         """Serve callbacks until shutdown."""
+
+    @abstractmethod
+    def set_executor(self, kind: str) -> None:
+        """What :meth:`spin` serves callbacks with (call before it): ROS 2's executor, ``events``, ``single``
+        (one thread, as ``rclpy.spin(node)`` has it) or ``multi`` (default: ``RAF_ROS2_EXECUTOR``, else
+        ``events``). rospy serves each subscription from a thread of its own: nothing to choose on ROS 1."""
+
+    @abstractmethod
+    def spin_in_background(self, name: str) -> threading.Thread | None:
+        """Have this node's callbacks served while the caller goes on: ROS 2 spins the node in a daemon thread
+        called ``name`` (returned: hand it to :meth:`finish`); rospy serves callbacks from threads of its own
+        already (None)."""
+
+    @abstractmethod
+    def finish(self, reason: str = "", spinner: threading.Thread | None = None) -> None:
+        """End this node for good, as a process's last use of its middleware (it cannot be used afterwards):
+        shut it down (:meth:`shutdown` with ``reason``), wait up to 5 s for ``spinner`` (the thread
+        running :meth:`spin`, if any), and release the middleware: ROS 2 destroys the node and shuts rclpy
+        down, which a process must do before its interpreter exits (a daemon thread still in rclpy then
+        aborts Python); rospy's one node per process ends with the shutdown."""

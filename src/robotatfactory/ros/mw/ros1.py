@@ -12,7 +12,7 @@ from typing import Any, Callable
 
 import rospy
 
-from .base import Node, Publisher, QoS, flatten, throttled
+from .base import Node, Publisher, QoS, RawTopic, flatten, throttled
 
 NAME = "ros1"
 MASTER_RESTARTED = 4  # exit code of a node whose ROS master restarted under it
@@ -41,6 +41,26 @@ def srv_types():
 def standard_sim_types():
     """ROS 2's simulation_interfaces: None on ROS 1 (the package's own sim/* services serve instead)."""
     return None
+
+
+def serialize(msg) -> bytes:
+    """A ROS 1 message object as it goes over the wire (and into a ROS 1 bag)."""
+    import io
+
+    buf = io.BytesIO()
+    msg.serialize(buf)
+    return buf.getvalue()
+
+
+def require_master(hint: str) -> str:
+    """The ROS master's URI; ConfigError ``no ROS master at URI: <hint>`` when none answers."""
+    import rosgraph
+
+    if not rosgraph.is_master_online():
+        from ...errors import ConfigError
+
+        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: {hint}")
+    return rosgraph.get_master_uri()
 
 
 class _Pub(Publisher):
@@ -106,6 +126,24 @@ class Ros1Node(Node):
     def timer(self, period, callback):
         return rospy.Timer(rospy.Duration.from_sec(period), lambda _ev: callback())
 
+    def topic_types(self) -> dict[str, str]:
+        return dict(rospy.get_published_topics())
+
+    def subscribe_raw(self, topic, msg_type, callback):
+        def on_message(msg) -> None:
+            data = getattr(msg, "_buff", None)
+            if data is None:  # rospy shares one subscription per topic: on /clock its own typed one
+                data = serialize(msg)
+                info = RawTopic(type=msg._type, definition=msg._full_text, digest=msg._md5sum)
+            else:
+                h = msg._connection_header
+                info = RawTopic(type=h["type"], definition=h["message_definition"], digest=h["md5sum"],
+                                latched=h.get("latching") == "1")
+            callback(data, info)
+
+        return rospy.Subscriber(topic, rospy.AnyMsg, on_message, queue_size=1000, buff_size=2 ** 24,
+                                tcp_nodelay=True), None
+
     def close(self, handle) -> None:
         if handle is None:
             return
@@ -163,6 +201,18 @@ class Ros1Node(Node):
 
     def spin(self) -> None:
         rospy.spin()
+
+    def set_executor(self, kind: str) -> None:
+        pass  # rospy: a thread per subscription, nothing to choose
+
+    def spin_in_background(self, name: str) -> None:
+        return None  # rospy's own threads serve the callbacks
+
+    def finish(self, reason: str = "", spinner: threading.Thread | None = None) -> None:
+        if not rospy.is_shutdown():
+            self.shutdown(reason)
+        if spinner is not None:
+            spinner.join(5.0)
 
 
 # ---- the process's node ---------------------------------------------------------------------------------

@@ -36,7 +36,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from ...errors import ConfigError  # noqa: E402
-from .base import Node, Publisher, QoS, flatten, throttled, typed_like, typed_tree, unflatten  # noqa: E402
+from .base import Node, Publisher, QoS, RawTopic, flatten, throttled, typed_like, typed_tree, unflatten  # noqa: E402
 
 NAME = "ros2"
 
@@ -83,6 +83,18 @@ def standard_sim_types():
     return types.SimpleNamespace(msg=msg, srv=srv, action=action)
 
 
+def serialize(msg) -> bytes:
+    """A ROS 2 message object as it goes over the wire (CDR, little endian; what a rosbag2 holds)."""
+    from rclpy.serialization import serialize_message
+
+    return serialize_message(msg)
+
+
+def require_master(hint: str) -> None:
+    """ROS 2 has no master (nodes find each other by discovery): nothing to insist on."""
+    return None
+
+
 def qos_profile(qos: QoS, depth: int = 10) -> QoSProfile:
     depth = max(1, int(depth or 10))
     if qos is QoS.SENSOR:
@@ -102,6 +114,26 @@ def subscriber_qos(qos: QoS, depth: int = 10) -> QoSProfile:
     """What a subscriber asks for: best effort for sensor data (it then matches reliable publishers too),
     transient local for latched topics, reliable otherwise."""
     return qos_profile(qos, depth)
+
+
+def raw_subscription_qos(publishers) -> QoSProfile:
+    """A QoS every one of ``publishers`` (``get_publishers_info_by_topic``) matches: reliable only if all are,
+    transient local only if all are, keep last (at least 100 deep: a recorder must not drop a burst)."""
+    profiles = [p.qos_profile for p in publishers]
+    reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in profiles)
+    latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in profiles)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def message_class(msg_type: str):
+    """``nav_msgs/msg/Odometry`` (or ``nav_msgs/Odometry``) -> the rclpy message class."""
+    import importlib
+
+    parts = msg_type.strip("/").split("/")
+    pkg, kind, name = (parts[0], "msg", parts[1]) if len(parts) == 2 else parts
+    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
 
 
 class _Pub(Publisher):
@@ -269,6 +301,20 @@ class Ros2Node(Node):
         self._keep.append(t)
         return t
 
+    def topic_types(self) -> dict[str, str]:
+        return {topic: types[0] for topic, types in self.node.get_topic_names_and_types() if types}
+
+    def subscribe_raw(self, topic, msg_type, callback):
+        pubs = self.node.get_publishers_info_by_topic(topic)
+        if not pubs:
+            return None
+        qos = raw_subscription_qos(pubs)
+        info = RawTopic(type=msg_type, offered_qos=[p.qos_profile for p in pubs],
+                        qos=f"{qos.reliability.name.lower()}, {qos.durability.name.lower()}")
+        sub = self.node.create_subscription(message_class(msg_type), topic, lambda data: callback(data, info), qos,
+                                            raw=True, callback_group=self.group)
+        return sub, info
+
     def close(self, handle) -> None:
         if handle is None:
             return
@@ -406,6 +452,21 @@ class Ros2Node(Node):
         if reason:
             self.node.get_logger().info(f"shutting down: {reason}")
         self._shutdown.set()
+
+    def set_executor(self, kind: str) -> None:
+        self.executor = make_executor(self.node.context, kind)
+
+    def spin_in_background(self, name: str) -> threading.Thread:
+        th = threading.Thread(target=self.spin, name=name, daemon=True)
+        th.start()
+        return th
+
+    def finish(self, reason: str = "", spinner: threading.Thread | None = None) -> None:
+        self.shutdown(reason)
+        if spinner is not None:
+            spinner.join(5.0)
+        self.destroy()
+        rclpy.try_shutdown()
 
     def spin(self) -> None:
         ex = self.executor or make_executor(self.node.context)
@@ -555,9 +616,7 @@ def run_node(args, who: str, params: dict, make_node: Callable[[Node], object],
     finally:
         if obj is not None:
             obj.stop()
-        node.destroy()
-        if rclpy.ok():
-            rclpy.try_shutdown()
+        node.finish()
     return 0
 
 
@@ -569,15 +628,13 @@ def spin_node(name: str, make_node: Callable[[Node], object], argv: list[str] | 
         obj = make_node(node)
     except ConfigError as e:
         node.fatal(f"{name}: {e}")
-        node.destroy()
-        rclpy.try_shutdown()
+        node.finish()
         return 2
     try:
         node.spin()
     finally:
         obj.stop()
-        node.destroy()
-        rclpy.try_shutdown()
+        node.finish()
     return 0
 
 
