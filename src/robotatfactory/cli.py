@@ -44,18 +44,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-VENVS = {"ros1": ".venv", "ros2": ".venv-ros2"}
-
-
 def _switch_middleware(want: str, argv: list[str]) -> None:
     """Run this command line again with the Python environment of middleware ``want`` (the two cannot share
     one interpreter: both define std_msgs etc.), unless this Python already has it."""
-    import importlib.util
     import os
     from pathlib import Path
 
+    from .ros.mw import importable
+    from .ros.processes import VENVS
+
     os.environ["RAF_MIDDLEWARE"] = want
-    if importlib.util.find_spec({"ros1": "rospy", "ros2": "rclpy"}[want]) is not None:
+    if importable(want):
         return
     root = Path(__file__).resolve().parents[2]
     venv = Path(os.environ.get("RAF_ROS2_VENV", root / VENVS["ros2"])) if want == "ros2" else root / VENVS["ros1"]

@@ -68,23 +68,16 @@ def main(out: str, what: str = "odom,image") -> None:
         node.subscribe("/diagnostics", DiagnosticArray, on_diag, QoS.RELIABLE, 10)
     if "image" in wanted:
         node.subscribe("camera/image_raw", Image, on_image, QoS.SENSOR, 100, large=True)
-    if mw.NAME == "ros2":
-        # one thread, as rclpy.spin(node) has it: what a Python controller or vision node runs with (the
-        # node layer's default, a multi-threaded executor, adds a thread hand-over to every message)
-        from rclpy.executors import SingleThreadedExecutor
-
-        node.executor = SingleThreadedExecutor(context=node.node.context)
+    # ROS 2: one thread, as rclpy.spin(node) has it: what a Python controller or vision node runs with (rospy
+    # serves each subscription from a thread of its own)
+    node.set_executor("single")
     try:
         node.spin()
     finally:
         with lock:
             with open(out, "w") as fh:
                 json.dump({"odom": odom, "images": images, "diag": diag}, fh)
-        if mw.NAME == "ros2":
-            import rclpy
-
-            node.destroy()
-            rclpy.try_shutdown()
+        node.finish()
 
 
 if __name__ == "__main__":

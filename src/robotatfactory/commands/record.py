@@ -52,11 +52,12 @@ def run(args) -> int:
     from ..ros.recorder import DEFAULT_TOPICS, IMAGE_TOPICS
 
     middleware = mw.name()
-    fmt = args.format or ("mcap" if middleware == "ros2" else "bag")
-    if middleware == "ros1" and fmt != "bag":
+    own = mw.bag_format(middleware)  # a middleware records its own generation's bags only
+    fmt = args.format or own
+    if own == "bag" and fmt != "bag":
         raise ConfigError(f"--format {fmt}: ROS 1 records a ROS 1 bag (--format bag); rosbag2 is ROS 2's "
                           "(raf --middleware ros2 record)")
-    if middleware == "ros2" and fmt == "bag":
+    if own != "bag" and fmt == "bag":
         raise ConfigError("--format bag: ROS 2 records a rosbag2 (mcap or sqlite3); a ROS 1 bag is raf record on ROS 1")
     if args.duration is not None and not args.duration > 0:
         raise ConfigError(f"--duration must be > 0 s, got {args.duration}")

@@ -250,14 +250,15 @@ def _graph(args, mw: str):
     import os
 
     from ..errors import ConfigError
+    from ..ros import mw as mwmod
     from ..ros.master import PrivateDomain, PrivateMaster
 
-    if mw == "ros2":
+    if not mwmod.has_master(mw):  # ROS 2: a domain id of its own
         if args.roscore:
             raise ConfigError("--roscore is for ROS 1; ROS 2 has no master (a private ROS_DOMAIN_ID is used "
                               "unless ROS_DOMAIN_ID is set)")
         if os.environ.get("ROS_DOMAIN_ID", "").strip():
-            env = dict(os.environ, RAF_MIDDLEWARE="ros2", PYTHONUNBUFFERED="1")
+            env = dict(os.environ, RAF_MIDDLEWARE=mw, PYTHONUNBUFFERED="1")
             env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
             return env, None, (f"ROS 2, ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (from the environment), discovery "
                                f"{env['ROS_AUTOMATIC_DISCOVERY_RANGE']}")
@@ -267,12 +268,9 @@ def _graph(args, mw: str):
     if args.roscore:
         m = PrivateMaster().start()
         return m.env(), m, f"ROS 1, private roscore {m.uri} (to join: export ROS_MASTER_URI={m.uri})"
-    import rosgraph
-
-    if not rosgraph.is_master_online():
-        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore, or pass --roscore")
-    env = dict(os.environ, RAF_MIDDLEWARE="ros1", PYTHONUNBUFFERED="1")
-    return env, None, f"ROS 1, roscore {rosgraph.get_master_uri()}"
+    uri = mwmod.api().require_master("start roscore, or pass --roscore")
+    env = dict(os.environ, RAF_MIDDLEWARE=mw, PYTHONUNBUFFERED="1")
+    return env, None, f"ROS 1, roscore {uri}"
 
 
 def _rviz_cmd(mw: str) -> list[str]:

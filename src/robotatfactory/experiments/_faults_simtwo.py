@@ -70,16 +70,14 @@ def command(field: str, udp_port: int, proxy_port: int, camera_port: int | None,
     return cmd + (["--camera-port", str(camera_port)] if camera_port is not None else ["--no-camera"])
 
 
-def teleport(pose: str, timeout: float = 30.0) -> str:
+def teleport(pose: str, timeout: float = 30.0, *, node) -> str:
     """The robot to ``pose`` ("x,y,theta") through the bridge's ``sim/set_robot_pose`` (the bridge waits until
-    SimTwo's ground truth shows it); RuntimeError when it fails."""
-    import rospy
-
+    SimTwo's ground truth shows it), called by ``node`` (this process's :class:`~..ros.mw.base.Node`; the
+    service must be offered within ``timeout`` s: TimeoutError); RuntimeError when it fails."""
     from ..srv import SetRobotPose
 
     x, y, th = (float(v) for v in pose.split(","))
-    rospy.wait_for_service("sim/set_robot_pose", timeout=timeout)
-    r = rospy.ServiceProxy("sim/set_robot_pose", SetRobotPose)(x=x, y=y, theta=th)
+    r = node.call("sim/set_robot_pose", SetRobotPose, timeout=timeout, x=x, y=y, theta=th)
     if not r.success:
         raise RuntimeError(f"SimTwo: the teleport to {pose} failed: {r.message}")
     return r.message

@@ -56,6 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..ros.mw.base import stamp_ns
 from ..simtwo import Command, ProtocolError
 from . import _faults_simtwo as simtwo_side
 
@@ -437,36 +438,55 @@ def _fuzzer(port: int, pool: dict, total: int, seconds: float, report) -> None:
 
 # ------------------------------------------------------------------------------------------------ ROS side
 
+_NODE = None  # this process's node (experiment_node)
+
+
+def experiment_node():
+    """This process's node on the rig's graph, made on first use: rospy has one node per process, bound to one
+    master for good (each part runs in an interpreter of its own: :func:`_part_child`)."""
+    global _NODE
+    if _NODE is None:
+        from ..ros.mw import api
+
+        _NODE = api().init_node("raf_experiment_faults", anonymous=True, signals=False)
+    return _NODE
+
+
 class Watch:
-    """This process's rospy node: odom, /clock, joint_states, ground truth, camera images, diagnostics."""
+    """This process's node (:func:`experiment_node`): odom, /clock, joint_states, ground truth, camera images,
+    diagnostics; ``cmd_vel`` out."""
 
     def __init__(self):
-        import rospy
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import Twist
         from nav_msgs.msg import Odometry
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import Image, JointState
 
-        self.rospy, self.Twist = rospy, Twist
+        from ..ros.mw import QoS
+
+        self.node = node = experiment_node()
+        self.Twist = Twist
         self.lock = threading.Lock()
         self.odom: list[tuple] = []  # (wall, stamp_ms, x, y, theta)
         self.clock: list[tuple] = []  # (wall, stamp_ms)
         self.joints: list[tuple] = []  # (wall, stamp_ms, left rad, right rad)
         self.images: list[tuple] = []  # (wall, stamp_ms)
         self.diag: dict[str, dict] = {}
-        self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=1, tcp_nodelay=True)
-        self.subs = [rospy.Subscriber("odom", Odometry, self._odom, queue_size=50, tcp_nodelay=True),
-                     rospy.Subscriber("/clock", Clock, self._clock, queue_size=50, tcp_nodelay=True),
-                     rospy.Subscriber("joint_states", JointState, self._joints, queue_size=50, tcp_nodelay=True),
-                     rospy.Subscriber("camera/image_raw", Image, self._image, queue_size=2, buff_size=1 << 22),
-                     rospy.Subscriber("/diagnostics", DiagnosticArray, self._diag, queue_size=20)]
+        # ROS 1: queue 1 and TCP_NODELAY out; TCP_NODELAY on odom, /clock and joint_states (SYNCHRONOUS), not on
+        # the images (RELIABLE: 2 deep, a large buffer) nor /diagnostics
+        self.cmd = node.publisher("cmd_vel", Twist, QoS.CONTROL)
+        self.subs = [node.subscribe("odom", Odometry, self._odom, QoS.SYNCHRONOUS, 50),
+                     node.subscribe("/clock", Clock, self._clock, QoS.SYNCHRONOUS, 50),
+                     node.subscribe("joint_states", JointState, self._joints, QoS.SYNCHRONOUS, 50),
+                     node.subscribe("camera/image_raw", Image, self._image, QoS.RELIABLE, 2, large=True),
+                     node.subscribe("/diagnostics", DiagnosticArray, self._diag, QoS.RELIABLE, 20)]
         self._drive = None
         self._drive_stop = threading.Event()
 
     @staticmethod
     def _ms(stamp) -> int:
-        return int(round(stamp.to_nsec() / 1e6))
+        return int(round(stamp_ns(stamp) / 1e6))
 
     def _odom(self, m):
         from ..ros.messages import quaternion_yaw
@@ -530,7 +550,7 @@ class Watch:
     def close(self):
         self.stop_drive()
         for s in self.subs:
-            s.unregister()
+            self.node.close(s)
 
 
 def reference_odometry(truth: np.ndarray, robot, start_index: int = 0) -> tuple[float, float, float]:
@@ -599,13 +619,8 @@ class Rig:
         if self.localize:
             self.start_localize()
         self.master.use_in_this_process()
-        import rospy
-
-        if not rospy.core.is_initialized():
-            rospy.init_node("raf_experiment_faults", anonymous=True, disable_signals=True)
         self.watch = Watch()
-        _wait(lambda: self.watch.cmd.get_num_connections() > 0, 60, "the bridge subscribing to cmd_vel",
-              self.check)
+        _wait(lambda: self.watch.cmd.subscriber_count() > 0, 60, "the bridge subscribing to cmd_vel", self.check)
         self.start_sim()
         _wait(lambda: len(self.watch.odom) > 5, self.sim_start_s, "odom from the bridge", self.check)
         if self.simtwo:
@@ -614,7 +629,7 @@ class Rig:
 
     def place(self) -> None:
         """SimTwo (no start pose option): the robot teleported to ``start_pose``."""
-        simtwo_side.teleport(self.start_pose)
+        simtwo_side.teleport(self.start_pose, node=self.watch.node)
 
     def kill_sim(self) -> None:
         """The simulator killed: ``raf sim`` with SIGKILL; SimTwo itself with SIGKILL (then its runner)."""

@@ -958,15 +958,17 @@ def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path,
     frame), camera_info and odom (``--save-bag FILE`` keeps it), then ``raf calibrate --bag`` on it; with
     ``--bag FILE``, no drive: ``raf calibrate`` on that recording. Returns the calibration file and result keys."""
     from ..localization.route import make_route
+    from ..ros.mw import bag_format
 
     out: dict = {}
     if plan.bag:
         bag = Path(plan.bag)
         out["calibration_bag"] = str(bag)
     else:
-        # ~130 MB: deleted with the work directory unless --save-bag names where to keep it (the YAML is kept)
-        bag = Path(args.save_bag) if args.save_bag else work / ("calibration.bag" if graph.middleware == "ros1"
-                                                                else "calibration_bag")
+        # ~130 MB: deleted with the work directory unless --save-bag names where to keep it (the YAML is kept);
+        # a ROS 1 bag is a file, a rosbag2 a directory
+        bag_name = "calibration.bag" if bag_format(graph.middleware) == "bag" else "calibration_bag"
+        bag = Path(args.save_bag) if args.save_bag else work / bag_name
         route = make_route("calibration", 1)
         with Session(args, plan, graph, log_dir, "calibration", route, robot_file, None, localize=False, bag=bag,
                      speed=args.calibration_speed) as ses:

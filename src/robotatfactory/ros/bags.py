@@ -222,24 +222,18 @@ class BagWriter:
 
 
 def serialize(msg, ros: int) -> bytes:
-    """A middleware message object serialized as its middleware does (ROS 2: CDR, little endian)."""
-    if ros == 2:
-        from rclpy.serialization import serialize_message
+    """A middleware message object serialized as its middleware does (ROS 2: CDR, little endian): a message of
+    ROS ``ros`` (1 or 2), by that middleware's :mod:`.mw` module (only its own interpreter has it)."""
+    from .mw import module
 
-        return serialize_message(msg)
-    import io
-
-    buf = io.BytesIO()
-    msg.serialize(buf)
-    return buf.getvalue()
+    return module(f"ros{ros}").serialize(msg)
 
 
 def default_format(middleware: str | None = None) -> str:
-    if middleware is None:
-        from .mw import name
+    """The bag format ``middleware`` (default: this process's) records (:func:`.mw.bag_format`)."""
+    from .mw import bag_format
 
-        middleware = name()
-    return "mcap" if middleware == "ros2" else "bag"
+    return bag_format(middleware)
 
 
 def open_writer(path: str | Path, fmt: str | None = None, custom: dict[str, str] | None = None) -> BagWriter:

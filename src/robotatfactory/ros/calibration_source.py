@@ -86,11 +86,7 @@ def record_live(image_topic: str, odom_topic: str | None, duration: float, sink,
     if not duration > 0 or not math.isfinite(duration):
         raise ConfigError(f"--duration must be a positive number of seconds, got {duration!r}")
     m = api()
-    if m.NAME == "ros1":
-        import rosgraph
-
-        if not rosgraph.is_master_online():
-            raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore and the bridge first")
+    m.require_master("start roscore and the bridge first")  # ROS 1; ROS 2 has no master
     node = m.init_node("raf_calibrate", argv=[sys.argv[0]], anonymous=True, signals=False)
     lock = threading.Lock()
     done = threading.Event()
@@ -131,13 +127,7 @@ def record_live(image_topic: str, odom_topic: str | None, duration: float, sink,
         done.set()
         for s in subs:
             node.close(s)
-        node.shutdown("raf calibrate: recording done")
-        spinner.join(timeout=5.0)
-        if m.NAME == "ros2":  # a ROS 2 process destroys its node and shuts rclpy down before it exits
-            import rclpy
-
-            node.destroy()
-            rclpy.try_shutdown()
+        node.finish("raf calibrate: recording done", spinner)
     with lock:
         if not kept[0]:
             extra = f" ({bad[0]} in an unsupported encoding)" if bad[0] else ""

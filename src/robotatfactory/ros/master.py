@@ -108,17 +108,14 @@ def ensure_master(start_private: bool, who: str) -> "PrivateMaster | None":
 
     Returns the started master (the caller stops it) or None; raises ConfigError when no master is online.
     """
-    from ..errors import ConfigError
+    from .mw import api
 
     master = None
     if start_private:
         master = PrivateMaster().start()
         os.environ["ROS_MASTER_URI"] = master.uri
         print(f"raf {who}: started roscore at {master.uri} (export ROS_MASTER_URI={master.uri})", flush=True)
-    import rosgraph
-
-    if not rosgraph.is_master_online():
-        raise ConfigError(f"no ROS master at {rosgraph.get_master_uri()}: start roscore (or pass --roscore)")
+    api().require_master("start roscore (or pass --roscore)")
     return master
 
 
@@ -174,8 +171,6 @@ class PrivateDomain(_PrivateGraph):
 def private_graph(middleware: str | None = None) -> "PrivateMaster | PrivateDomain":
     """A private ROS graph for this process's middleware (or ``middleware``), not yet started: a roscore on a
     free port (ROS 1) or a free domain id (ROS 2)."""
-    if middleware is None:
-        from .mw import name
+    from .mw import has_master
 
-        middleware = name()
-    return PrivateDomain() if middleware == "ros2" else PrivateMaster()
+    return PrivateMaster() if has_master(middleware) else PrivateDomain()

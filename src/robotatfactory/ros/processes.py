@@ -11,7 +11,6 @@ this one when it has that middleware).
 """
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
@@ -21,16 +20,17 @@ from pathlib import Path
 from typing import Callable
 
 ROOT = Path(__file__).resolve().parents[3]
-#: the module each middleware's interpreter must be able to import
-MIDDLEWARE_MODULE = {"ros1": "rospy", "ros2": "rclpy"}
+#: each middleware's virtual environment in the repository (scripts/bootstrap.sh builds both; ``raf
+#: --middleware`` and :func:`interpreter` run its Python)
+VENVS = {"ros1": ".venv", "ros2": ".venv-ros2"}
 
 
 def interpreter(middleware: str) -> Path | None:
     """The Python that runs ``middleware`` (this one when it can import it), or None when it is not there."""
-    if importlib.util.find_spec(MIDDLEWARE_MODULE[middleware]) is not None:
-        return Path(sys.executable)
-    from ..cli import VENVS
+    from .mw import importable
 
+    if importable(middleware):
+        return Path(sys.executable)
     if middleware == "ros2" and os.environ.get("RAF_ROS2_VENV"):
         venv = Path(os.environ["RAF_ROS2_VENV"])
     else:
@@ -150,10 +150,7 @@ class ExperimentNode:
 
         self.mw = api()
         self.node = self.mw.init_node(name, argv=[sys.argv[0]], anonymous=True, signals=False)
-        self._thread: threading.Thread | None = None
-        if self.mw.NAME == "ros2":
-            self._thread = threading.Thread(target=self.node.spin, name=f"raf-{name}-spin", daemon=True)
-            self._thread.start()
+        self._thread: threading.Thread | None = self.node.spin_in_background(f"raf-{name}-spin")
 
     @property
     def middleware(self) -> str:
@@ -184,16 +181,7 @@ class ExperimentNode:
         return got[0] if got else None
 
     def close(self) -> None:
-        if self.mw.NAME == "ros2":
-            self.node.shutdown()
-            if self._thread is not None:
-                self._thread.join(5)
-            self.node.destroy()
-            import rclpy
-
-            rclpy.try_shutdown()
-        else:
-            self.node.shutdown("experiment done")
+        self.node.finish(spinner=self._thread)
 
     def __enter__(self):
         return self
