@@ -6,6 +6,7 @@ import argparse
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
 from ..sim.config import (CAMERA_TIMINGS, LIDAR_UPDATES, MAGNETS, PID_TIMINGS, REPLY_TIMINGS, SPEED_CONTROLS,
                           SimConfig)
+from ..sim.runner import RunnerConfig
 
 NAME = "sim"
 HELP = "run the stand-in simulator: MuJoCo physics, SimTwo's UDP/ZMQ protocol, the competition and its server"
@@ -60,9 +61,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--controller", default=None, metavar="HOST:PORT",
                    help="accept commands from this source only (default: the first that sends a valid command; "
                         "another takes over after it has been silent for --takeover-after seconds)")
-    g.add_argument("--takeover-after", type=float, default=2.0, metavar="S",
+    g.add_argument("--takeover-after", type=float, default=RunnerConfig.takeover_after, metavar="S",
                    help="wall seconds the controller must be silent before another source may take over "
-                        "(default 2.0)")
+                        f"(default {RunnerConfig.takeover_after:g})")
 
     g = p.add_argument_group("timing")
     mode = g.add_mutually_exclusive_group()
@@ -74,9 +75,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="start paused: the control channel's step and resume requests run it")
     g.add_argument("--lockstep", action="store_true",
                    help="wait each cycle for the controller's reply to the frame just sent")
-    g.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="S",
-                   help="wall seconds to wait for a reply in lockstep (default 1.0)")
-    g.add_argument("--on-timeout", choices=("stop", "hold", "exit"), default="stop",
+    g.add_argument("--lockstep-timeout", type=float, default=RunnerConfig.lockstep_timeout, metavar="S",
+                   help=f"wall seconds to wait for a reply in lockstep (default {RunnerConfig.lockstep_timeout:g})")
+    g.add_argument("--on-timeout", choices=("stop", "hold", "exit"), default=RunnerConfig.on_timeout,
                    help="when no reply comes in time: stop the robot (V=W=0, magnet kept), hold the last "
                         "command, or exit (code 3); always with a warning (default stop)")
     g.add_argument("--command-timeout", type=float, default=0.5, metavar="S",
@@ -110,7 +111,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--beacons", action="store_true", help="put the LIDAR beacons in the team areas")
     g.add_argument("--robot", default="simtwo", help="robot parameters: shipped name or a .json file (default simtwo)")
 
-    g = p.add_argument_group("SimTwo fidelity (defaults behave like SimTwo; the rest are idealisations, docs/simulator.md)")
+    g = p.add_argument_group("SimTwo fidelity (defaults behave like SimTwo; the rest are idealisations, "
+                             "docs/simulator.md)")
     g.add_argument("--lidar-update", choices=LIDAR_UPDATES,
                    help="sweep: all rays published at once once per period, 0 before the first (SimTwo); per_ray: "
                         "each ray as soon as measured (default sweep)")
@@ -128,8 +130,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "idealisation, a facing plate is welded flat to the magnet and never lost")
 
     g = p.add_argument_group("output")
-    g.add_argument("--status-every", type=float, default=1.0, metavar="S",
-                   help="print a status line every S wall seconds (default 1.0; 0 = never)")
+    g.add_argument("--status-every", type=float, default=RunnerConfig.status_every, metavar="S",
+                   help=f"print a status line every S wall seconds (default {RunnerConfig.status_every:g}; 0 = "
+                        "never)")
     g.add_argument("--quiet", action="store_true", help="no status lines (warnings and the final score still)")
     g.add_argument("--trace", default=None, metavar="FILE.jsonl",
                    help="write the ground truth cycle by cycle (robot pose, parts, held part, command, contact, "
@@ -246,7 +249,8 @@ def run(args) -> int:
     print(f"raf sim: {result.reason} at t = {result.sim_time:.2f} s of simulation in {result.wall_time:.2f} s "
           f"(real-time factor {result.real_time_factor:.2f}); frames sent {cnt['frames_sent']}, commands "
           f"{cnt['commands']} (rejected {cnt['rejected']}: malformed {cnt['malformed']}, foreign "
-          f"{cnt['foreign']}, version {cnt['version']}, other sources {cnt['foreign_source']}), lockstep timeouts {cnt['timeouts']}, camera frames "
+          f"{cnt['foreign']}, version {cnt['version']}, other sources {cnt['foreign_source']}), lockstep timeouts "
+          f"{cnt['timeouts']}, camera frames "
           f"{cnt['camera_frames']}", flush=True)
     if result.report is not None:
         print(result.report, flush=True)
