@@ -38,8 +38,10 @@ NAMED = {
     "camera_frames_per_s": ((13.5, 15.5), (1.2, 9.0)),
     "straight_odom_over_truth": ((1.0, 1.035), (0.99, 1.01)),  # the stand-in's slip from rest (~2 %)
     # round 1: the stand-in scored the maximum in 3 of 3 compare runs and 3 of 4 once in CI (2026-11-26: a part
-    # left short in the outgoing warehouse, as on SimTwo); SimTwo 2-4 (docs/simtwo.md, "The agent on SimTwo")
-    "points": ((3, 4), (1, 4)),
+    # left short in the outgoing warehouse, as on SimTwo); SimTwo anything from 0 to 4 (0 in a CI run on the slow
+    # host: 6 of 9 picks failed, 3 parts dropped; 3 twice the same hour: docs/simtwo.md, "The agent on SimTwo"),
+    # so no bound on SimTwo's side: its picks are the named difference (picks_attempted)
+    "points": ((3, 4), None),
     "picks_attempted": ((4, 6), (2, 40)),  # SimTwo: the agent gets the first part at least, then retries
 }
 
