@@ -69,3 +69,25 @@ def test_commands_and_interpreters():
 
     for m in mw.available():  # this interpreter runs its own middleware
         assert str(interpreter(m)) == sys.executable
+
+
+def test_a_killed_process_restarted_under_its_name_is_the_one_watched_with_its_own_log(tmp_path):
+    """The faults campaign's use: kill a process (its whole group, no second signal) and start it again under
+    the same name: numbered logs keep both runs, and only the latest process of a name is judged."""
+    sleeper = [sys.executable, "-c", "import sys, time; print('run', sys.argv[1], flush=True); time.sleep(60)"]
+    with Procs(tmp_path, env=dict(os.environ), numbered_logs=True) as procs:
+        procs.start("node", sleeper + ["1"])
+        wait_until(lambda: "run 1" in procs.log("node"), 20, "the first run's output")
+        first = procs.get("node")
+        procs.kill("node")
+        assert first.poll() is not None and "node" in procs
+        with pytest.raises(RuntimeError, match="node exited early"):
+            procs.check()  # killed and not restarted: a dead process
+        procs.start("node", sleeper + ["2"])
+        wait_until(lambda: "run 2" in procs.log("node"), 20, "the second run's output")
+        procs.check()  # the restarted one is alive: no error for the killed one
+        assert procs.get("node") is not first and procs.starts["node"] == 2
+        assert procs.log_path("node").name == "node.2.log" and "run 1" not in procs.log("node")
+        assert "run 1" in (tmp_path / "node.1.log").read_text()
+        second = procs.get("node")
+    assert second.poll() is not None  # stopped with the context

@@ -1,9 +1,10 @@
 """``raf experiment faults --simulator simtwo``: the real SimTwo in the fault campaign's rig.
 
-:mod:`.faults` imports this module (never the other way round). SimTwo runs as ``raf simtwo run`` (the Linux
-build, headless, field ``simtwo2022``) and sends its SensorFrames to the proxy's port (``--bridge
-127.0.0.1:PROXY``); the proxy sends the bridge's replies back to where SimTwo's frames came from. SimTwo's
-SensorFrames carry its ground truth, so the proxy's record is the truth as on the stand-in.
+:mod:`.faults` imports this module (never the other way round); the processes are the rig's
+:class:`..ros.processes.Procs` (numbered logs: ``sim.N.log`` for the N-th start). SimTwo runs as ``raf simtwo
+run`` (the Linux build, headless, field ``simtwo2022``) and sends its SensorFrames to the proxy's port
+(``--bridge 127.0.0.1:PROXY``); the proxy sends the bridge's replies back to where SimTwo's frames came from.
+SimTwo's SensorFrames carry its ground truth, so the proxy's record is the truth as on the stand-in.
 
 What the real SimTwo cannot do, and how the result says so (:data:`NOT_APPLICABLE`, :data:`DIFFERENCES`):
 
@@ -26,7 +27,6 @@ from __future__ import annotations
 import os
 import re
 import signal
-import sys
 import time
 from pathlib import Path
 
@@ -60,13 +60,16 @@ def check_parts(parts: list[str]) -> None:
 
 
 def keep_dir(procs) -> Path:
-    """The folder the next ``raf simtwo run`` keeps (its scene copy and SimTwo's log): new for each start."""
-    return procs.log_dir / f"simtwo.{procs.n.get('sim', 0) + 1}"
+    """The folder the next ``raf simtwo run`` keeps (its scene copy and SimTwo's log): new for each start
+    (``procs``: the rig's :class:`..ros.processes.Procs`)."""
+    return procs.log_dir / f"simtwo.{procs.starts.get('sim', 0) + 1}"
 
 
 def command(field: str, udp_port: int, proxy_port: int, camera_port: int | None, keep: Path) -> list[str]:
-    cmd = [sys.executable, "-m", "robotatfactory", "--field", field, "simtwo", "run", "--port", str(udp_port),
-           "--bridge", f"127.0.0.1:{proxy_port}", "--keep", str(keep), "--ready-timeout", "150"]
+    from ..ros.processes import raf_cmd
+
+    cmd = raf_cmd("--field", field, "simtwo", "run", "--port", str(udp_port), "--bridge", f"127.0.0.1:{proxy_port}",
+                  "--keep", str(keep), "--ready-timeout", "150")
     return cmd + (["--camera-port", str(camera_port)] if camera_port is not None else ["--no-camera"])
 
 
@@ -107,7 +110,7 @@ def kill(procs, keep: Path) -> float:
     t = time.monotonic()
     for pid in pids:
         os.kill(pid, signal.SIGKILL)
-    p = procs.procs["sim"]
+    p = procs.get("sim")
     try:
         p.wait(5)
     except Exception:  # noqa: BLE001 - subprocess.TimeoutExpired: the group is killed below

@@ -1,9 +1,9 @@
 """``raf experiment faults``: the fault campaign of issue 10, on the real ``raf sim``, bridge and localization.
 
 Everything runs on loopback (127.0.0.1) with a private roscore. Between the simulator and the bridge sits a
-UDP proxy in this process (:class:`Proxy`): it records every SensorFrame the simulator sent (the loss-free,
-fuzz-free truth) and, per part, drops, duplicates, reorders or injects datagrams. The bridge's stream is bound
-to the proxy's address (its only legitimate sender).
+UDP proxy in this process (:class:`._faults_net.Proxy`): it records every SensorFrame the simulator sent (the
+loss-free, fuzz-free truth) and, per part, drops, duplicates, reorders or injects datagrams. The bridge's stream
+is bound to the proxy's address (its only legitimate sender).
 
 Parts (``--parts``, all by default):
 
@@ -36,6 +36,12 @@ Simulator. ``--simulator standin`` (the default) runs ``raf sim``; ``--simulator
 (``raf simtwo run``, field ``simtwo2022``) behind the same proxy: fuzz, loss and restarts, with the keys
 prefixed ``real_simtwo_``. What SimTwo cannot do (no ``--fast``, no lockstep: no soak; no start pose option:
 teleports; its own command timeout and log line) is in :mod:`._faults_simtwo` and in the result.
+
+Code. This module is the campaign: the parts (:data:`PARTS`, each run in an interpreter of its own by
+:func:`run_part`), the rig that starts and restarts the processes (:class:`Rig`: a private roscore and
+:class:`..ros.processes.Procs`), the figures and :data:`TARGETS`, the table. The proxy and the fuzz (no ROS)
+are in :mod:`._faults_net`; this process's node and what it records from the bridge (:class:`Watch`) in
+:mod:`._faults_watch`; what differs on the real SimTwo in :mod:`._faults_simtwo`.
 """
 from __future__ import annotations
 
@@ -43,22 +49,18 @@ import json
 import math
 import os
 import random
-import select
 import signal
 import socket
-import subprocess
 import sys
 import tempfile
-import threading
 import time
-from collections import deque
 from pathlib import Path
 
 import numpy as np
 
-from ..ros.mw.base import stamp_ns
-from ..simtwo import Command, ProtocolError
 from . import _faults_simtwo as simtwo_side
+from ._faults_net import LOCAL, Proxy, fuzz_pool, fuzzer
+from ._faults_watch import Watch
 
 NAME = "faults"
 HELP = ("fault campaign (issue 10): fuzz, loss, restarts and soak on the real raf sim, bridge and localization "
@@ -84,7 +86,6 @@ TARGETS = {
 TARGETS.update({f"{simtwo_side.MODE}_{k}": v for k, v in list(TARGETS.items())
                 if k not in simtwo_side.TARGETS_NOT_APPLICABLE})
 EXIT_STATUS_FROM_TARGETS = True  # raf experiment faults exits 1 when a target is missed
-LOCAL = "127.0.0.1"
 PERIOD = 0.04
 
 
@@ -113,48 +114,10 @@ def add_arguments(parser) -> None:
 
 # ------------------------------------------------------------------------------------------------ plumbing
 
-def _raf(*args: str) -> list[str]:
-    return [sys.executable, "-m", "robotatfactory", *args]
-
-
 def _free_udp() -> int:
     from ..ros.master import free_port
 
     return free_port(socket.SOCK_DGRAM)
-
-
-class Procs:
-    """Child processes in their own sessions, logs in a directory."""
-
-    def __init__(self, log_dir: Path, env: dict):
-        self.log_dir, self.env = log_dir, env
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.n: dict[str, int] = {}
-
-    def start(self, name: str, cmd: list[str]) -> subprocess.Popen:
-        self.n[name] = self.n.get(name, 0) + 1
-        log = open(self.log_dir / f"{name}.{self.n[name]}.log", "wb")
-        p = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        self.procs[name] = p
-        return p
-
-    def log(self, name: str) -> str:
-        try:
-            return (self.log_dir / f"{name}.{self.n.get(name, 1)}.log").read_text(errors="replace")
-        except OSError:
-            return ""
-
-    def kill(self, name: str, sig=signal.SIGKILL) -> None:
-        p = self.procs.get(name)
-        if p is not None and p.poll() is None:
-            os.killpg(p.pid, sig)
-            p.wait(10)
-
-    def stop_all(self) -> None:
-        from ..ros.master import stop_process
-
-        for p in reversed(list(self.procs.values())):
-            stop_process(p)
 
 
 def rss_kib(pid: int) -> int | None:
@@ -186,373 +149,6 @@ def _wait(pred, timeout: float, what: str, check=None) -> None:
     wait_until(pred, timeout, what, check, period=0.02)
 
 
-# ------------------------------------------------------------------------------------------------ the proxy
-
-class Proxy:
-    """UDP proxy simulator <-> bridge on loopback, with loss, duplication, reordering and in-band injection.
-
-    The simulator sends its frames to :attr:`port`; they go on to the bridge from the same socket, so the
-    bridge sees one source. Replies from the bridge go back to the simulator's address (learned from its
-    frames). Every frame the simulator sent is recorded (``frames``: wall time, Seq, Tms, totals, x, y, theta).
-    """
-
-    def __init__(self, bridge: tuple[str, int], seed: int = 0):
-        from ..simtwo.messages import SensorFrame
-
-        self._decode = SensorFrame.decode
-        self.bridge = bridge
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
-        self.sock.bind((LOCAL, 0))
-        self.sock.setblocking(False)
-        self.port = self.sock.getsockname()[1]
-        self.rng = random.Random(seed)
-        self.drop = self.dup = self.reorder = 0.0
-        self.sim_addr = None
-        self.lock = threading.Lock()
-        self.frames: list[tuple] = []  # (wall, seq, tms, left, right, x, y, theta)
-        self.replies: list[tuple] = []  # (wall, seq, v, w)
-        self.template: bytes | None = None
-        self.counts = {"frames": 0, "replies": 0, "dropped": 0, "duplicated": 0, "reordered": 0, "injected": 0,
-                       "reply_errors": 0}
-        self._held = {0: None, 1: None}  # a datagram held back per direction (reordering)
-        self.inject_queue: deque = deque()
-        self.forge_ticks_every = 0  # > 0: after every n-th frame, a copy of the next one with impossible ticks
-        self._running = True
-        self.thread = threading.Thread(target=self._loop, name="raf-faults-proxy", daemon=True)
-        self.thread.start()
-
-    def set_faults(self, drop=0.0, dup=0.0, reorder=0.0) -> None:
-        self.drop, self.dup, self.reorder = drop, dup, reorder
-
-    def _out(self, direction: int, data: bytes, addr) -> None:
-        r = self.rng.random()
-        if r < self.drop:
-            self.counts["dropped"] += 1
-            return
-        sends = [data]
-        if r < self.drop + self.dup:
-            self.counts["duplicated"] += 1
-            sends.append(data)
-        elif r < self.drop + self.dup + self.reorder and self._held[direction] is None:
-            self.counts["reordered"] += 1
-            self._held[direction] = data  # goes out after the next datagram of this direction
-            return
-        held, self._held[direction] = self._held[direction], None
-        if held is not None:
-            sends.append(held)
-        for d in sends:
-            try:
-                self.sock.sendto(d, addr)
-            except OSError:
-                self.counts["reply_errors"] += 1
-
-    def _loop(self) -> None:
-        sock = self.sock
-        while self._running:
-            r, _, _ = select.select([sock], [], [], 0.05)
-            while self.inject_queue:
-                try:
-                    sock.sendto(self.inject_queue.popleft(), self.bridge)
-                    self.counts["injected"] += 1
-                except (IndexError, OSError):
-                    break
-            if not r:
-                continue
-            while True:
-                try:
-                    data, addr = sock.recvfrom(65535)
-                except (BlockingIOError, InterruptedError):
-                    break
-                except OSError:
-                    break
-                now = time.monotonic()
-                if addr == self.bridge:
-                    self.counts["replies"] += 1
-                    try:
-                        c = Command.decode(data)
-                        with self.lock:
-                            self.replies.append((now, c.seq, c.v, c.w))
-                    except ProtocolError:
-                        pass
-                    if self.sim_addr is not None:
-                        self._out(1, data, self.sim_addr)
-                    continue
-                self.sim_addr = addr
-                try:
-                    f = self._decode(data)
-                except Exception:  # noqa: BLE001 - the simulator never sends garbage, but do not die on it
-                    continue
-                self.counts["frames"] += 1
-                with self.lock:
-                    self.frames.append((now, f.seq, f.time_ms, f.enc_total[0], f.enc_total[1], f.x, f.y, f.theta))
-                    self.template = data
-                self._out(0, data, self.bridge)
-                if self.forge_ticks_every and self.counts["frames"] % self.forge_ticks_every == 0:
-                    self._forge_ticks(f)
-
-    def _forge_ticks(self, f) -> None:
-        """The next frame before it comes, with encoder totals the wheels cannot reach in one cycle."""
-        import dataclasses
-
-        jump = 40 * (1 + self.counts["frames"] % 50)
-        forged = dataclasses.replace(f, seq=f.seq + 1, time_ms=f.time_ms + 40,
-                                     enc_total=(f.enc_total[0] + jump * 10, f.enc_total[1] - jump * 10))
-        try:
-            self.sock.sendto(forged.encode(), self.bridge)
-            self.counts["forged_ticks"] = self.counts.get("forged_ticks", 0) + 1
-        except OSError:
-            pass
-
-    def truth(self) -> np.ndarray:
-        with self.lock:
-            return np.array(self.frames, dtype=float).reshape(-1, 8)
-
-    def close(self) -> None:
-        self._running = False
-        self.thread.join(2)
-        self.sock.close()
-
-
-# ------------------------------------------------------------------------------------------------ the fuzz
-
-def fuzz_pool(template: bytes, rng: random.Random, n: int = 4000) -> dict[str, list[bytes]]:
-    """Datagrams of each kind, built once and sent round-robin (generation would be slower than sending)."""
-    from ..simtwo.messages import SensorFrame
-
-    base = SensorFrame.decode(template)
-
-    def forged(seq, tms, totals=None):
-        return SensorFrame(seq=seq, time_ms=tms, enc_delta=base.enc_delta, enc_total=totals or base.enc_total,
-                           x=base.x, y=base.y, theta=base.theta, contact=base.contact, magnet=base.magnet,
-                           ranges=base.ranges).encode()
-
-    def mutate(b: bytes) -> bytes:
-        a = bytearray(b)
-        for _ in range(rng.randint(1, 8)):
-            op = rng.random()
-            i = rng.randrange(len(a)) if a else 0
-            if op < 0.5 and a:
-                a[i] = rng.randrange(256)
-            elif op < 0.75:
-                a[i:i] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 6)))
-            elif a:
-                del a[i:i + rng.randint(1, 20)]
-        return bytes(a)
-
-    def undecodable_mutation() -> bytes:
-        while True:
-            m = mutate(template)
-            try:
-                SensorFrame.decode(m)
-            except Exception:  # noqa: BLE001
-                return m
-
-    big = 10 ** 9
-    pool = {
-        "random": [bytes(rng.randrange(256) for _ in range(rng.randint(0, 1500))) for _ in range(n // 8)],
-        "mutated": [mutate(template) for _ in range(n // 4)],
-        "forged_seq_tms": [forged(rng.randint(base.seq + 300, 2 ** 31 - 1), rng.randint(base.time_ms + 12001, big))
-                           for _ in range(n // 8)],
-        "oversized": [template * rng.randint(6, 20) for _ in range(16)],
-        "non_ascii": [template[:200] + bytes(rng.randrange(128, 256) for _ in range(40)) + template[240:]
-                      for _ in range(n // 8)],
-    }
-    # from the simulator's own address: only kinds the stream rules must catch on their own
-    last = base.seq
-    inband = []
-    for i in range(n // 4):
-        k = i % 7
-        if k == 0:
-            inband.append(forged(last + rng.randint(300, 10 ** 6), base.time_ms + 40 * rng.randint(1, 5)))
-        elif k == 1:
-            inband.append(forged(last + 1, base.time_ms + rng.randint(10_001, big)))
-        elif k == 2:
-            inband.append(forged(rng.randint(0, 3), 40 * rng.randint(1, 4)))  # a lone restart-like frame
-        elif k == 3:
-            inband.append(forged(last + rng.randint(1, 5), 40 * rng.randint(1, 20)))  # Seq ahead, clock back
-        elif k == 4:
-            inband.append(undecodable_mutation())
-        elif k == 5:
-            inband.append(template[:100] + bytes(rng.randrange(128, 256) for _ in range(30)) + template[130:])
-        else:
-            inband.append(template * 8)
-    pool["inband"] = inband
-    return pool
-
-
-def _fuzzer(port: int, pool: dict, total: int, seconds: float, report) -> None:
-    """A separate process: ``total`` datagrams to 127.0.0.1:port over ``seconds`` wall seconds, from several
-    source ports, plus a second sender streaming valid frames (its Tms 20 ms off the simulator's grid)."""
-    from ..simtwo.messages import SensorFrame
-
-    socks = []
-    for _ in range(4):
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.bind((LOCAL, 0))
-        s.setblocking(False)
-        socks.append(s)
-    second = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    second.bind((LOCAL, 0))
-    second.setblocking(False)
-    kinds = [k for k in pool if k != "inband"]
-    weights = {"random": 3, "mutated": 4, "forged_seq_tms": 3, "oversized": 1, "non_ascii": 2}
-    seq_kinds = [k for k in kinds for _ in range(weights.get(k, 1))]
-    sent = {k: 0 for k in kinds}
-    sent["second_sender"] = sent["errors"] = 0
-    dest = (LOCAL, port)
-    t0 = time.monotonic()
-    n = 0
-    seq2 = 0
-    batch = 200
-    ranges = np.full(360, 2.0)
-    while n < total:
-        for i in range(batch):
-            if n >= total:
-                break
-            if i == 0:
-                data = SensorFrame(seq=seq2, time_ms=(seq2 + 1) * 40 + 20, enc_delta=(5, 5),
-                                   enc_total=(5 * seq2, 5 * seq2), x=1.0, y=1.0, theta=0.0, contact=False,
-                                   magnet=False, ranges=ranges).encode()
-                seq2 += 1
-                kind, sock = "second_sender", second
-            else:
-                kind = seq_kinds[(n * 7 + i) % len(seq_kinds)]
-                lst = pool[kind]
-                data = lst[(n // len(seq_kinds)) % len(lst)]
-                sock = socks[i % len(socks)]
-            try:
-                sock.sendto(data, dest)
-                sent[kind] += 1
-            except OSError:
-                sent["errors"] += 1  # the kernel's buffer full: counted, not retried
-            n += 1
-        ahead = t0 + seconds * n / total - time.monotonic()
-        if ahead > 0:
-            time.sleep(ahead)
-    sent["wall_s"] = time.monotonic() - t0
-    sent["total"] = n
-    sent["source_ports"] = [s.getsockname()[1] for s in socks] + [second.getsockname()[1]]
-    report.put(sent)
-
-
-# ------------------------------------------------------------------------------------------------ ROS side
-
-_NODE = None  # this process's node (experiment_node)
-
-
-def experiment_node():
-    """This process's node on the rig's graph, made on first use: rospy has one node per process, bound to one
-    master for good (each part runs in an interpreter of its own: :func:`_part_child`)."""
-    global _NODE
-    if _NODE is None:
-        from ..ros.mw import api
-
-        _NODE = api().init_node("raf_experiment_faults", anonymous=True, signals=False)
-    return _NODE
-
-
-class Watch:
-    """This process's node (:func:`experiment_node`): odom, /clock, joint_states, ground truth, camera images,
-    diagnostics; ``cmd_vel`` out."""
-
-    def __init__(self):
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import Twist
-        from nav_msgs.msg import Odometry
-        from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import Image, JointState
-
-        from ..ros.mw import QoS
-
-        self.node = node = experiment_node()
-        self.Twist = Twist
-        self.lock = threading.Lock()
-        self.odom: list[tuple] = []  # (wall, stamp_ms, x, y, theta)
-        self.clock: list[tuple] = []  # (wall, stamp_ms)
-        self.joints: list[tuple] = []  # (wall, stamp_ms, left rad, right rad)
-        self.images: list[tuple] = []  # (wall, stamp_ms)
-        self.diag: dict[str, dict] = {}
-        # ROS 1: queue 1 and TCP_NODELAY out; TCP_NODELAY on odom, /clock and joint_states (SYNCHRONOUS), not on
-        # the images (RELIABLE: 2 deep, a large buffer) nor /diagnostics
-        self.cmd = node.publisher("cmd_vel", Twist, QoS.CONTROL)
-        self.subs = [node.subscribe("odom", Odometry, self._odom, QoS.SYNCHRONOUS, 50),
-                     node.subscribe("/clock", Clock, self._clock, QoS.SYNCHRONOUS, 50),
-                     node.subscribe("joint_states", JointState, self._joints, QoS.SYNCHRONOUS, 50),
-                     node.subscribe("camera/image_raw", Image, self._image, QoS.RELIABLE, 2, large=True),
-                     node.subscribe("/diagnostics", DiagnosticArray, self._diag, QoS.RELIABLE, 20)]
-        self._drive = None
-        self._drive_stop = threading.Event()
-
-    @staticmethod
-    def _ms(stamp) -> int:
-        return int(round(stamp_ns(stamp) / 1e6))
-
-    def _odom(self, m):
-        from ..ros.messages import quaternion_yaw
-
-        with self.lock:
-            self.odom.append((time.monotonic(), self._ms(m.header.stamp), m.pose.pose.position.x,
-                              m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation)))
-
-    def _clock(self, m):
-        with self.lock:
-            self.clock.append((time.monotonic(), self._ms(m.clock)))
-
-    def _joints(self, m):
-        if len(m.position) >= 2:
-            with self.lock:
-                self.joints.append((time.monotonic(), self._ms(m.header.stamp), m.position[0], m.position[1]))
-
-    def _image(self, m):
-        with self.lock:
-            self.images.append((time.monotonic(), self._ms(m.header.stamp)))
-
-    def _diag(self, m):
-        with self.lock:
-            for st in m.status:
-                self.diag[st.name] = {kv.key: kv.value for kv in st.values} | {"_level": st.level,
-                                                                               "_message": st.message}
-
-    def stream_diag(self) -> dict:
-        with self.lock:
-            for name, d in self.diag.items():
-                if name.endswith("sensor stream"):
-                    return dict(d)
-        return {}
-
-    def drive(self, profile) -> None:
-        """Publish cmd_vel = profile(wall seconds since start) at 20 Hz from a thread until stop_drive()."""
-        self.stop_drive()
-        self._drive_stop.clear()
-
-        def loop():
-            t0 = time.monotonic()
-            while not self._drive_stop.is_set():
-                v, w = profile(time.monotonic() - t0)
-                tw = self.Twist()
-                tw.linear.x, tw.angular.z = v, w
-                self.cmd.publish(tw)
-                time.sleep(0.05)
-
-        self._drive = threading.Thread(target=loop, daemon=True)
-        self._drive.start()
-
-    def stop_drive(self) -> None:
-        if self._drive is not None:
-            self._drive_stop.set()
-            self._drive.join(2)
-            self._drive = None
-        for _ in range(3):
-            self.cmd.publish(self.Twist())
-            time.sleep(0.05)
-
-    def close(self):
-        self.stop_drive()
-        for s in self.subs:
-            self.node.close(s)
-
-
 def reference_odometry(truth: np.ndarray, robot, start_index: int = 0) -> tuple[float, float, float]:
     """The bridge's odometry over every frame the simulator sent (in Seq order, from zero): the fuzz-free and
     loss-free result."""
@@ -577,12 +173,14 @@ class Rig:
     def __init__(self, args, log_dir: Path, camera: bool = False, localize: bool = False, fast: bool = False,
                  lockstep: bool = False, start_pose: str = "0.0,0.0,1.5708"):
         from ..ros.master import PrivateMaster, free_port
+        from ..ros.processes import Procs
 
         self.args, self.camera, self.localize, self.fast, self.lockstep = args, camera, localize, fast, lockstep
         self.start_pose = start_pose  # the open middle of the field (rules2026); the loss part drives a corridor
         self.master = PrivateMaster().start()
         self.env = self.master.env(MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
-        self.procs = Procs(log_dir, self.env)
+        # every start logs to NAME.N.log: a restart keeps the earlier one's log
+        self.procs = Procs(log_dir, env=self.env, numbered_logs=True)
         self.bport, self.sport = _free_udp(), _free_udp()
         self.cam = f"tcp://{LOCAL}:{free_port()}"
         self.proxy = Proxy((LOCAL, self.bport), seed=args.seed)
@@ -595,10 +193,10 @@ class Rig:
         cmd = ["--field", self.args.field, "bridge", "--port", str(self.bport), "--sim-host", LOCAL,
                "--set", "lidar/enabled=false"]
         cmd += ["--camera", self.cam] if self.camera else ["--no-camera"]
-        return self.procs.start("bridge", _raf(*cmd))
+        return self.procs.raf("bridge", *cmd)
 
     def start_localize(self):
-        return self.procs.start("localize", _raf("--field", self.args.field, "localize"))
+        return self.procs.raf("localize", "--field", self.args.field, "localize")
 
     def start_sim(self, extra=()):
         if self.simtwo:
@@ -612,7 +210,7 @@ class Rig:
         cmd += ["--fast"] if self.fast else ["--realtime"]
         if self.lockstep:
             cmd += ["--lockstep", "--lockstep-timeout", "2.0"]
-        return self.procs.start("sim", _raf(*cmd, *extra))
+        return self.procs.raf("sim", *cmd, *extra)
 
     def up(self) -> "Rig":
         self.start_bridge()
@@ -640,7 +238,7 @@ class Rig:
 
     def check(self) -> None:
         for name in ("bridge", "sim", "localize"):
-            p = self.procs.procs.get(name)
+            p = self.procs.get(name) if name in self.procs else None
             if p is not None and p.poll() is not None:
                 raise RuntimeError(f"{name} exited with code {p.returncode}:\n{self.procs.log(name)[-2000:]}")
 
@@ -680,7 +278,7 @@ def part_fuzz(args, log_dir: Path, robot) -> dict:
         n_out = args.fuzz_datagrams - n_inband
         ctx = mp.get_context("spawn")
         q = ctx.Queue()
-        fz = ctx.Process(target=_fuzzer, args=(rig.bport, {k: v for k, v in pool.items() if k != "inband"}, n_out,
+        fz = ctx.Process(target=fuzzer, args=(rig.bport, {k: v for k, v in pool.items() if k != "inband"}, n_out,
                                                args.fuzz_seconds, q), daemon=True)
         t_fuzz0 = time.monotonic()
         fz.start()
@@ -702,7 +300,7 @@ def part_fuzz(args, log_dir: Path, robot) -> dict:
         w.stop_drive()
         time.sleep(1.5)  # the robot stops; the last frames arrive
         rig.check()
-        crashed = sum(1 for n in ("bridge", "sim") if rig.procs.procs[n].poll() is not None)
+        crashed = sum(1 for n in ("bridge", "sim") if rig.procs.get(n).poll() is not None)
         truth = px.truth()
         real_ms = set(truth[:, 2].astype(int).tolist())
         with w.lock:
@@ -936,7 +534,7 @@ def _policy_stop(after, before, t_cmd) -> float:
 def _roscore_restart(rig: Rig) -> dict:
     from ..ros.master import stop_process
 
-    names = [n for n in ("bridge", "localize") if n in rig.procs.procs]
+    names = [n for n in ("bridge", "localize") if n in rig.procs]
     stop_process(rig.master.proc, signal.SIGINT)
     time.sleep(1.0)
     rig.master.start()
@@ -944,7 +542,7 @@ def _roscore_restart(rig: Rig) -> dict:
     exited, clear = {}, {}
     while time.monotonic() - t0 < 15 and len(exited) < len(names):
         for n in names:
-            p = rig.procs.procs[n]
+            p = rig.procs.get(n)
             if n not in exited and p.poll() is not None:
                 exited[n] = p.returncode
         time.sleep(0.2)
@@ -970,7 +568,7 @@ def part_soak(args, log_dir: Path, robot) -> dict:
         def procs():
             out = {}
             for n in ("sim", "bridge", "localize"):
-                p = rig.procs.procs[n]
+                p = rig.procs.get(n)
                 out[n] = p.pid
                 if n == "bridge":
                     for c in children(p.pid):

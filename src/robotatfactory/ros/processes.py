@@ -2,7 +2,8 @@
 
 One helper for what the benchmarks and experiments all do: start ``python -m robotatfactory ...`` (the
 simulator, the bridge, the localization) with a private graph's environment (:func:`.master.private_graph`),
-each logging to a file of its own and in a process group of its own; notice one that died; stop them all.
+each logging to a file of its own and in a process group of its own; notice one that died; kill one (a crash)
+and start it again; stop them all.
 :class:`ExperimentNode` is the experiment's own node in this process, on either middleware (ROS 2's is
 spun by a thread of its own, and torn down before the interpreter exits).
 
@@ -12,6 +13,7 @@ this one when it has that middleware).
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -59,21 +61,40 @@ def wait_until(pred: Callable[[], bool], timeout: float, what: str, check: Calla
 
 
 class Procs:
-    """The processes of one run: each logs to ``log_dir/NAME.log`` and runs in a session of its own, so that
-    :meth:`stop_all` (SIGINT, then SIGKILL) ends it with its children. Use as a context manager."""
+    """The processes of one run: each logs to a file in ``log_dir`` and runs in a session of its own, so that
+    :meth:`stop_all` (SIGINT, then SIGKILL) ends it with its children. Use as a context manager.
 
-    def __init__(self, log_dir: Path, watch: tuple[str, ...] | None = None):
+    ``env``: the environment of every start that does not give its own (None: this process's). A name may be
+    started again (a restart, e.g. after :meth:`kill`): :meth:`get`, :meth:`check`, :meth:`kill`, :meth:`log`
+    and :meth:`tail` mean its latest process. Logs: ``NAME.log`` (a restart writes over it), or with
+    ``numbered_logs`` ``NAME.N.log`` for the N-th start of ``NAME`` (1, 2, ...: every start's log is kept).
+    """
+
+    def __init__(self, log_dir: Path, watch: tuple[str, ...] | None = None, env: dict | None = None,
+                 numbered_logs: bool = False):
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        self.procs: list[tuple[str, subprocess.Popen]] = []
+        self.procs: list[tuple[str, subprocess.Popen]] = []  # every start, in order (a restarted name: twice)
         self.watch = watch  # names whose early exit is an error (default: every one started by start())
+        self.env = env
+        self.numbered_logs = numbered_logs
+        self.starts: dict[str, int] = {}  # how many times each name was started
         self._expected_exit: set[str] = set()
 
-    def start(self, name: str, cmd: list[str], env: dict, may_exit: bool = False) -> subprocess.Popen:
-        """Start ``cmd`` (e.g. :func:`raf_cmd`) with ``env``; ``may_exit``: its exit is not an error."""
-        log = open(self.log_dir / f"{name}.log", "wb")
+    def log_path(self, name: str) -> Path:
+        """The log of the latest start of ``name`` (of the first one when it was never started)."""
+        if self.numbered_logs:
+            return self.log_dir / f"{name}.{self.starts.get(name, 1)}.log"
+        return self.log_dir / f"{name}.log"
+
+    def start(self, name: str, cmd: list[str], env: dict | None = None, may_exit: bool = False) -> subprocess.Popen:
+        """Start ``cmd`` (e.g. :func:`raf_cmd`) with ``env`` (default: the constructor's); ``may_exit``: its
+        exit is not an error."""
+        self.starts[name] = self.starts.get(name, 0) + 1
+        log = open(self.log_path(name), "wb")
         try:
-            p = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+            p = subprocess.Popen(cmd, env=self.env if env is None else env, stdout=log, stderr=subprocess.STDOUT,
+                                 start_new_session=True)
         finally:
             log.close()  # the child has its own copy
         self.procs.append((name, p))
@@ -81,20 +102,26 @@ class Procs:
             self._expected_exit.add(name)
         return p
 
-    def raf(self, name: str, *args: str, env: dict, python: str | Path | None = None,
+    def raf(self, name: str, *args: str, env: dict | None = None, python: str | Path | None = None,
             may_exit: bool = False) -> subprocess.Popen:
         """Start ``raf ARGS`` (this interpreter unless ``python``) as process ``name``."""
         return self.start(name, raf_cmd(*args, python=python), env, may_exit)
 
     def get(self, name: str) -> subprocess.Popen:
+        """The latest process started as ``name`` (KeyError when none was)."""
         for n, p in reversed(self.procs):
             if n == name:
                 return p
         raise KeyError(name)
 
+    def __contains__(self, name: str) -> bool:
+        return any(n == name for n, _p in self.procs)
+
     def check(self) -> None:
-        """RuntimeError (with the log's tail) when a watched process has exited."""
-        for name, p in self.procs:
+        """RuntimeError (with the log's tail) when a watched process has exited (the latest of each name: one
+        that was restarted is judged by its new process)."""
+        latest = dict(self.procs)  # each name once, in the order of its first start; its latest process
+        for name, p in latest.items():
             if name in self._expected_exit or (self.watch is not None and name not in self.watch):
                 continue
             if p.poll() is not None:
@@ -111,11 +138,26 @@ class Procs:
             raise RuntimeError(f"{name} exited with code {code}:\n{self.tail(name)}")
         return code
 
-    def tail(self, name: str, n: int = 25) -> str:
+    def log(self, name: str) -> str:
+        """The whole log of ``name``'s latest start ("" when there is none)."""
         try:
-            return "\n".join((self.log_dir / f"{name}.log").read_text(errors="replace").splitlines()[-n:])
+            return self.log_path(name).read_text(errors="replace")
         except OSError:
             return ""
+
+    def tail(self, name: str, n: int = 25) -> str:
+        return "\n".join(self.log(name).splitlines()[-n:])
+
+    def kill(self, name: str, sig: int = signal.SIGKILL, timeout: float = 10.0) -> None:
+        """Send ``sig`` (default SIGKILL: a crash) to the session of ``name``'s latest process and wait up to
+        ``timeout`` s for it to exit; nothing when it is not running (or was never started). Unlike
+        :meth:`stop`, no second signal."""
+        if name not in self:
+            return
+        p = self.get(name)
+        if p.poll() is None:
+            os.killpg(p.pid, sig)
+            p.wait(timeout)
 
     def stop(self, name: str) -> int | None:
         from .master import stop_process

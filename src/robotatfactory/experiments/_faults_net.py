@@ -1,0 +1,279 @@
+"""``raf experiment faults``, the network side: the UDP proxy between the simulator and the bridge, and the fuzz.
+
+No ROS here (plain sockets and :mod:`..simtwo`'s codec), so the fuzzer's own process (:func:`fuzzer`, started
+by :func:`.faults.part_fuzz` with the ``spawn`` context) imports no middleware.
+
+* :class:`Proxy`: simulator <-> bridge on loopback, in a thread of the part's process. It records every
+  SensorFrame the simulator sent (the loss-free, fuzz-free truth: :meth:`Proxy.truth`) and every Command the
+  bridge replied; it drops, duplicates and reorders datagrams both ways (:meth:`Proxy.set_faults`), sends the
+  in-band fuzz from the simulator's own source address (``inject_queue``) and forges frames with impossible
+  encoder totals (``forge_ticks_every``).
+* :func:`fuzz_pool`: the fuzz datagrams of each kind (random bytes, mutated copies of a real SensorFrame,
+  forged far-future Seq/Tms, oversized, non-ASCII; and the in-band kinds), built once from a real frame.
+* :func:`fuzzer`: a separate process sending the out-of-band fuzz to the bridge's port from several source
+  ports, plus a second sender streaming valid frames.
+"""
+from __future__ import annotations
+
+import random
+import select
+import socket
+import threading
+import time
+from collections import deque
+
+import numpy as np
+
+from ..simtwo import Command, ProtocolError
+
+LOCAL = "127.0.0.1"
+
+
+# ------------------------------------------------------------------------------------------------ the proxy
+
+class Proxy:
+    """UDP proxy simulator <-> bridge on loopback, with loss, duplication, reordering and in-band injection.
+
+    The simulator sends its frames to :attr:`port`; they go on to the bridge from the same socket, so the
+    bridge sees one source. Replies from the bridge go back to the simulator's address (learned from its
+    frames). Every frame the simulator sent is recorded (``frames``: wall time, Seq, Tms, totals, x, y, theta).
+    """
+
+    def __init__(self, bridge: tuple[str, int], seed: int = 0):
+        from ..simtwo.messages import SensorFrame
+
+        self._decode = SensorFrame.decode
+        self.bridge = bridge
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+        self.sock.bind((LOCAL, 0))
+        self.sock.setblocking(False)
+        self.port = self.sock.getsockname()[1]
+        self.rng = random.Random(seed)
+        self.drop = self.dup = self.reorder = 0.0
+        self.sim_addr = None
+        self.lock = threading.Lock()
+        self.frames: list[tuple] = []  # (wall, seq, tms, left, right, x, y, theta)
+        self.replies: list[tuple] = []  # (wall, seq, v, w)
+        self.template: bytes | None = None
+        self.counts = {"frames": 0, "replies": 0, "dropped": 0, "duplicated": 0, "reordered": 0, "injected": 0,
+                       "reply_errors": 0}
+        self._held = {0: None, 1: None}  # a datagram held back per direction (reordering)
+        self.inject_queue: deque = deque()
+        self.forge_ticks_every = 0  # > 0: after every n-th frame, a copy of the next one with impossible ticks
+        self._running = True
+        self.thread = threading.Thread(target=self._loop, name="raf-faults-proxy", daemon=True)
+        self.thread.start()
+
+    def set_faults(self, drop=0.0, dup=0.0, reorder=0.0) -> None:
+        self.drop, self.dup, self.reorder = drop, dup, reorder
+
+    def _out(self, direction: int, data: bytes, addr) -> None:
+        r = self.rng.random()
+        if r < self.drop:
+            self.counts["dropped"] += 1
+            return
+        sends = [data]
+        if r < self.drop + self.dup:
+            self.counts["duplicated"] += 1
+            sends.append(data)
+        elif r < self.drop + self.dup + self.reorder and self._held[direction] is None:
+            self.counts["reordered"] += 1
+            self._held[direction] = data  # goes out after the next datagram of this direction
+            return
+        held, self._held[direction] = self._held[direction], None
+        if held is not None:
+            sends.append(held)
+        for d in sends:
+            try:
+                self.sock.sendto(d, addr)
+            except OSError:
+                self.counts["reply_errors"] += 1
+
+    def _loop(self) -> None:
+        sock = self.sock
+        while self._running:
+            r, _, _ = select.select([sock], [], [], 0.05)
+            while self.inject_queue:
+                try:
+                    sock.sendto(self.inject_queue.popleft(), self.bridge)
+                    self.counts["injected"] += 1
+                except (IndexError, OSError):
+                    break
+            if not r:
+                continue
+            while True:
+                try:
+                    data, addr = sock.recvfrom(65535)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:
+                    break
+                now = time.monotonic()
+                if addr == self.bridge:
+                    self.counts["replies"] += 1
+                    try:
+                        c = Command.decode(data)
+                        with self.lock:
+                            self.replies.append((now, c.seq, c.v, c.w))
+                    except ProtocolError:
+                        pass
+                    if self.sim_addr is not None:
+                        self._out(1, data, self.sim_addr)
+                    continue
+                self.sim_addr = addr
+                try:
+                    f = self._decode(data)
+                except Exception:  # noqa: BLE001 - the simulator never sends garbage, but do not die on it
+                    continue
+                self.counts["frames"] += 1
+                with self.lock:
+                    self.frames.append((now, f.seq, f.time_ms, f.enc_total[0], f.enc_total[1], f.x, f.y, f.theta))
+                    self.template = data
+                self._out(0, data, self.bridge)
+                if self.forge_ticks_every and self.counts["frames"] % self.forge_ticks_every == 0:
+                    self._forge_ticks(f)
+
+    def _forge_ticks(self, f) -> None:
+        """The next frame before it comes, with encoder totals the wheels cannot reach in one cycle."""
+        import dataclasses
+
+        jump = 40 * (1 + self.counts["frames"] % 50)
+        forged = dataclasses.replace(f, seq=f.seq + 1, time_ms=f.time_ms + 40,
+                                     enc_total=(f.enc_total[0] + jump * 10, f.enc_total[1] - jump * 10))
+        try:
+            self.sock.sendto(forged.encode(), self.bridge)
+            self.counts["forged_ticks"] = self.counts.get("forged_ticks", 0) + 1
+        except OSError:
+            pass
+
+    def truth(self) -> np.ndarray:
+        with self.lock:
+            return np.array(self.frames, dtype=float).reshape(-1, 8)
+
+    def close(self) -> None:
+        self._running = False
+        self.thread.join(2)
+        self.sock.close()
+
+
+# ------------------------------------------------------------------------------------------------ the fuzz
+
+def fuzz_pool(template: bytes, rng: random.Random, n: int = 4000) -> dict[str, list[bytes]]:
+    """Datagrams of each kind, built once and sent round-robin (generation would be slower than sending)."""
+    from ..simtwo.messages import SensorFrame
+
+    base = SensorFrame.decode(template)
+
+    def forged(seq, tms, totals=None):
+        return SensorFrame(seq=seq, time_ms=tms, enc_delta=base.enc_delta, enc_total=totals or base.enc_total,
+                           x=base.x, y=base.y, theta=base.theta, contact=base.contact, magnet=base.magnet,
+                           ranges=base.ranges).encode()
+
+    def mutate(b: bytes) -> bytes:
+        a = bytearray(b)
+        for _ in range(rng.randint(1, 8)):
+            op = rng.random()
+            i = rng.randrange(len(a)) if a else 0
+            if op < 0.5 and a:
+                a[i] = rng.randrange(256)
+            elif op < 0.75:
+                a[i:i] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 6)))
+            elif a:
+                del a[i:i + rng.randint(1, 20)]
+        return bytes(a)
+
+    def undecodable_mutation() -> bytes:
+        while True:
+            m = mutate(template)
+            try:
+                SensorFrame.decode(m)
+            except Exception:  # noqa: BLE001
+                return m
+
+    big = 10 ** 9
+    pool = {
+        "random": [bytes(rng.randrange(256) for _ in range(rng.randint(0, 1500))) for _ in range(n // 8)],
+        "mutated": [mutate(template) for _ in range(n // 4)],
+        "forged_seq_tms": [forged(rng.randint(base.seq + 300, 2 ** 31 - 1), rng.randint(base.time_ms + 12001, big))
+                           for _ in range(n // 8)],
+        "oversized": [template * rng.randint(6, 20) for _ in range(16)],
+        "non_ascii": [template[:200] + bytes(rng.randrange(128, 256) for _ in range(40)) + template[240:]
+                      for _ in range(n // 8)],
+    }
+    # from the simulator's own address: only kinds the stream rules must catch on their own
+    last = base.seq
+    inband = []
+    for i in range(n // 4):
+        k = i % 7
+        if k == 0:
+            inband.append(forged(last + rng.randint(300, 10 ** 6), base.time_ms + 40 * rng.randint(1, 5)))
+        elif k == 1:
+            inband.append(forged(last + 1, base.time_ms + rng.randint(10_001, big)))
+        elif k == 2:
+            inband.append(forged(rng.randint(0, 3), 40 * rng.randint(1, 4)))  # a lone restart-like frame
+        elif k == 3:
+            inband.append(forged(last + rng.randint(1, 5), 40 * rng.randint(1, 20)))  # Seq ahead, clock back
+        elif k == 4:
+            inband.append(undecodable_mutation())
+        elif k == 5:
+            inband.append(template[:100] + bytes(rng.randrange(128, 256) for _ in range(30)) + template[130:])
+        else:
+            inband.append(template * 8)
+    pool["inband"] = inband
+    return pool
+
+
+def fuzzer(port: int, pool: dict, total: int, seconds: float, report) -> None:
+    """A separate process: ``total`` datagrams to 127.0.0.1:port over ``seconds`` wall seconds, from several
+    source ports, plus a second sender streaming valid frames (its Tms 20 ms off the simulator's grid)."""
+    from ..simtwo.messages import SensorFrame
+
+    socks = []
+    for _ in range(4):
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind((LOCAL, 0))
+        s.setblocking(False)
+        socks.append(s)
+    second = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    second.bind((LOCAL, 0))
+    second.setblocking(False)
+    kinds = [k for k in pool if k != "inband"]
+    weights = {"random": 3, "mutated": 4, "forged_seq_tms": 3, "oversized": 1, "non_ascii": 2}
+    seq_kinds = [k for k in kinds for _ in range(weights.get(k, 1))]
+    sent = {k: 0 for k in kinds}
+    sent["second_sender"] = sent["errors"] = 0
+    dest = (LOCAL, port)
+    t0 = time.monotonic()
+    n = 0
+    seq2 = 0
+    batch = 200
+    ranges = np.full(360, 2.0)
+    while n < total:
+        for i in range(batch):
+            if n >= total:
+                break
+            if i == 0:
+                data = SensorFrame(seq=seq2, time_ms=(seq2 + 1) * 40 + 20, enc_delta=(5, 5),
+                                   enc_total=(5 * seq2, 5 * seq2), x=1.0, y=1.0, theta=0.0, contact=False,
+                                   magnet=False, ranges=ranges).encode()
+                seq2 += 1
+                kind, sock = "second_sender", second
+            else:
+                kind = seq_kinds[(n * 7 + i) % len(seq_kinds)]
+                lst = pool[kind]
+                data = lst[(n // len(seq_kinds)) % len(lst)]
+                sock = socks[i % len(socks)]
+            try:
+                sock.sendto(data, dest)
+                sent[kind] += 1
+            except OSError:
+                sent["errors"] += 1  # the kernel's buffer full: counted, not retried
+            n += 1
+        ahead = t0 + seconds * n / total - time.monotonic()
+        if ahead > 0:
+            time.sleep(ahead)
+    sent["wall_s"] = time.monotonic() - t0
+    sent["total"] = n
+    sent["source_ports"] = [s.getsockname()[1] for s in socks] + [second.getsockname()[1]]
+    report.put(sent)
