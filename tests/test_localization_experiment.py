@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from robotatfactory.experiments.localization import analyse, read_xwd, table
+from robotatfactory.experiments._localization_analysis import analyse, table
+from robotatfactory.experiments._localization_views import read_xwd
 
 
 def _recording():
@@ -83,6 +84,10 @@ def test_options_resolve_to_a_plan(tmp_path):
     f = tmp_path / "calib.yaml"
     f.write_text("camera: {fx: 230.0}\n")
     assert _parse("--calibration", str(f)).calibration == str(f.resolve())
+    bag = tmp_path / "drive.bag"
+    bag.write_bytes(b"")
+    p = _parse("--ideal", "--bag", str(bag))  # a recorded calibration drive: calibrated from it, path resolved
+    assert (p.calibration, p.bag) == ("auto", str(bag.resolve()))
     for bad in (["--calibration", str(tmp_path / "missing.yaml")], ["--laps", "0"], ["--speed", "2"],
                 ["--wheel-error", "0.5,0"], ["--wheel-error", "x"]):
         with pytest.raises(ConfigError):
@@ -139,7 +144,7 @@ def test_calibration_drive_recording_reads_back(middleware, tmp_path):
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import CameraInfo, Image
 
-    from robotatfactory.experiments.localization import BagSink
+    from robotatfactory.experiments._localization_record import BagSink
     from robotatfactory.ros import messages as rm
     from robotatfactory.ros.bags import find_topic, open_bag
     from robotatfactory.ros.mw.base import stamp_ns

@@ -9,7 +9,7 @@ and fy perturbed differently are refused). Mount height and forward offset (``--
 
 The perturbed robot file goes to ``raf simtwo run --robot FILE``, which writes its camera into the scene
 copy's AGV.xml (:func:`robotatfactory.simtwo_linux.scene.install_camera`). The drive is the localization
-experiment's calibration drive on SimTwo (:func:`.localization.calibration_drive`: the route
+experiment's calibration drive on SimTwo (:func:`._localization_record.calibration_drive`: the route
 ``calibration`` at ``--calibration-speed``, pure pursuit on SimTwo's ground truth, raf bridge on a private
 ROS graph, every 3rd camera frame and odom recorded to a bag), then ``raf calibrate --bag`` from the NOMINAL
 camera; the result has the stand-in's keys (errors against the perturbed true camera, the targets) with
@@ -112,7 +112,8 @@ def run(args, out_dir: Path | None) -> dict:
     from ..localization.calibration import write_robot_json
     from ..robot import load_robot
     from ..simtwo_linux.scene import field_for_simtwo, focal_length_mm
-    from . import localization as loc
+    from ._localization_record import calibration_drive, experiment_graph
+    from .localization import REAL, Plan
 
     check_args(args)
     truth = true_robot(args)
@@ -125,14 +126,14 @@ def run(args, out_dir: Path | None) -> dict:
     # what Session and calibration_drive read of the localization experiment's options
     largs = argparse.Namespace(field=field, timeout=DRIVE_TIMEOUT_S, set=[], no_beacons=True, save_bag=None,
                                calibration_speed=CALIBRATION_SPEED, seed=args.seed)
-    plan = loc.Plan(loc.REAL, (), "auto", False, 0.0, 0.0, CALIBRATION_SPEED)
+    plan = Plan(REAL, (), "auto", False, 0.0, 0.0, CALIBRATION_SPEED)
     notes: list[str] = []
     out: dict = {}
     t0 = time.monotonic()
     # the work folder (the ~100 MB bag) goes when the drive finished; logs live in out_dir/logs with --out
-    with loc.experiment_graph("raf_experiment_calibration", work, log_dir) as graph:
-        calib, keys = loc.calibration_drive(largs, plan, graph, log_dir, work, robot_file, nominal,
-                                            Path(out_dir) if out_dir else None, notes)
+    with experiment_graph("raf_experiment_calibration", work, log_dir) as graph:
+        calib, keys = calibration_drive(largs, plan, graph, log_dir, work, robot_file, nominal,
+                                        Path(out_dir) if out_dir else None, notes)
         out.update(result_keys(calib, truth.camera))
         out.update({
             "simulator": "simtwo", "field": field, "middleware": graph.middleware,
