@@ -225,9 +225,9 @@ def to_yaml(obj, header: str = "", indent: int = 0) -> str:
         if v is None:  # unset (null is no ROS parameter value): shown as a comment
             lines.append(f"{pad}# {f.name}: (unset) {doc}".rstrip())
             continue
-        value = yaml.safe_dump(list(v) if isinstance(v, tuple) else v, default_flow_style=True,
-                               width=10 ** 6).strip()
-        value = value[:-4].rstrip() if value.endswith("\n...") else value.removesuffix("...").rstrip()
+        # one flow-style value: dumped as a one-element list (a bare scalar gets YAML's "..." end marker)
+        value = yaml.safe_dump([list(v) if isinstance(v, tuple) else v], default_flow_style=True,
+                               width=10 ** 6).strip()[1:-1]
         text = f"{pad}{f.name}: {value}"
         lines.append(f"{text:<36} # {doc}" if doc else text)
     return "\n".join(lines) + "\n"

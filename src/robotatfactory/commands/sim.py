@@ -273,9 +273,10 @@ def sim_settings(args, start_pose=None, start_poses=None, snapshot: bool = False
     deep_update(tree, {k: v for k, v in given.items() if v is not None})
     if args.robots != 1:
         tree["robots"] = args.robots
-    for flag, name in ((args.beacons, "beacons"), (args.no_lidar_self_hits, "lidar_self_hits")):
-        if flag:
-            tree[name] = name == "beacons"
+    if args.beacons:
+        tree["beacons"] = True
+    if args.no_lidar_self_hits:
+        tree["lidar_self_hits"] = False
     if args.no_camera or snapshot:
         tree["camera"] = False
     deep_update(tree, parse_set(args.set))
