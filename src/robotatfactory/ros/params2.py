@@ -78,7 +78,8 @@ NODES = {
 def merged(defaults: dict, values: dict, path: str = "") -> dict:
     """Every leaf of ``defaults``, with the value ``values`` gives where it gives one (typed like the
     default: :func:`.mw.base.typed_like`). A key of ``values`` that the defaults lack is kept too (the node decides whether it knows it:
-    the bridge rejects it, the localization's ``detector/extra`` takes any)."""
+    the bridge rejects it, the localization's ``detector/extra`` takes any), but an empty mapping (the
+    localization's ``detector/extra: {}``): it names no parameter."""
     out: dict = {}
     for k, d in defaults.items():
         if isinstance(d, dict) and d:
@@ -91,7 +92,7 @@ def merged(defaults: dict, values: dict, path: str = "") -> dict:
         else:
             out[k] = typed_like(values[k], d) if k in values else d
     for k, v in values.items():
-        if k not in defaults:
+        if k not in defaults and v != {}:
             out[k] = v
     return out
 
