@@ -75,7 +75,7 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
 def test_localize_settings_are_checked_before_any_run():
     """--localize NAME=VALUE reaches the whole stack's raf localize; a bad one is refused at once, and outside
     the whole stack it is refused too (the bare mode runs no raf localize)."""
-    for extra, msg in ((["--localize", "scan_match/nope=1"], "scan_match/nope"),
+    for extra, msg in ((["--localize", "scan_match/nope=1"], "unknown setting(s) scan_match.nope"),
                        (["--localize", "scan_match/enabled=false", "--mode", "bare_truth"], "only the whole stack")):
         r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "competition", "--rounds", "1",
                             "--seeds", "1", *extra], capture_output=True, text=True, timeout=60)

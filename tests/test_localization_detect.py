@@ -79,13 +79,16 @@ def test_empty_and_garbage_images(field, robot):
 
 def test_bad_detector_settings_are_user_errors():
     from robotatfactory.errors import ConfigError
+    from robotatfactory.settings import build
 
     with pytest.raises(ConfigError):
-        MarkerDetector(DetectorConfig(dictionary="DICT_9X9_7"))
-    with pytest.raises(ConfigError):
-        MarkerDetector(DetectorConfig(corner_refinement="magic"))
-    with pytest.raises(ConfigError):
-        MarkerDetector(DetectorConfig.from_dict({"noSuchParameter": 3}))
-    cfg = DetectorConfig.from_dict({"adaptive_win_max": 15, "minDistanceToBorder": 2})
+        MarkerDetector(DetectorConfig(dictionary="DICT_9X9_7"))  # the field's dictionary, set in code
+    with pytest.raises(ConfigError, match="detector.corner_refinement must be one of none, subpix"):
+        build(DetectorConfig, {"corner_refinement": "magic"}, "detector")
+    with pytest.raises(ConfigError, match="detector.extra.noSuchParameter: not a cv2.aruco.DetectorParameters"):
+        build(DetectorConfig, {"extra": {"noSuchParameter": 3}}, "detector")
+    with pytest.raises(ConfigError, match="detector.extra.noSuchParameter"):  # built in code: checked when used
+        MarkerDetector(DetectorConfig(extra={"noSuchParameter": 3}))
+    cfg = build(DetectorConfig, {"adaptive_win_max": 15, "extra": {"minDistanceToBorder": 2}}, "detector")
     assert cfg.adaptive_win_max == 15 and cfg.extra == {"minDistanceToBorder": 2}
     MarkerDetector(cfg)

@@ -167,9 +167,9 @@ def test_a_wall_alone_constrains_only_what_it_can():
 
 
 def test_settings_are_checked():
-    with pytest.raises(ConfigError, match="scan_match/outlier_m"):
+    with pytest.raises(ConfigError, match="scan_match.outlier_m must be a number > 0"):
         from_dict({"scan_match": {"outlier_m": 0}})
-    with pytest.raises(ConfigError, match="scan_match/nope"):
+    with pytest.raises(ConfigError, match="scan_match.nope"):
         from_dict({"scan_match": {"nope": 1}})
     assert from_dict({"scan_match": {"enabled": False}}).scan_match.enabled is False
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -37,7 +38,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--frames", type=int, default=60, help="distinct frames (default 60)")
     parser.add_argument("--repeats", type=int, default=5, help="passes over the frames; medians reported")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--config", metavar="YAML", help="localization settings (default config/localization.yaml)")
+    parser.add_argument("--config", metavar="YAML",
+                        help="localization settings in the shape of config/localization.yaml (default: the defaults)")
     parser.add_argument("--sweep", action="store_true", help="also compare detector settings")
 
 
@@ -83,7 +85,6 @@ def run(args) -> dict:
 
     from ..field import load_field
     from ..localization.config import load_config
-    from ..localization.detect import DetectorConfig
     from ..localization.frames import random_poses
     from ..localization.pipeline import METHODS, FrameLocalizer
     from ..results import machine_info
@@ -105,11 +106,8 @@ def run(args) -> dict:
     out["frames_per_s_all_methods"] = _measure(loc, imgs, poses, args.repeats, METHODS)["frames_per_s"]
     out["frames_per_s_target_met"] = bool(node["frames_per_s"] >= 200)
     if args.sweep:
-        base = cfg.detector.__dict__.copy()
         for name, over in SWEEP.items():
-            d = dict(base)
-            d.update(over)
-            lo = FrameLocalizer(field, robot, DetectorConfig(**d), cfg.pose)
+            lo = FrameLocalizer(field, robot, replace(cfg.detector, **over), cfg.pose)
             lo.process(imgs[0])
             m = _measure(lo, imgs, poses, max(1, args.repeats // 2), NODE_METHODS)
             out[f"sweep_{name}_frames_per_s"] = m["frames_per_s"]

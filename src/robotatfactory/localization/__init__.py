@@ -13,7 +13,8 @@ Modules (each one job; import what you need: this package imports nothing on its
 - :mod:`.lidar`      LIDAR beacon extraction (and a scan simulator for tests).
 - :mod:`.reasons`    the names rejections are counted under.
 - :mod:`.draw`       the debug image (markers, IDs, axes, estimates).
-- :mod:`.config`     the settings (``config/localization.yaml``) with validation.
+- :mod:`.config`     the settings: one typed object (``LocalizationConfig``), one validation
+  (``config/localization.yaml`` is generated from it).
 - :mod:`.geometry`   SE(2)/SE(3) helpers, angle wrapping.
 - :mod:`.synth`, :mod:`.frames` synthetic camera images; random poses and test frames (synthetic or simulator).
 - :mod:`.route`, :mod:`.metrics` the experiment's reference route and pure pursuit; error statistics.

@@ -1,18 +1,26 @@
-"""Settings of the localization (``config/localization.yaml``): detector, pose estimators, EKF, LIDAR beacons,
-LIDAR scan matching and the ROS node's wiring. Plain Python (no ROS): the node passes its private parameters (a
-nested dict) to :func:`from_dict`; ``raf localize``, the bench and the experiment load the YAML file with
-:func:`load_config`.
-Unknown keys and bad values raise :class:`~robotatfactory.errors.ConfigError` naming them.
+"""The localization's settings: one typed object (:class:`LocalizationConfig`) for the estimators, the filter
+and the ROS node.
+
+Every setting has its default, meaning and allowed values once, in the class where it is used: the detector's
+in :class:`~.detect.DetectorConfig` (``detector.*``), the pose estimators' in :class:`~.markerpose.PoseConfig`
+(``pose.*``), the EKF's in :class:`~.ekf.EkfConfig` (``ekf.*``), the LIDAR beacons' in
+:class:`~.lidar.BeaconConfig` (``beacons.*``), the scan matching's in :class:`~.scanmatch.ScanMatchConfig`
+(``scan_match.*``), the node's here (``node.*``, ``topics.*``, ``frames.*``). One validation,
+:func:`robotatfactory.settings.build`, fills it from a nested mapping: ``raf localize --config FILE --set
+ekf.history_s=2`` (:func:`load_config`), the node's ROS parameters (``~ekf/history_s`` on ROS 1,
+``ekf.history_s`` on ROS 2; :func:`from_dict`), the competition experiment's ``--localize``; an unknown name or a
+bad value is a :class:`~robotatfactory.errors.ConfigError` naming the setting's path and what it allows.
+``config/localization.yaml`` lists them all with their defaults (generated: :data:`HEADER`). Plain Python (no
+ROS).
 """
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, fields
-from dataclasses import field as dc_field
 from pathlib import Path
 
 from ..errors import ConfigError
-from ..settings import deep_update
+from ..field import DEFAULT_FIELD
+from ..settings import build, deep_update, section, setting
 from ..settings import read_yaml as _read_yaml
 from .detect import DetectorConfig
 from .ekf import EkfConfig
@@ -23,56 +31,37 @@ from .scanmatch import ScanMatchConfig
 ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_FILE = ROOT / "config" / "localization.yaml"
 
-DEFAULT_TOPICS = {
-    "image": "camera/image_raw",
-    "camera_info": "camera/camera_info",
-    "odom": "odom",
-    "scan": "scan",
-    "markers": "aruco/markers",
-    "marker_poses": "aruco/poses",
-    "debug_image": "aruco/debug_image",
-    "camera_pose": "camera_pose",
-    "fixes": "aruco/fixes",
-    "pose": "pose",
-    "diagnostics": "/diagnostics",
-}
-DEFAULT_FRAMES = {"map": "map", "odom": "odom", "base_link": "base_link", "camera_optical": "camera_optical",
-                  "laser": "laser"}
+#: the camera fixes the node can publish on camera_pose / give the EKF (:data:`.pipeline.METHODS`)
+CAMERA_POSE_METHODS = ("closest", "closest_checked")
+FILTER_METHODS = ("planar", "all_pnp", "closest_checked")
 
 
-@dataclass
+@dataclass(frozen=True)
 class NodeConfig:
-    """The ROS node's behaviour (``node:`` in the YAML file)."""
+    """The ROS node's behaviour (``node.*``)."""
 
-    camera_pose_method: str = "closest"  # the paper's method on camera_pose (closest | closest_checked)
-    filter_method: str = "planar"  # camera fixes the EKF uses (planar | all_pnp | closest_checked)
-    all_methods: bool = False  # also run all_pnp/closest_checked every frame (costs time; for experiments)
-    use_prior: bool = True  # seed the planar fit with the EKF's pose
-    use_camera_info: bool = True  # take K from camera_info (else the robot file's)
-    use_lidar: bool = True  # LIDAR beacon updates (only if beacons are seen)
-    initial_pose: str = "none"  # none: wait for a confident camera fix | start: the field's start pose
-    initial_sigma_xy: float = 0.05
-    initial_sigma_theta_deg: float = 10.0
-    publish_tf: bool = True  # map -> odom (REP 105)
-    tf_future_s: float = 0.0  # post-date map -> odom (s); 0 = stamped with the odometry time
-    debug_image: bool = True  # only drawn while someone subscribes
-    debug_axis_m: float = 0.03  # length of the drawn marker axes
-    diagnostics_period: float = 1.0
-    log_period: float = 5.0  # s between repeated warnings of the same kind
-    max_image_age_s: float = 1.0  # frames older than the filter's history are dropped anyway
-
-    def check(self) -> None:
-        if self.camera_pose_method not in ("closest", "closest_checked"):
-            raise ConfigError(f"node/camera_pose_method must be closest or closest_checked, "
-                              f"not {self.camera_pose_method!r}")
-        if self.filter_method not in ("planar", "all_pnp", "closest_checked"):
-            raise ConfigError(f"node/filter_method must be planar, all_pnp or closest_checked, "
-                              f"not {self.filter_method!r}")
-        if self.initial_pose not in ("none", "start"):
-            raise ConfigError(f"node/initial_pose must be none or start, not {self.initial_pose!r}")
-        for k in ("diagnostics_period", "log_period", "initial_sigma_xy", "initial_sigma_theta_deg"):
-            if not float(getattr(self, k)) > 0:
-                raise ConfigError(f"node/{k} must be > 0, got {getattr(self, k)!r}")
+    camera_pose_method: str = setting("closest", "camera_pose: the paper's method (closest) or with the mount "
+                                                 "check (closest_checked)", choices=CAMERA_POSE_METHODS)
+    filter_method: str = setting("planar", "the camera fixes the EKF uses: planar | all_pnp | closest_checked",
+                                 choices=FILTER_METHODS)
+    all_methods: bool = setting(False, "also compute every method each frame on aruco/fixes/<method> (costs time; "
+                                       "for experiments)")
+    use_prior: bool = setting(True, "seed the planar fit with the EKF's pose")
+    use_camera_info: bool = setting(True, "camera matrix from camera_info (else the robot file's; a calibration "
+                                          "file takes precedence over both)")
+    use_lidar: bool = setting(True, "LIDAR beacon updates (when the field has beacons)")
+    initial_pose: str = setting("none", "none: wait for a confident camera fix; start: the field's start pose",
+                                choices=("none", "start"))
+    initial_sigma_xy: float = setting(0.05, "m, the position sigma of the filter started at the start pose",
+                                      lo=0.0, lo_open=True)
+    initial_sigma_theta_deg: float = setting(10.0, "deg, its heading sigma", lo=0.0, hi=180.0, lo_open=True)
+    publish_tf: bool = setting(True, "publish map -> odom (REP 105)")
+    tf_future_s: float = setting(0.0, "s map -> odom is post-dated by (0: stamped with the odometry's time)",
+                                 lo=0.0)
+    debug_image: bool = setting(True, "draw aruco/debug_image (only while someone subscribes)")
+    debug_axis_m: float = setting(0.03, "m, the length of the marker axes drawn on the debug image", lo=0.0)
+    diagnostics_period: float = setting(1.0, "s of wall time between /diagnostics reports", lo=0.0, lo_open=True)
+    log_period: float = setting(5.0, "s between repeated warnings of the same kind", lo=0.0, lo_open=True)
 
     def methods(self) -> tuple[str, ...]:
         if self.all_methods:
@@ -80,94 +69,92 @@ class NodeConfig:
         return tuple(dict.fromkeys((self.camera_pose_method, self.filter_method)))
 
 
-@dataclass
+def _names_check(obj, where: str) -> None:
+    """Topic and frame names: none empty."""
+    for f in fields(obj):
+        if not getattr(obj, f.name).strip("/"):
+            raise ConfigError(f"setting {where}.{f.name} must be a name, got {getattr(obj, f.name)!r}")
+
+
+@dataclass(frozen=True)
+class Topics:
+    """The node's topics (``topics.*``; relative names resolve in the node's namespace)."""
+
+    image: str = setting("camera/image_raw", "in: sensor_msgs/Image from the bridge's camera")
+    camera_info: str = setting("camera/camera_info", "in: sensor_msgs/CameraInfo (K, D)")
+    odom: str = setting("odom", "in: nav_msgs/Odometry, base_link in odom")
+    scan: str = setting("scan", "in: sensor_msgs/LaserScan (beacons, scan matching)")
+    markers: str = setting("aruco/markers", "out: visualization_msgs/MarkerArray, the detected markers (in "
+                                            "camera_optical) with their IDs")
+    marker_poses: str = setting("aruco/poses", "out: geometry_msgs/PoseArray, the same poses")
+    debug_image: str = setting("aruco/debug_image", "out: the detections drawn (only while subscribed)")
+    camera_pose: str = setting("camera_pose", "out: the paper's method, camera_optical in map")
+    fixes: str = setting("aruco/fixes", "out: <this>/<method>, base_link in map from each method computed")
+    pose: str = setting("pose", "out: the EKF's pose, base_link in map")
+    diagnostics: str = setting("/diagnostics", "out: diagnostic_msgs/DiagnosticArray")
+
+    def check(self) -> None:
+        _names_check(self, "topics")
+
+
+@dataclass(frozen=True)
+class Frames:
+    """The frames (``frames.*``; all but ``map`` get ``frame_prefix``)."""
+
+    map: str = setting("map", "the field's frame (never prefixed)")
+    odom: str = setting("odom", "odometry's frame")
+    base_link: str = setting("base_link", "the robot, on the floor between the wheels")
+    camera_optical: str = setting("camera_optical", "the camera's optical frame (z forward, x right)")
+    laser: str = setting("laser", "the LIDAR's frame")
+
+    def check(self) -> None:
+        _names_check(self, "frames")
+
+
+@dataclass(frozen=True)
 class LocalizationConfig:
-    field: str = "rules2026"
-    robot: str = "simtwo"
-    frame_prefix: str = ""
-    calibration: str = ""  # camera calibration YAML (raf calibrate): overrides the robot file's camera and camera_info
-    detector: DetectorConfig = dc_field(default_factory=DetectorConfig)
-    pose: PoseConfig = dc_field(default_factory=PoseConfig)
-    ekf: EkfConfig = dc_field(default_factory=EkfConfig)
-    beacons: BeaconConfig = dc_field(default_factory=BeaconConfig)
-    scan_match: ScanMatchConfig = dc_field(default_factory=ScanMatchConfig)
-    node: NodeConfig = dc_field(default_factory=NodeConfig)
-    topics: dict = dc_field(default_factory=lambda: dict(DEFAULT_TOPICS))
-    frames: dict = dc_field(default_factory=lambda: dict(DEFAULT_FRAMES))
+    """Everything the localization and its node can be told."""
+
+    field: str = setting(DEFAULT_FIELD, "competition map: a shipped field's name or a field .json")
+    robot: str = setting("simtwo", "robot file name or path: camera mount and intrinsics, track, LIDAR mount")
+    frame_prefix: str = setting("", "robot1 makes robot1/odom, robot1/base_link, ... (map is never prefixed)")
+    calibration: str = setting("", "camera calibration YAML from raf calibrate (empty: none): overrides the robot "
+                                   "file's camera and camera_info")
+    detector: DetectorConfig = section(DetectorConfig, "cv2.aruco.ArucoDetector")
+    pose: PoseConfig = section(PoseConfig, "the pose estimators (camera fixes)")
+    ekf: EkfConfig = section(EkfConfig, "the EKF")
+    beacons: BeaconConfig = section(BeaconConfig, "LIDAR beacons (cylinders at the field's beacon positions)")
+    scan_match: ScanMatchConfig = section(ScanMatchConfig, "the LIDAR scan matched to the field's walls and ribs: "
+                                                           "a pose fix for the EKF")
+    node: NodeConfig = section(NodeConfig, "the ROS node's behaviour")
+    topics: Topics = section(Topics, "the node's topics")
+    frames: Frames = section(Frames, "the node's frames")
+
+    def check(self) -> None:
+        """The calibration file, read now (a missing or bad one is an error before the node starts)."""
+        if self.calibration:
+            from .calibration import load_calibration
+
+            load_calibration(self.calibration)
 
     def frame(self, name: str) -> str:
         """A frame id with the robot prefix applied (``map`` is never prefixed)."""
-        f = self.frames[name]
+        f = getattr(self.frames, name)
         if name != "map" and self.frame_prefix:
             return f"{self.frame_prefix.strip('/')}/{f}"
         return f
 
 
-def _section(cls, d, name):
-    if d is None:
-        return cls()
-    if not isinstance(d, dict):
-        raise ConfigError(f"localization setting {name!r} is a section, got {d!r}")
-    known = {f.name for f in fields(cls)}
-    bad = sorted(set(d) - known - ({"extra"} if cls is DetectorConfig else set()))
-    if bad and cls is not DetectorConfig:
-        raise ConfigError(f"unknown setting(s) {', '.join(f'{name}/{b}' for b in bad)}; known: {sorted(known)}")
-    if cls is DetectorConfig:
-        return DetectorConfig.from_dict(d)
-    try:
-        obj = cls(**d)
-    except TypeError as e:
-        raise ConfigError(f"section {name}: {e}") from None
-    for f in fields(cls):
-        v = getattr(obj, f.name)
-        default = getattr(cls(), f.name)
-        if isinstance(default, bool) and not isinstance(v, bool):
-            raise ConfigError(f"setting {name}/{f.name} must be true or false, got {v!r}")
-        if isinstance(default, (int, float)) and not isinstance(default, bool):
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
-                raise ConfigError(f"setting {name}/{f.name} must be a number, got {v!r}")
-        if isinstance(default, str) and not isinstance(v, str):
-            raise ConfigError(f"setting {name}/{f.name} must be a string, got {v!r}")
-    return obj
+HEADER = """The localization's settings (raf localize --config FILE; the node's ROS parameters), every one with its
+default. GENERATED from src/robotatfactory/localization/ by `raf localize --print-params --defaults >
+config/localization.yaml`: edit the settings there (LocalizationConfig and its sections), then regenerate
+(tests/test_localization_config.py fails while this one is out of date). docs/localization.md says what each
+part does."""
 
 
 def from_dict(d: dict | None) -> LocalizationConfig:
-    d = copy.deepcopy(d or {})
-    if not isinstance(d, dict):
-        raise ConfigError(f"localization settings must be a mapping, got {type(d).__name__}")
-    known = {f.name for f in fields(LocalizationConfig)}
-    bad = sorted(set(d) - known)
-    if bad:
-        raise ConfigError(f"unknown localization setting(s) {bad}; known: {sorted(known)}")
-    cfg = LocalizationConfig(
-        field=str(d.get("field", "rules2026")), robot=str(d.get("robot", "simtwo")),
-        frame_prefix=str(d.get("frame_prefix", "") or ""),
-        calibration=str(d.get("calibration", "") or ""),
-        detector=_section(DetectorConfig, d.get("detector"), "detector"),
-        pose=_section(PoseConfig, d.get("pose"), "pose"),
-        ekf=_section(EkfConfig, d.get("ekf"), "ekf"),
-        beacons=_section(BeaconConfig, d.get("beacons"), "beacons"),
-        scan_match=_section(ScanMatchConfig, d.get("scan_match"), "scan_match"),
-        node=_section(NodeConfig, d.get("node"), "node"),
-    )
-    for key, defaults, target in (("topics", DEFAULT_TOPICS, cfg.topics), ("frames", DEFAULT_FRAMES, cfg.frames)):
-        sec = d.get(key) or {}
-        if not isinstance(sec, dict):
-            raise ConfigError(f"localization setting {key!r} is a section, got {sec!r}")
-        bad = sorted(set(sec) - set(defaults))
-        if bad:
-            raise ConfigError(f"unknown {key} {bad}; known: {sorted(defaults)}")
-        for k, v in sec.items():
-            if not isinstance(v, str) or not v:
-                raise ConfigError(f"{key}/{k} must be a non-empty string, got {v!r}")
-            target[k] = v
-    cfg.node.check()
-    cfg.scan_match.check()
-    if cfg.calibration:
-        from .calibration import load_calibration
-
-        load_calibration(cfg.calibration)
-    return cfg
+    """:class:`LocalizationConfig` from a nested mapping (what it lacks keeps its default), validated."""
+    return build(LocalizationConfig, d)
 
 
 def robot_for(cfg: LocalizationConfig):
@@ -187,12 +174,8 @@ def read_yaml(path: str | Path) -> dict:
 
 
 def load_config(path: str | Path | None = None, overrides: dict | None = None) -> LocalizationConfig:
-    """Defaults, then ``config/localization.yaml`` (or ``path``), then ``overrides``."""
-    d: dict = {}
-    if path is not None:
-        d = read_yaml(path)
-    elif DEFAULT_FILE.is_file():
-        d = read_yaml(DEFAULT_FILE)
+    """The defaults, then the YAML file ``path`` (if given), then ``overrides``, validated."""
+    d: dict = read_yaml(path) if path is not None else {}
     if overrides:
         deep_update(d, overrides)
     return from_dict(d)

@@ -5,46 +5,73 @@ pixel coordinates with pixel centres at integers (the convention of ``cx = 319.5
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
+from ..settings import setting
 
-@dataclass
+#: corner_refinement's choices: OpenCV's names
+REFINEMENTS = {"none": "CORNER_REFINE_NONE", "subpix": "CORNER_REFINE_SUBPIX",
+               "contour": "CORNER_REFINE_CONTOUR", "apriltag": "CORNER_REFINE_APRILTAG"}
+
+
+def _mapping_setting(doc: str):
+    """A setting holding a free-form mapping (default empty): :func:`..settings.build` takes it as it is, the
+    class's ``check()`` judges it."""
+    return field(default_factory=dict, metadata=setting(None, doc, kind=dict).metadata)
+
+
+@dataclass(frozen=True)
 class DetectorConfig:
-    """Settings of the detector. The defaults are tuned on 640x480 frames of the field (``raf bench
-    localization`` measures them); sub-pixel refinement matters for accuracy (see docs/localization.md)."""
+    """Settings of the detector (``detector.*``). The defaults are tuned on 640x480 frames of the field (``raf
+    bench localization`` measures them); sub-pixel refinement matters for accuracy (see docs/localization.md).
+    The ranges are what OpenCV's ``ArucoDetector`` accepts (it asserts them)."""
 
+    corner_refinement: str = setting("subpix", "cv2.aruco corner refinement: none | subpix | contour | apriltag; "
+                                               "sub-pixel corners matter for accuracy", choices=tuple(REFINEMENTS))
+    adaptive_win_min: int = setting(5, "px, the smallest adaptive-threshold window (windows 5, 15 px: measured "
+                                       "with `raf bench localization --sweep`)", lo=3)
+    adaptive_win_max: int = setting(15, "px, the largest adaptive-threshold window (at least adaptive_win_min)",
+                                    lo=3)
+    adaptive_win_step: int = setting(10, "px between the adaptive-threshold windows", lo=1)
+    adaptive_constant: float = setting(7.0, "grey levels subtracted from the local mean in the adaptive "
+                                            "threshold")
+    min_perimeter_rate: float = setting(0.02, "the smallest marker perimeter, as a fraction of the image's larger "
+                                              "side (0.02 x 640 = 12.8 px: 3.2 px sides)", lo=0.0, hi=4.0,
+                                        lo_open=True)
+    polygonal_approx_rate: float = setting(0.05, "polygon fit tolerance, as a fraction of the contour's "
+                                                 "perimeter", lo=0.0, hi=1.0, lo_open=True)
+    subpix_win: int = setting(3, "px, half window of the sub-pixel corner refinement", lo=1)
+    subpix_iterations: int = setting(30, "most iterations of the sub-pixel refinement", lo=1)
+    subpix_min_accuracy: float = setting(0.01, "px: the sub-pixel refinement stops below this change", lo=0.0,
+                                         lo_open=True)
+    error_correction_rate: float = setting(0.6, "share of the dictionary's bit-error correction used", lo=0.0,
+                                           hi=1.0)
+    aruco3: bool = setting(False, "OpenCV's ArUco3 speed-up (misses small markers)")
+    aruco3_min_side_px: int = setting(32, "px, the side of the canonical image ArUco3 scales markers to", lo=1)
+    extra: dict = _mapping_setting("any other cv2.aruco.DetectorParameters attribute by its OpenCV name "
+                                   "(minDistanceToBorder: 2), set as it is; --set detector.extra.NAME=VALUE")
+    # set in code, not a setting: the field's own (FrameLocalizer takes it from the field file)
     dictionary: str = "DICT_5X5_100"
-    corner_refinement: str = "subpix"  # none | subpix | contour | apriltag
-    adaptive_win_min: int = 5
-    adaptive_win_max: int = 15
-    adaptive_win_step: int = 10
-    adaptive_constant: float = 7.0
-    min_perimeter_rate: float = 0.02  # of the image's larger side; 0.02 * 640 = 12.8 px: 3.2 px sides
-    polygonal_approx_rate: float = 0.05
-    subpix_win: int = 3
-    subpix_iterations: int = 30
-    subpix_min_accuracy: float = 0.01
-    error_correction_rate: float = 0.6
-    aruco3: bool = False
-    aruco3_min_side_px: int = 32
-    extra: dict = field(default_factory=dict)  # any other cv2.aruco.DetectorParameters attribute
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "DetectorConfig":
-        d = dict(d or {})
-        known = {k: d.pop(k) for k in list(d) if k in cls.__dataclass_fields__ and k != "extra"}
-        extra = dict(d.pop("extra", {}) or {})
-        extra.update(d)
-        return cls(**known, extra=extra)
+    def check(self) -> None:
+        """The rules across settings, and ``extra``'s names and values as OpenCV takes them."""
+        from ..errors import ConfigError
+
+        if self.adaptive_win_max < self.adaptive_win_min:
+            raise ConfigError(f"setting detector.adaptive_win_max must be at least detector.adaptive_win_min "
+                              f"({self.adaptive_win_min}), got {self.adaptive_win_max}")
+        if not isinstance(self.extra, Mapping):
+            raise ConfigError(f"setting detector.extra must be a mapping of cv2.aruco.DetectorParameters names to "
+                              f"values, got {self.extra!r}")
+        object.__setattr__(self, "extra", dict(self.extra))  # a copy: the caller's mapping stays theirs
+        detector_parameters(self)
 
 
 APRILTAG_OFFSET_PX = 0.5  # see MarkerDetector.detect
-
-_REFINE = {"none": "CORNER_REFINE_NONE", "subpix": "CORNER_REFINE_SUBPIX",
-           "contour": "CORNER_REFINE_CONTOUR", "apriltag": "CORNER_REFINE_APRILTAG"}
 
 
 def aruco_dictionary(name: str):
@@ -61,9 +88,7 @@ def detector_parameters(cfg: DetectorConfig) -> "cv2.aruco.DetectorParameters":
     from ..errors import ConfigError
 
     p = cv2.aruco.DetectorParameters()
-    if cfg.corner_refinement not in _REFINE:
-        raise ConfigError(f"corner_refinement must be one of {sorted(_REFINE)}, not {cfg.corner_refinement!r}")
-    p.cornerRefinementMethod = getattr(cv2.aruco, _REFINE[cfg.corner_refinement])
+    p.cornerRefinementMethod = getattr(cv2.aruco, REFINEMENTS[cfg.corner_refinement])
     p.adaptiveThreshWinSizeMin = int(cfg.adaptive_win_min)
     p.adaptiveThreshWinSizeMax = int(cfg.adaptive_win_max)
     p.adaptiveThreshWinSizeStep = int(cfg.adaptive_win_step)
@@ -77,9 +102,14 @@ def detector_parameters(cfg: DetectorConfig) -> "cv2.aruco.DetectorParameters":
     p.useAruco3Detection = bool(cfg.aruco3)
     p.minSideLengthCanonicalImg = int(cfg.aruco3_min_side_px)
     for k, v in cfg.extra.items():
-        if not hasattr(p, k):
-            raise ConfigError(f"detector setting {k!r} is not a cv2.aruco.DetectorParameters attribute")
-        setattr(p, k, v)
+        if not isinstance(k, str) or k.startswith("_") or not hasattr(p, k) or callable(getattr(p, k)):
+            raise ConfigError(f"setting detector.extra.{k}: not a cv2.aruco.DetectorParameters attribute (e.g. "
+                              f"minDistanceToBorder)")
+        try:
+            setattr(p, k, v)
+        except (TypeError, ValueError, cv2.error) as e:
+            raise ConfigError(f"setting detector.extra.{k} must be of OpenCV's type for it "
+                              f"({type(getattr(p, k)).__name__}), got {v!r}: {e}") from None
     return p
 
 

@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..settings import setting
 from . import reasons
 from .geometry import between2, compose2, se2_log, split_increment, wrap_angle
 
@@ -50,40 +51,47 @@ SCAN = "scan"
 CHI2_2_999 = 13.816
 
 
-@dataclass
+@dataclass(frozen=True)
 class EkfConfig:
-    wheel_sigma_per_sqrt_m: float = 0.005  # 1-sigma travel error of one wheel after 1 m (random, not scale)
-    turn_sigma_per_sqrt_rad: float = 0.005  # extra heading sigma per sqrt(rad turned) (slip in turns)
-    xy_sigma_per_sqrt_s: float = 0.0005  # random walk of position while time passes (bumps, slip)
-    theta_sigma_per_sqrt_s: float = 0.0005
-    track_m: float = 0.135  # wheel separation (for wheel-travel noise); from the robot file in from_robot
-    gate_pose_chi2: float = CHI2_3_999
-    gate_beacon_chi2: float = CHI2_2_999
-    stamp_sigma_s: float = 0.01  # uncertainty of camera frame stamps (and motion effects while turning)
-    history_s: float = 3.0
-    max_pending: int = 20  # measurements waiting for odometry to reach their stamp
-    reinit_after_s: float = 5.0
-    reinit_after_gated: int = 6
-    confident_sigma_xy_m: float = 0.02  # a fix this certain may re-initialise the filter
-    confident_sigma_theta_deg: float = 3.0
-    # a pose fix whose position sigma (largest of its xy covariance) exceeds this is not used ("uncertain"):
-    # such a fix can be more than 5 cm off and still pass the gate; 5 cm / 3
-    max_fix_sigma_xy_m: float = 0.0165
-    max_sigma_xy_m: float = 3.0  # covariance bounds (after a long outage the covariance stops growing)
-    max_sigma_theta_rad: float = math.pi
-    min_variance: float = 1e-12
+    """Settings of the filter (``ekf.*``)."""
 
-    @classmethod
-    def from_dict(cls, d: dict | None, track_m: float | None = None) -> "EkfConfig":
-        d = dict(d or {})
-        bad = sorted(set(d) - set(cls.__dataclass_fields__))
-        if bad:
-            from ..errors import ConfigError
-
-            raise ConfigError(f"unknown ekf settings {bad}; known: {sorted(cls.__dataclass_fields__)}")
-        if track_m is not None and "track_m" not in d:
-            d["track_m"] = track_m
-        return cls(**d)
+    # process noise (fitted to stand-in simulator runs, docs/localization.md)
+    wheel_sigma_per_sqrt_m: float = setting(0.005, "m: one wheel's random travel error (1 sigma) after 1 m of its "
+                                                   "travel (not a scale error)", lo=0.0)
+    turn_sigma_per_sqrt_rad: float = setting(0.005, "rad per sqrt(rad turned): extra heading noise in turns "
+                                                    "(slip)", lo=0.0)
+    xy_sigma_per_sqrt_s: float = setting(0.0005, "m per sqrt(s): random walk of the position while time passes "
+                                                 "(bumps, slip)", lo=0.0)
+    theta_sigma_per_sqrt_s: float = setting(0.0005, "rad per sqrt(s): the same for the heading", lo=0.0)
+    # gates and timing
+    gate_pose_chi2: float = setting(CHI2_3_999, "squared Mahalanobis distance above which a pose fix is gated "
+                                                "(chi-square, 3 dof, 99.9 %)", lo=0.0, lo_open=True)
+    gate_beacon_chi2: float = setting(CHI2_2_999, "likewise for a LIDAR beacon (2 dof, 99.9 %)", lo=0.0,
+                                      lo_open=True)
+    stamp_sigma_s: float = setting(0.01, "s, uncertainty of a camera frame's stamp (and motion effects while "
+                                         "turning)", lo=0.0)
+    history_s: float = setting(3.0, "s: late measurements up to this old are applied at their own time", lo=0.0,
+                               lo_open=True)
+    max_pending: int = setting(20, "measurements at most waiting for odometry to reach their stamp", lo=1)
+    # re-initialisation
+    reinit_after_s: float = setting(5.0, "s: a confident fix gated after this long without an accepted one "
+                                         "re-initialises the filter", lo=0.0)
+    reinit_after_gated: int = setting(6, "... or after this many confident fixes gated in a row", lo=1)
+    confident_sigma_xy_m: float = setting(0.02, "m, the position sigma of a fix that may (re-)initialise the "
+                                                "filter", lo=0.0)
+    confident_sigma_theta_deg: float = setting(3.0, "deg, and its heading sigma", lo=0.0, hi=180.0)
+    max_fix_sigma_xy_m: float = setting(0.0165, "m: a camera fix less certain than this (the larger position "
+                                                "sigma of its covariance) is not used: such a fix could be more "
+                                                "than 5 cm off and still pass the gate; 5 cm / 3 (0: no limit)",
+                                        lo=0.0)
+    # covariance bounds (after a long outage the covariance stops growing)
+    max_sigma_xy_m: float = setting(3.0, "m, the position sigma at most (a long outage stops growing there)",
+                                    lo=0.0, lo_open=True)
+    max_sigma_theta_rad: float = setting(math.pi, "rad, the heading sigma at most", lo=0.0, lo_open=True)
+    min_variance: float = setting(1e-12, "the covariance's eigenvalues at least (m^2, rad^2)", lo=0.0,
+                                  lo_open=True)
+    # set in code, not a setting: the robot file's odometry track (the node sets it)
+    track_m: float = 0.135  # m, wheel separation (for the wheel-travel noise)
 
 
 @dataclass(frozen=True)

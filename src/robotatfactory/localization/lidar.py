@@ -16,29 +16,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..settings import setting
 
-@dataclass
+
+@dataclass(frozen=True)
 class BeaconConfig:
-    diameter_m: float = 0.09
-    min_points: int = 3
-    width_tolerance_m: float = 0.03  # a cluster may be this much wider than the diameter (noise)
-    jump_m: float = 0.05  # neighbours farther apart than this (plus 3 ray spacings) start a new cluster
-    foreground_m: float = 0.05  # returns next to the cluster must be this much farther (or none)
-    max_range_m: float = 3.0
-    max_fit_rms_m: float = 0.015
-    noise_a: float = 0.001524  # range noise sigma = a * exp(b * d) (the LIDAR's model)
-    noise_b: float = 1.3103
-    min_sigma_m: float = 0.002  # floor of the per-point sigma (model error, beam width)
+    """Settings of the beacon extraction (``beacons.*``)."""
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "BeaconConfig":
-        d = dict(d or {})
-        bad = sorted(set(d) - set(cls.__dataclass_fields__))
-        if bad:
-            from ..errors import ConfigError
-
-            raise ConfigError(f"unknown beacon settings {bad}; known: {sorted(cls.__dataclass_fields__)}")
-        return cls(**d)
+    diameter_m: float = setting(0.09, "m, the beacon cylinders' diameter", lo=0.0, lo_open=True)
+    min_points: int = setting(3, "fewest LIDAR returns on a beacon", lo=2)
+    width_tolerance_m: float = setting(0.03, "m a cluster may be wider than the diameter (noise)", lo=0.0)
+    jump_m: float = setting(0.05, "m: neighbouring returns farther apart than this (plus 3 ray spacings) start a "
+                                  "new cluster", lo=0.0)
+    foreground_m: float = setting(0.05, "m: the returns next to a cluster must be this much farther (or none)",
+                                  lo=0.0)
+    max_range_m: float = setting(3.0, "m: beacons farther away are ignored", lo=0.0, lo_open=True)
+    max_fit_rms_m: float = setting(0.015, "m: a circle fit with a larger RMS residual (and above 3 sigma) is not "
+                                          "a beacon", lo=0.0)
+    noise_a: float = setting(0.001524, "m, the LIDAR's range noise sigma = noise_a x exp(noise_b x range)", lo=0.0)
+    noise_b: float = setting(1.3103, "1/m, likewise")
+    min_sigma_m: float = setting(0.002, "m, the per-return sigma at least (model error, beam width)", lo=0.0,
+                                 lo_open=True)
 
 
 @dataclass(frozen=True)

@@ -13,61 +13,70 @@ import cv2
 import numpy as np
 
 from ..field.model import Field, Marker
+from ..settings import setting
 from . import reasons
 from .detect import Detection
 from .geometry import inv, rt_matrix, tilt_angle
 
 
-@dataclass
+@dataclass(frozen=True)
 class PoseConfig:
-    """Settings of the pose estimators (units in the names; angles in degrees)."""
+    """Settings of the pose estimators (``pose.*``; units in the names, angles in degrees).
 
-    # corner noise model, pixels (1 sigma per coordinate):
-    #   sigma = min(sigma_max_px, sigma_min_px + sigma_px_per_m * d / max(cos a, 0.1) ** sigma_cos_exp)
-    # d = camera-to-marker distance (m), a = angle between the marker's normal and the line of sight;
-    # fitted (maximum likelihood) to the corner errors of 150 stand-in simulator frames (docs/localization.md)
-    sigma_min_px: float = 0.28
-    sigma_px_per_m: float = 0.16
-    sigma_cos_exp: float = 2.0
-    sigma_max_px: float = 1.4
+    Corner noise, pixels (1 sigma per coordinate): ``sigma = min(sigma_max_px, sigma_min_px + sigma_px_per_m * d
+    / max(cos a, 0.1) ** sigma_cos_exp)``, d the camera-to-marker distance (m), a the angle between the marker's
+    normal and the line of sight; fitted (maximum likelihood) to the corner errors of 150 stand-in simulator
+    frames (docs/localization.md)."""
+
+    # the corner noise model
+    sigma_min_px: float = setting(0.28, "px, the corner noise of a near marker seen square on (fitted to the "
+                                        "corner errors of stand-in simulator frames)", lo=0.0, lo_open=True)
+    sigma_px_per_m: float = setting(0.16, "px/m, growth of the corner noise with distance", lo=0.0)
+    sigma_cos_exp: float = setting(2.0, "growth of the corner noise with the viewing angle (exponent of 1/cos)",
+                                   lo=0.0)
+    sigma_max_px: float = setting(1.4, "px, the corner noise at most (0: no cap)", lo=0.0)
     # mount check: base_link implied by a camera pose must be on the floor and level
-    mount_max_height_m: float = 0.04
-    mount_max_tilt_deg: float = 8.0
-    mount_sigma_height_m: float = 0.01  # for ranking solutions
-    mount_sigma_tilt_deg: float = 2.0
+    mount_max_height_m: float = setting(0.04, "m: a camera pose must put base_link this close to the floor ...",
+                                        lo=0.0)
+    mount_max_tilt_deg: float = setting(8.0, "deg: ... and this close to level (camera tilt and roll as mounted)",
+                                        lo=0.0, hi=180.0)
+    mount_sigma_height_m: float = setting(0.01, "m, the height error that counts as 1 sigma when IPPE's two "
+                                                "solutions are ranked by the mount check", lo=0.0, lo_open=True)
+    mount_sigma_tilt_deg: float = setting(2.0, "deg, likewise for the tilt", lo=0.0, hi=180.0, lo_open=True)
     # per-marker sanity
-    marker_max_rms_px: float = 1.0  # IPPE's square fits the corners worse than max(this, marker_rms_sigmas *
-    marker_rms_sigmas: float = 5.0  # sigma): a corner is off (occlusion, a neighbour), the marker is rejected
-    min_side_px: float = 4.0
-    min_area_px2: float = 20.0
-    max_side_ratio: float = 12.0
-    max_marker_distance_m: float = 2.5
+    marker_max_rms_px: float = setting(1.0, "px: a marker whose corners IPPE's square fits worse than max(this, "
+                                            "marker_rms_sigmas x sigma) is rejected (a corner is off: occlusion, "
+                                            "a neighbour)", lo=0.0)
+    marker_rms_sigmas: float = setting(5.0, "corner sigmas, the other half of that limit", lo=0.0)
+    min_side_px: float = setting(4.0, "px: a marker with a shorter side is rejected", lo=0.0)
+    min_area_px2: float = setting(20.0, "px^2: a marker with a smaller area is rejected", lo=0.0)
+    max_side_ratio: float = setting(12.0, "a marker whose longest side is more than this many times its shortest "
+                                          "is rejected", lo=1.0)
+    max_marker_distance_m: float = setting(2.5, "m: a marker farther from the camera is rejected", lo=0.0,
+                                           lo_open=True)
     # frame-level
-    lone_marker_max_distance_m: float = 0.45  # one marker only and farther: rejected (ambiguity zone)
-    marker_outlier_chi2: float = 60.0  # per marker (8 residuals), normalised by the noise model
-    max_rms_px: float = 3.0
-    field_margin_m: float = 0.15
-    max_position_sigma_m: float = 0.10
-    max_heading_sigma_deg: float = 10.0
-    # model-error floor added to every planar covariance (camera model, mount, timing within a frame)
-    floor_position_sigma_m: float = 0.0005
-    floor_heading_sigma_deg: float = 0.1
-    # consensus: a marker agrees with a hypothesis when its RMS reprojection error is under this (pixels)
-    consensus_px: float = 10.0
-    # how many of the best-supported hypotheses seed the LM of the planar fit
-    refine_seeds: int = 2
-    # how many of the closest markers' mount-checked IPPE solutions seed the all-marker PnP refinement
-    seed_markers: int = 2
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "PoseConfig":
-        d = dict(d or {})
-        bad = sorted(set(d) - set(cls.__dataclass_fields__))
-        if bad:
-            from ..errors import ConfigError
-
-            raise ConfigError(f"unknown pose settings {bad}; known: {sorted(cls.__dataclass_fields__)}")
-        return cls(**d)
+    lone_marker_max_distance_m: float = setting(0.45, "m: a fix from one marker only that is farther than this is "
+                                                      "rejected (IPPE's ambiguity zone)", lo=0.0)
+    marker_outlier_chi2: float = setting(60.0, "chi-square of one marker's 8 corner residuals (normalised by the "
+                                               "noise model) above which the fit drops it as an outlier",
+                                         lo=0.0, lo_open=True)
+    max_rms_px: float = setting(3.0, "px: a fix whose reprojection RMS is larger is rejected", lo=0.0,
+                                lo_open=True)
+    field_margin_m: float = setting(0.15, "m: a fix farther than this outside the field is rejected", lo=0.0)
+    max_position_sigma_m: float = setting(0.10, "m: a fix less certain than this (position sigma) is rejected",
+                                          lo=0.0, lo_open=True)
+    max_heading_sigma_deg: float = setting(10.0, "deg: ... or than this in heading", lo=0.0, hi=180.0,
+                                           lo_open=True)
+    # covariance
+    floor_position_sigma_m: float = setting(0.0005, "m, the model-error floor added to each planar fix's "
+                                                    "covariance (camera model, mount, timing within a frame)",
+                                            lo=0.0)
+    floor_heading_sigma_deg: float = setting(0.1, "deg, the same floor for the heading", lo=0.0)
+    consensus_px: float = setting(10.0, "px: a marker agrees with a hypothesis when its RMS reprojection error is "
+                                        "under this", lo=0.0, lo_open=True)
+    refine_seeds: int = setting(2, "the best-supported hypotheses that seed the planar fit's least squares", lo=1)
+    seed_markers: int = setting(2, "the closest markers whose mount-checked IPPE solutions seed the all-marker "
+                                   "PnP", lo=1)
 
     def corner_sigma(self, distance: float, cos_view: float) -> float:
         s = self.sigma_min_px + self.sigma_px_per_m * distance / max(cos_view, 0.1) ** self.sigma_cos_exp

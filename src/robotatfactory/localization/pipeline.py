@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -50,7 +50,7 @@ class FrameLocalizer:
         self.field, self.robot = field, robot
         dcfg = detector or DetectorConfig()
         if dcfg.dictionary != field.dictionary:
-            dcfg = DetectorConfig(**{**dcfg.__dict__, "dictionary": field.dictionary})
+            dcfg = replace(dcfg, dictionary=field.dictionary)
         self.detector = MarkerDetector(dcfg)
         self.cfg = pose or PoseConfig()
         self.methods = tuple(methods)

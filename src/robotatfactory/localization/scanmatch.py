@@ -24,44 +24,40 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..settings import setting
 from .geometry import wrap_angle
 
 
-@dataclass
+@dataclass(frozen=True)
 class ScanMatchConfig:
-    """``scan_match:`` in config/localization.yaml."""
+    """Settings of the scan matching (``scan_match.*``)."""
 
-    enabled: bool = True           # scan fixes for the EKF (the field's boxes as the map)
-    stride: int = 2                # use every n-th ray (360 rays: 180 returns at most)
-    max_range_m: float = 1.5       # returns farther away are not used (m; the range noise grows with distance)
-    body_margin_m: float = 0.02    # returns within the robot's outline (and a held part's) grown by this: ignored
-    min_points: int = 30           # fewest returns on mapped surfaces for a fix
-    min_inlier_share: float = 0.5  # and at least this share of the usable returns
-    outlier_m: float = 0.015       # a return farther than this (or 3 sigma) from every mapped surface after the
-                                   # fit is something the map does not have (a part, a robot): left out
-    huber_m: float = 0.005         # robust weight: returns farther than this (or 1 sigma) count less (m)
-    sigma_m: float = 0.003         # least error of one return (the map's and the mount's), m; the LIDAR's range
-                                   # noise model (the robot file's lidar noise_a, noise_b) adds to it
-    rays_per_independent: float = 8.0  # neighbouring returns share map and mount errors: covariance x this
-    max_rms_sigmas: float = 2.0    # a fit whose inliers' RMS distance exceeds this many sigmas is not used
-    max_correction_m: float = 0.06  # a fit that moved farther than this from the prior found another basin: unused
-    max_correction_deg: float = 6.0
-    max_iterations: int = 15
-
-    def check(self) -> None:
-        from ..errors import ConfigError
-
-        for k in ("max_range_m", "outlier_m", "huber_m", "sigma_m", "rays_per_independent", "max_rms_sigmas",
-                  "max_correction_m", "max_correction_deg"):
-            if not float(getattr(self, k)) > 0:
-                raise ConfigError(f"scan_match/{k} must be > 0, got {getattr(self, k)!r}")
-        for k in ("stride", "min_points", "max_iterations"):
-            if int(getattr(self, k)) < 1:
-                raise ConfigError(f"scan_match/{k} must be >= 1, got {getattr(self, k)!r}")
-        if not 0 < self.min_inlier_share <= 1:
-            raise ConfigError(f"scan_match/min_inlier_share must be in (0, 1], got {self.min_inlier_share!r}")
-        if self.body_margin_m < 0:
-            raise ConfigError(f"scan_match/body_margin_m must be >= 0, got {self.body_margin_m!r}")
+    enabled: bool = setting(True, "scan fixes for the EKF, the field's boxes as the map (docs/localization.md, "
+                                  "\"LIDAR scan matching\")")
+    stride: int = setting(2, "use every n-th ray (360 rays: up to 180 returns)", lo=1)
+    max_range_m: float = setting(1.5, "m: farther returns are not used (the range noise grows with distance)",
+                                 lo=0.0, lo_open=True)
+    body_margin_m: float = setting(0.02, "m: returns on the robot or a held part (their outline grown by this) "
+                                         "are ignored", lo=0.0)
+    min_points: int = setting(30, "fewest returns on mapped surfaces for a fix", lo=1)
+    min_inlier_share: float = setting(0.5, "... and at least this share of the usable returns", lo=0.0, hi=1.0,
+                                      lo_open=True)
+    outlier_m: float = setting(0.015, "m: a return farther than this (or 3 sigma) from every mapped surface after "
+                                      "the fit is something the map does not have (a part, a robot): left out",
+                               lo=0.0, lo_open=True)
+    huber_m: float = setting(0.005, "m, robust weight: returns farther than this (or 1 sigma) count less", lo=0.0,
+                             lo_open=True)
+    sigma_m: float = setting(0.003, "m, the least error of one return (the map's and the mount's); the LIDAR's "
+                                    "range noise (the robot file's lidar noise_a, noise_b) adds to it", lo=0.0,
+                             lo_open=True)
+    rays_per_independent: float = setting(8.0, "neighbouring returns share the map's and the mount's errors: the "
+                                               "fit's covariance times this", lo=0.0, lo_open=True)
+    max_rms_sigmas: float = setting(2.0, "a fit whose inliers' RMS distance exceeds this many sigmas is not used",
+                                    lo=0.0, lo_open=True)
+    max_correction_m: float = setting(0.06, "m: a fit this far from the filter's pose found another basin: not "
+                                            "used", lo=0.0, lo_open=True)
+    max_correction_deg: float = setting(6.0, "deg: ... or this far in heading", lo=0.0, hi=180.0, lo_open=True)
+    max_iterations: int = setting(15, "most Gauss-Newton iterations of one fit", lo=1)
 
 
 @dataclass

@@ -21,6 +21,7 @@ import sys
 import threading
 import time
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -38,6 +39,7 @@ from ..localization.geometry import inv, matrix_se2, se2_matrix
 from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from ..localization.scanmatch import ScanLocalizer
+from ..settings import tree
 from . import messages as rm
 from .cli import publish_every, spin_node
 from .mw import QoS, api
@@ -55,12 +57,7 @@ class LocalizationNode:
         self.robot = robot_for(cfg)  # the calibration file's camera, if any
         nc = cfg.node
         self.loc = FrameLocalizer(self.field, self.robot, cfg.detector, cfg.pose, nc.methods())
-        ekf_cfg = cfg.ekf
-        if abs(ekf_cfg.track_m - self.robot.odometry_track) > 1e-12:
-            from dataclasses import replace
-
-            ekf_cfg = replace(ekf_cfg, track_m=self.robot.odometry_track)
-        self.ekf = Ekf(ekf_cfg)
+        self.ekf = Ekf(replace(cfg.ekf, track_m=self.robot.odometry_track))  # the track: the robot file's
         self.beacon_xy = np.array(self.field.beacons, dtype=float).reshape(-1, 2)
         self.laser_xy = tuple(self.robot.lidar.xyz[:2])
         self.scan_matcher = ScanLocalizer(self.field, self.robot, cfg.scan_match) if cfg.scan_match.enabled else None
@@ -73,34 +70,34 @@ class LocalizationNode:
         self._frame_ms: list[float] = []
         self._K_from_info = False
         self._running = False
-        self.frames = {k: cfg.frame(k) for k in cfg.frames}
+        self.frames = {k: cfg.frame(k) for k in tree(cfg.frames)}  # prefixed
 
     # ------------------------------------------------------------------ wiring
     def start(self) -> "LocalizationNode":
         t, nc, node = self.cfg.topics, self.cfg.node, self.node
         R = QoS.RELIABLE
-        self.pub_markers = node.publisher(t["markers"], MarkerArray, R, 2)
-        self.pub_poses = node.publisher(t["marker_poses"], PoseArray, R, 2)
+        self.pub_markers = node.publisher(t.markers, MarkerArray, R, 2)
+        self.pub_poses = node.publisher(t.marker_poses, PoseArray, R, 2)
         # reliable: it then reaches reliable viewers (RViz's default) as well as best-effort ones
-        self.pub_debug = node.publisher(t["debug_image"], Image, R, 1)
-        self.pub_camera_pose = node.publisher(t["camera_pose"], PoseWithCovarianceStamped, R, 5)
-        self.pub_fix = {m: node.publisher(f"{t['fixes']}/{m}", PoseWithCovarianceStamped, R, 5)
+        self.pub_debug = node.publisher(t.debug_image, Image, R, 1)
+        self.pub_camera_pose = node.publisher(t.camera_pose, PoseWithCovarianceStamped, R, 5)
+        self.pub_fix = {m: node.publisher(f"{t.fixes}/{m}", PoseWithCovarianceStamped, R, 5)
                         for m in nc.methods()}
         # the filter's final verdict on each camera fix (once it leaves the filter's history): accepted / gated
-        self.pub_verdict = {ok: node.publisher(f"{t['fixes']}/filter_{'accepted' if ok else 'rejected'}",
+        self.pub_verdict = {ok: node.publisher(f"{t.fixes}/filter_{'accepted' if ok else 'rejected'}",
                                                PoseWithCovarianceStamped, R, 50) for ok in (True, False)}
-        self.pub_pose = node.publisher(t["pose"], PoseWithCovarianceStamped, R, 10)
-        self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, R, 5)
+        self.pub_pose = node.publisher(t.pose, PoseWithCovarianceStamped, R, 10)
+        self.pub_diag = node.publisher(t.diagnostics, DiagnosticArray, R, 5)
         self._running = True
         # odom: the bridge writes it reliably (QoS.SYNCHRONOUS); every message counts for the filter
         self.subs = [
-            node.subscribe(t["odom"], Odometry, self._guard(self.on_odom), R, 50),
-            node.subscribe(t["image"], Image, self._guard(self.on_image), QoS.SENSOR, 1, large=True),
-            node.subscribe(t["camera_info"], CameraInfo, self._guard(self.on_camera_info), QoS.SENSOR, 1),
+            node.subscribe(t.odom, Odometry, self._guard(self.on_odom), R, 50),
+            node.subscribe(t.image, Image, self._guard(self.on_image), QoS.SENSOR, 1, large=True),
+            node.subscribe(t.camera_info, CameraInfo, self._guard(self.on_camera_info), QoS.SENSOR, 1),
         ]
         self.use_beacons = bool(nc.use_lidar and len(self.beacon_xy))
         if self.use_beacons or self.scan_matcher is not None:
-            self.subs.append(node.subscribe(t["scan"], LaserScan, self._guard(self.on_scan), QoS.SENSOR, 5))
+            self.subs.append(node.subscribe(t.scan, LaserScan, self._guard(self.on_scan), QoS.SENSOR, 5))
         self._diag_thread = threading.Thread(target=self._diag_loop, name="raf-localize-diag", daemon=True)
         self._diag_thread.start()
         node.info(f"localization: field {self.field.name}, camera fixes by '{nc.filter_method}', camera_pose "
@@ -407,64 +404,32 @@ class LocalizationNode:
 
 
 def default_params() -> dict:
-    """The node's whole parameter tree with its defaults (what ROS 2 declares): every setting of
-    :mod:`robotatfactory.localization.config` (``detector/extra`` only when given)."""
-    from dataclasses import asdict
-
-    cfg = LocalizationConfig()
-    tree = {}
-    for f in cfg.__dataclass_fields__:
-        v = getattr(cfg, f)
-        tree[f] = asdict(v) if hasattr(v, "__dataclass_fields__") else (dict(v) if isinstance(v, dict) else v)
-    tree["detector"].pop("extra", None)
-    return tree
+    """The node's parameters with their defaults (what ROS 2 declares): every localization setting
+    (:class:`~..localization.config.LocalizationConfig`'s tree), but ``detector.extra``, whose OpenCV names are
+    declared only when given (``--set detector.extra.minDistanceToBorder=2``)."""
+    params = tree(LocalizationConfig())
+    params["detector"].pop("extra")
+    return params
 
 
-RANGES: dict[str, tuple[float, float]] = {  # what NodeConfig.check() and the estimators accept
-    "node.diagnostics_period": (1e-3, 1e9), "node.log_period": (1e-3, 1e9), "node.initial_sigma_xy": (1e-9, 1e9),
-    "node.initial_sigma_theta_deg": (1e-9, 1e9),
-}
-_COMMENTS: dict | None = None
+def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
+    """(description, (min, max) or None) of a parameter (``ekf.history_s``): its setting's."""
+    from ..settings import descriptions
+
+    global _DESCRIPTIONS
+    if _DESCRIPTIONS is None:
+        _DESCRIPTIONS = descriptions(LocalizationConfig)
+    if name.startswith("detector.extra."):
+        return f"cv2.aruco.DetectorParameters.{name.rsplit('.', 1)[1]} (detector.extra)", None
+    return _DESCRIPTIONS.get(name, ("", None))
 
 
-def _field_comments() -> dict:
-    """``section.field`` -> the end-of-line comment of the field in its settings dataclass's source (the
-    descriptions of settings config/localization.yaml does not list or comment)."""
-    import inspect
-    import re
-
-    from ..localization import config as lc
-
-    out = {}
-    sections = {"": lc.LocalizationConfig, "node": lc.NodeConfig}
-    sections.update({f.name: f.default_factory for f in lc.LocalizationConfig.__dataclass_fields__.values()
-                     if isinstance(f.default_factory, type) and hasattr(f.default_factory, "__dataclass_fields__")})
-    for sec, cls in sections.items():
-        try:
-            src = inspect.getsource(cls)
-        except (OSError, TypeError):
-            continue
-        for m in re.finditer(r"^\s+(\w+)\s*:[^=\n]*=[^#\n]*#\s*(.+)$", src, re.M):
-            out[f"{sec}.{m.group(1)}" if sec else m.group(1)] = m.group(2).strip()
-    return out
-
-
-def describe_param(flat: str) -> tuple[str, tuple[float, float] | None]:
-    """(description, (min, max) or None) of a parameter (``node.filter_method``): its end-of-line comment in
-    config/localization.yaml (else in its settings dataclass) and the range the validation allows, where it
-    checks one."""
-    global _COMMENTS
-    if _COMMENTS is None:
-        from ..localization.config import DEFAULT_FILE
-        from ..settings import yaml_comments
-
-        _COMMENTS = {**_field_comments(), **yaml_comments(DEFAULT_FILE)}
-    return _COMMENTS.get(flat, ""), RANGES.get(flat)
+_DESCRIPTIONS: dict | None = None
 
 
 def node_params(node: Node, settings: dict | None = None) -> dict:
     """The node's parameters as a settings tree: ``default_params()`` (updated with ``settings``: options
-    given on the command line that the defaults lack, e.g. ``detector/extra`` keys, are declared too)."""
+    given on the command line that the defaults lack, ``detector.extra``'s names, are declared too)."""
     return node.params(default_params(), describe_param, settings)
 
 
