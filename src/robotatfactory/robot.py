@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .settings import spec
+
 
 @dataclass(frozen=True)
 class CameraSpec:
@@ -26,19 +28,25 @@ class CameraSpec:
     ``raf calibrate`` estimates all but the image size and the timing (docs/calibration.md).
     """
 
-    xyz: tuple[float, float, float]
-    pitch_down_deg: float
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    bottom_up: bool
-    render_fps: float
-    decimation: int
-    roll_deg: float = 0.0
-    distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    xyz: tuple[float, float, float] = spec("m, camera_link's origin in base_link [x, y, z]", size=(3, 3),
+                                           items=float)
+    pitch_down_deg: float = spec("deg: camera_link is base_link pitched down by this", lo=-90.0, hi=90.0)
+    width: int = spec("px, the image's width", lo=1, hi=16384)
+    height: int = spec("px, the image's height", lo=1, hi=16384)
+    fx: float = spec("px, focal length along x (GLScene focal length 30 at 96 DPI: 226.8)", lo=0.0, lo_open=True)
+    fy: float = spec("px, focal length along y", lo=0.0, lo_open=True)
+    cx: float = spec("px, principal point's x, OpenCV convention (pixel centres at integers: 319.5 is the "
+                     "middle of 640)")
+    cy: float = spec("px, principal point's y")
+    bottom_up: bool = spec("rows arrive in OpenGL order (row 0 = bottom): flip them")
+    render_fps: float = spec("the simulator's render clock, ticks per WALL second (SimTwo's GUI: 60)", lo=0.0,
+                             lo_open=True)
+    decimation: int = spec("one published frame every this many renders", lo=1, hi=10 ** 6)
+    roll_deg: float = spec("deg, then rolled about camera_link's x (the optical axis), right-handed",
+                           default=0.0, lo=-90.0, hi=90.0)
+    distortion: tuple[float, float, float, float, float] = spec(
+        "OpenCV k1, k2, p1, p2, k3 (ROS plumb_bob, CameraInfo D); zeros: an ideal pinhole (SimTwo's GLScene)",
+        default=(0.0, 0.0, 0.0, 0.0, 0.0), size=(1, 5), items=float)
 
     def __post_init__(self):
         object.__setattr__(self, "xyz", tuple(float(v) for v in self.xyz))
@@ -88,12 +96,14 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class LidarSpec:
-    xyz: tuple[float, float, float]
-    rays: int
-    fov_deg: float
-    range_max: float
-    range_min: float
-    period: float
+    xyz: tuple[float, float, float] = spec("m, base_link -> laser [x, y, z]", size=(3, 3), items=float)
+    rays: int = spec("rays per sweep", lo=1)
+    fov_deg: float = spec("deg, the field of view: N rays from -fov/2 to +fov/2, step fov/(N-1) (SimTwo's "
+                          "ranger2d)", lo=0.0, hi=360.0, lo_open=True)
+    range_max: float = spec("m, the longest range", lo=0.0, lo_open=True)
+    range_min: float = spec("m, the shortest range", lo=0.0)
+    period: float = spec("s, one sweep: LaserScan.scan_time (SimTwo: rays measured in turn, delivered all at "
+                         "once)", lo=0.0, lo_open=True)
     noise_a: float
     noise_b: float
 
@@ -111,11 +121,13 @@ class LidarSpec:
 @dataclass(frozen=True)
 class RobotSpec:
     name: str
-    control_period: float
-    physics_step: float
-    wheel_radius: float
-    track: float
-    ticks_per_rev: int
+    control_period: float = spec("s, SimTwo's script period (Tms advances by this per cycle): whole "
+                                 "milliseconds", lo=0.0, hi=10.0, lo_open=True)
+    physics_step: float = spec("s, SimTwo's physics step (the LIDAR's ray schedule); at most control_period",
+                               lo=0.0, hi=10.0, lo_open=True)
+    wheel_radius: float = spec("m", lo=0.0, hi=10.0, lo_open=True)
+    track: float = spec("m, the wheels' separation (TF)", lo=0.0, hi=10.0, lo_open=True)
+    ticks_per_rev: int = spec("encoder ticks per wheel revolution", lo=1, hi=10 ** 9)
     base: dict
     wheel: dict
     caster: dict

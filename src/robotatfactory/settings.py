@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -95,14 +96,79 @@ def yaml_comments(path: str | Path, sep: str = ".") -> dict:
 
 
 # ------------------------------------------------------------------------------------------ typed settings
+def _meta(doc: str, lo, hi, lo_open: bool, choices, kind, pattern, what, size, items) -> dict:
+    return {"doc": doc, "lo": lo, "hi": hi, "lo_open": lo_open, "choices": choices, "kind": kind,
+            "pattern": pattern, "what": what, "size": size, "items": items}
+
+
 def setting(default: Any, doc: str = "", *, lo: float | None = None, hi: float | None = None,
-            lo_open: bool = False, choices: tuple | None = None, kind: type | None = None):
+            lo_open: bool = False, choices: tuple | None = None, kind: type | None = None,
+            pattern: str | None = None, what: str = "", size: tuple[int, int] | None = None,
+            items: type | None = None):
     """A field of a settings dataclass: ``default``, ``doc`` (units first, then what it does) and the values
-    :func:`build` allows: numbers within ``lo``..``hi`` (``lo_open``: above ``lo``), one of ``choices``.
-    ``kind`` when the default does not say it (a default of None: "unset", e.g. taken from the robot file)."""
-    meta = {"doc": doc, "lo": lo, "hi": hi, "lo_open": lo_open, "choices": choices,
-            "kind": kind or type(default)}
+    :func:`build` allows: numbers within ``lo``..``hi`` (``lo_open``: above ``lo``), one of ``choices``, a
+    string matching ``pattern`` (``what`` says it in words), a list of ``size`` = (least, most) ``items``
+    (numbers). ``kind`` when the default does not say it (a default of None: "unset", e.g. taken from the
+    robot file)."""
+    meta = _meta(doc, lo, hi, lo_open, choices, kind or type(default), pattern, what, size, items)
     return dataclasses.field(default=default, metadata=meta)
+
+
+def spec(doc: str = "", *, default: Any = dataclasses.MISSING, lo: float | None = None, hi: float | None = None,
+         lo_open: bool = False, choices: tuple | None = None, size: tuple[int, int] | None = None,
+         items: type | None = None):
+    """A field of a model (a dataclass read from data, such as the robot file's camera) with what
+    :func:`setting` says of a setting: its meaning and allowed values. The model keeps no default for it (its
+    file gives the value); :func:`overlay` makes settings of such fields, so a component that lets a user
+    change the model's values declares none of them again."""
+    meta = _meta(doc, lo, hi, lo_open, choices, None, None, "", size, items)
+    return dataclasses.field(default=default, metadata={"spec": meta})
+
+
+def overlay(model: type, names: tuple[str, ...] | None = None, name: str | None = None) -> type:
+    """A settings section (frozen dataclass) whose settings are ``model``'s fields (all, or ``names``) made with
+    :func:`spec`, each unset (None) by default: values given over a model object made elsewhere (the robot
+    file's camera), applied with :func:`over`. Subclass it to add the component's own settings."""
+    import typing
+
+    hints = typing.get_type_hints(model)
+    specs = {f.name: f for f in dataclasses.fields(model) if "spec" in f.metadata}
+    names = tuple(specs) if names is None else names
+    out = []
+    for n in names:
+        if n not in specs:
+            raise TypeError(f"{model.__name__}.{n} is not a spec() field")
+        m = dict(specs[n].metadata["spec"])
+        hint = hints[n]
+        m["kind"] = typing.get_origin(hint) or hint
+        out.append((n, hint | None, dataclasses.field(default=None, metadata=m)))
+    cls = dataclasses.make_dataclass(name or f"{model.__name__}Overlay", out, frozen=True)
+    cls.__doc__ = f"Values over a {model.__name__} (unset: the model's own): {', '.join(names)}."
+    cls.model = model
+    return cls
+
+
+def over(values, model_obj):
+    """``model_obj`` (a :func:`spec` model) with the settings of ``values`` (an :func:`overlay` section, or a
+    subclass of one) that are set; the unset ones keep the model's values."""
+    names = {f.name for f in dataclasses.fields(model_obj)}
+    given = {f.name: getattr(values, f.name) for f in dataclasses.fields(values)
+             if f.name in names and "kind" in f.metadata and getattr(values, f.name) is not None}
+    return dataclasses.replace(model_obj, **given) if given else model_obj
+
+
+def given(obj, where: str = "") -> dict:
+    """The settings of ``obj`` that are set (not None), as the nested mapping :func:`build` reads."""
+    out = {}
+    for f in _settings_fields(obj):
+        v = getattr(obj, f.name)
+        if f.metadata.get("section"):
+            sub = given(v)
+            if sub:
+                out[f.name] = sub
+        elif v is not None:
+            out[f.name] = list(v) if isinstance(v, tuple) else v
+    return out
 
 
 def section(cls: type, doc: str = ""):
@@ -120,6 +186,12 @@ def _allowed(m: Mapping) -> str:
         return "one of " + ", ".join(map(str, choices))
     if kind is bool:
         return "true or false"
+    if m.get("what"):
+        return m["what"]
+    if kind in (tuple, list) and m.get("size"):
+        least, most = m["size"]
+        count = f"{least}" if least == most else f"{least} to {most}"
+        return f"a list of {count} {'numbers' if m.get('items') in (int, float) else 'values'}"
     what = "a whole number" if kind is int else "a number" if kind is float else f"a {kind.__name__}"
     if lo is not None and hi is not None:
         return f"{what} in {'(' if m['lo_open'] else '['}{lo:g}, {hi:g}]"
@@ -157,9 +229,17 @@ def _value(path: str, v: Any, f: dataclasses.Field) -> Any:
     elif kind is str:
         if not isinstance(v, str):
             raise bad
+        if m.get("pattern") is not None and not re.fullmatch(m["pattern"], v):
+            raise bad
     elif kind in (tuple, list):
         if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
             raise bad
+        if m.get("size") and not m["size"][0] <= len(v) <= m["size"][1]:
+            raise bad
+        if m.get("items") in (int, float):
+            if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
+                raise bad
+            v = tuple(m["items"](x) for x in v)
         v = tuple(tuple(x) if isinstance(x, list) else x for x in v)
     if m["choices"] and v not in m["choices"]:
         raise bad
