@@ -1,4 +1,5 @@
-"""The bridge's parameters (robotatfactory.ros.config): defaults, the YAML file, validation messages. Pure."""
+"""The bridge's settings (robotatfactory.ros.config): defaults, the generated YAML file, the robot file and the
+calibration under them, validation messages. Pure."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,17 +14,44 @@ from robotatfactory.settings import parse_set
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_yaml_file_equals_the_code_defaults():
+def test_config_bridge_yaml_is_the_defaults_generated_from_the_settings():
+    from robotatfactory.ros.config import HEADER, BridgeSettings
+    from robotatfactory.settings import to_yaml
+
+    assert (ROOT / "config" / "bridge.yaml").read_text() == to_yaml(BridgeSettings(), HEADER), \
+        "config/bridge.yaml is out of date: raf bridge --print-params --defaults > config/bridge.yaml"
     from_file = load_config(yaml.safe_load((ROOT / "config" / "bridge.yaml").read_text()))
     assert from_file.params == load_config({}).params
 
 
 def test_defaults_follow_the_robot_spec(robot):
     c = load_config({})
-    assert (c.wheel_radius, c.track, c.ticks_per_rev) == (robot.wheel_radius, robot.track, robot.ticks_per_rev)
-    assert (c.fx, c.cx, c.cy, c.bottom_up) == (robot.camera.fx, robot.camera.cx, robot.camera.cy, robot.camera.bottom_up)
-    assert c.lidar_range_max == 6.0 and c.lidar_period == 0.2 and c.watchdog_timeout == 0.5
-    assert c.port == 9810 and c.sim_host == "127.0.0.1" and c.control_period_ms == 40
+    assert (c.geometry.wheel_radius, c.geometry.track, c.geometry.ticks_per_rev) == \
+        (robot.wheel_radius, robot.track, robot.ticks_per_rev)
+    assert c.robot.camera == robot.camera and c.robot.lidar == robot.lidar
+    assert (c.camera.fx, c.camera.cx, c.camera.cy, c.camera.bottom_up) == \
+        (robot.camera.fx, robot.camera.cx, robot.camera.cy, robot.camera.bottom_up)
+    assert c.lidar.range_max == 6.0 and c.lidar.period == 0.2 and c.watchdog.timeout == 0.5
+    assert c.udp.port == 9810 and c.sim_host == "127.0.0.1" and c.control_period_ms == 40
+    assert c.odometry.track == robot.odometry_track and c.stream.max_wheel_speed == 54.4
+
+
+def test_another_robot_file_brings_its_own_geometry_and_camera(tmp_path, robot):
+    """The robot file's values are unset in the settings, so a robot file named by ``robot`` is what the bridge
+    runs with (config/bridge.yaml no longer pins SimTwo's values over it), and a value given still wins."""
+    import json
+
+    raw = json.loads((ROOT / "src" / "robotatfactory" / "data" / "robot_simtwo.json").read_text())
+    raw["wheel_radius"], raw["camera"]["fx"], raw["camera"]["fy"] = 0.04, 300.0, 300.0
+    raw["lidar"]["range_max"] = 3.5
+    path = tmp_path / "robot_other.json"
+    path.write_text(json.dumps(raw))
+    from_file = yaml.safe_load((ROOT / "config" / "bridge.yaml").read_text())
+    c = load_config({**from_file, "robot": str(path)})
+    assert c.robot.wheel_radius == 0.04 and c.robot.camera.fx == 300.0 and c.lidar.range_max == 3.5
+    assert c.robot.track == robot.track
+    c = load_config({"robot": str(path), "camera": {"fx": 250.0}})
+    assert c.robot.camera.fx == 250.0 and c.robot.camera.fy == 300.0
 
 
 def test_frame_prefix_applies_to_robot_frames_only():
@@ -34,27 +62,32 @@ def test_frame_prefix_applies_to_robot_frames_only():
 
 
 @pytest.mark.parametrize("over, names", [
-    ({"udp": {"port": 70000}}, "~udp/port"),
-    ({"udp": {"port": "ninety"}}, "~udp/port"),
-    ({"camera": {"fx": -1}}, "~camera/fx"),
-    ({"camera": {"fxx": 300}}, "~camera/fxx"),
-    ({"camera": {"bottom_up": "yes"}}, "~camera/bottom_up"),
-    ({"camera": {"endpoint": "9899"}}, "~camera/endpoint"),
-    ({"camera": {"cx": 9000}}, "~camera/cx"),
-    ({"camera": 3}, "~camera"),
-    ({"watchdog": {"timeout": 0}}, "~watchdog/timeout"),
-    ({"lidar": {"xyz": [0, 0]}}, "~lidar/xyz"),
-    ({"lidar": {"mode": "burst"}}, "~lidar/mode"),
-    ({"lidar": {"range_min": 7.0}}, "~lidar/range_min"),
-    ({"simulator": {"host": "no such host.invalid"}}, "~simulator/host"),
-    ({"frame_prefix": "/robot1"}, "~frame_prefix"),
-    ({"frames": {"base_link": "base link"}}, "~frames/base_link"),
-    ({"field": "atlantis"}, "~field"),
-    ({"geometry": {"control_period": 0.0405}}, "~geometry/control_period"),
-    ({"diagnostics": {"stale_warn": 3.0, "stale_error": 1.0}}, "~diagnostics/stale_error"),
-    ({"tf": {"map_to_odom": "yes"}}, "~tf/map_to_odom"),
+    ({"udp": {"port": 70000}}, "udp.port must be a whole number in [0, 65535]"),
+    ({"udp": {"port": "ninety"}}, "udp.port"),
+    ({"camera": {"fx": -1}}, "camera.fx must be a number > 0"),
+    ({"camera": {"fxx": 300}}, "camera.fxx"),
+    ({"camera": {"bottom_up": "yes"}}, "camera.bottom_up must be true or false"),
+    ({"camera": {"endpoint": "9899"}}, "camera.endpoint must be a ZMQ endpoint"),
+    ({"camera": {"cx": 9000}}, "camera.cx"),
+    ({"camera": 3}, "camera"),
+    ({"watchdog": {"timeout": 0}}, "watchdog.timeout"),
+    ({"lidar": {"xyz": [0, 0]}}, "lidar.xyz must be a list of 3 numbers"),
+    ({"camera": {"distortion": [0.1, "x"]}}, "camera.distortion"),
+    ({"lidar": {"mode": "burst"}}, "lidar.mode must be one of sweep, cycle"),
+    ({"lidar": {"range_min": 7.0}}, "lidar.range_min"),
+    ({"lidar": {"delivery_lag": 0.05}}, "lidar.delivery_lag"),
+    ({"simulator": {"host": "no such host.invalid"}}, "simulator.host"),
+    ({"simulator": {"control": "9812"}}, "simulator.control"),
+    ({"frame_prefix": "/robot1"}, "frame_prefix"),
+    ({"frames": {"base_link": "base link"}}, "frames.base_link"),
+    ({"field": "atlantis"}, "field"),
+    ({"robot": "no_such_robot"}, "robot"),
+    ({"geometry": {"control_period": 0.0405}}, "geometry.control_period"),
+    ({"geometry": {"physics_step": 0.05}}, "geometry.physics_step"),
+    ({"diagnostics": {"stale_warn": 3.0, "stale_error": 1.0}}, "diagnostics.stale_error"),
+    ({"tf": {"map_to_odom": "yes"}}, "tf.map_to_odom"),
 ])
-def test_bad_values_name_the_parameter(over, names):
+def test_bad_values_name_the_setting(over, names):
     with pytest.raises(ConfigError) as e:
         load_config(over)
     assert names in str(e.value)
@@ -71,7 +104,7 @@ def test_parse_set():
     with pytest.raises(ConfigError):
         parse_set(["udp/port"])
     c = load_config(d)
-    assert c.port == 9811 and not c.camera_enabled and c.fx == 283.5
+    assert c.udp.port == 9811 and not c.camera.enabled and c.robot.camera.fx == 283.5
 
 
 def test_flat_params_round_trip():
@@ -96,4 +129,7 @@ def test_raf_bridge_print_params_and_bad_option(raf_cmd):
     p = yaml.safe_load(out)
     assert p["udp"]["port"] == 9999 and p["camera"]["fx"] == 283
     r = subprocess.run(raf_cmd + ["bridge", "--set", "camera/fx=-3", "--print-params"], capture_output=True, text=True)
-    assert r.returncode == 2 and "~camera/fx" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 2 and "camera.fx" in r.stderr and "Traceback" not in r.stderr
+    defaults = subprocess.run(raf_cmd + ["bridge", "--print-params", "--defaults"], capture_output=True, text=True,
+                              check=True).stdout
+    assert defaults == (ROOT / "config" / "bridge.yaml").read_text()

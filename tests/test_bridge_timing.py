@@ -457,11 +457,10 @@ def rafsim_events(seed, seconds=20.0, paced=True, compute=(0.004, 0.015), frame_
 
 def bridge_stamper(**overrides):
     """A stamper built as ``raf bridge``'s camera node builds it, from its default parameters (+ overrides)."""
+    from robotatfactory.ros.camera_node import camera_stamper
     from robotatfactory.ros.config import load_config
 
-    cfg = load_config({"camera": overrides} if overrides else None)
-    return CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
-                         use_grid=cfg.use_grid, rule=cfg.camera_bracket, latency=cfg.camera_latency)
+    return camera_stamper(load_config({"camera": overrides} if overrides else None))
 
 
 OLD_DEFAULTS = {"bracket": "nearest", "use_grid": True}  # raf bridge's camera stamping before issue 9

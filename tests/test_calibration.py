@@ -192,10 +192,16 @@ def test_bridge_and_localize_load_the_calibration(tmp_path, fitted):
     args = argparse.Namespace(config=None, field="rules2026", sim_host=None, port=None, camera=None, no_camera=False,
                               frame_prefix=None, set=["camera/cy=240.25"], calibration=str(p))
     cfg = load_config(bridge.build_params(args))
-    c = cfg.camera
+    c = cfg.robot.camera
     assert c.fx == pytest.approx(fitted.camera.fx, abs=1e-3) and c.cy == 240.25  # --set after the file
     assert c.roll_deg == pytest.approx(fitted.camera.roll_deg, abs=1e-3)
-    assert cfg.distortion[0] == pytest.approx(-0.01)
+    assert c.distortion[0] == pytest.approx(-0.01) and cfg.camera.distortion[0] == pytest.approx(-0.01)
+    # a value given explicitly wins over the calibration even when it equals the robot file's (the settings
+    # know what was given: the earlier rule took such a value for unset)
+    robot_cy = load_config({}).robot.camera.cy
+    args.set = [f"camera/cy={robot_cy}"]
+    assert fitted.camera.cy != robot_cy
+    assert load_config(bridge.build_params(args)).robot.camera.cy == robot_cy
     assert np.allclose(c.base_to_link(), fitted.camera.base_to_link(), atol=1e-5)  # the camera TF
 
     largs = argparse.Namespace(config=None, field="rules2026", frame_prefix=None, set=[], calibration=str(p))
@@ -464,8 +470,9 @@ def test_a_calibration_file_is_parsed_once_into_the_camera_the_bridge_and_the_lo
     settings = localize.build_settings(largs)
     from_dict(settings)  # the command checks them
     robot = robot_for(from_dict(settings))  # the node reads them again
-    bridge_camera = load_config({"camera": {"calibration": str(p)}}).camera
+    bridge_camera = load_config({"camera": {"calibration": str(p)}}).robot.camera
     assert len(parsed) == 1
     assert bridge_camera == robot.camera  # one camera object's values, on both sides
     p.write_text(p.read_text().replace("-0.02", "-0.035"))  # a changed file is read again
-    assert load_config({"camera": {"calibration": str(p)}}).distortion[0] == -0.035 and len(parsed) == 2
+    assert load_config({"camera": {"calibration": str(p)}}).robot.camera.distortion[0] == -0.035
+    assert len(parsed) == 2

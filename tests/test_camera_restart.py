@@ -11,9 +11,9 @@ from rosutil import free_port, wait_until
 
 
 def _cfg(endpoint: str):
-    return SimpleNamespace(control_period_ms=40, render_fps=60.0, decimation=4, max_wait=0.02, use_grid=False,
-                           camera_bracket="elapsed", camera_latency=0.004, log_period=5.0,
-                           camera_endpoint=endpoint)
+    from robotatfactory.ros.config import load_config
+
+    return load_config({"camera": {"endpoint": endpoint}})
 
 
 def _publish_until(pub, cam, received: int, timeout: float = 10.0) -> None:

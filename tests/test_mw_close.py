@@ -225,12 +225,14 @@ ROS2_PARAMS = textwrap.dedent("""
                        params={"watchdog": {"timeout": 1}, "udp": {"port": 9811}})
     from robotatfactory.ros.config import default_params, describe_param, load_config
     got = n.params(default_params(), describe_param)
-    load_config(got)
+    cfg = load_config(got)
     p = n.node.get_parameter("watchdog.timeout")
     out["bridge"] = [got["watchdog"]["timeout"], type(got["watchdog"]["timeout"]).__name__,
-                     p.type_ == Parameter.Type.DOUBLE, got["stream"]["max_wheel_speed"],
-                     type(got["stream"]["max_wheel_speed"]).__name__, got["udp"]["port"],
+                     p.type_ == Parameter.Type.DOUBLE, got["stream"]["takeover_after"],
+                     type(got["stream"]["takeover_after"]).__name__, got["udp"]["port"],
                      type(got["udp"]["port"]).__name__]
+    # a setting unset by default (the robot file's) is declared with dynamic typing: the settings make it a real
+    out["bridge_unset"] = [got["camera"]["fx"], cfg.robot.camera.fx, type(cfg.robot.camera.fx).__name__]
     n.destroy()
     # the agent's and the localization's given settings
     from robotatfactory.ros.agent_node import node_params as agent_params
@@ -263,12 +265,14 @@ def test_whole_numbers_given_for_reals_become_reals_on_ros2(tmp_path):
 
     py = sys.executable if importlib.util.find_spec("rclpy") else str(ROOT / ".venv-ros2" / "bin" / "python")
     f = tmp_path / "p.yaml"
-    f.write_text("/**/raf_bridge:\n  ros__parameters:\n    stream:\n      max_wheel_speed: 54\n")
+    f.write_text("/**/raf_bridge:\n  ros__parameters:\n    stream:\n      takeover_after: 3\n"
+                 "    camera:\n      fx: 283\n")
     with PrivateDomain() as dom:
         r = subprocess.run([py, "-c", ROS2_PARAMS, str(f)], env=dom.env(), cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-3000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
-    assert out["bridge"] == [1.0, "float", True, 54.0, "float", 9811, "int"]
+    assert out["bridge"] == [1.0, "float", True, 3.0, "float", 9811, "int"]
+    assert out["bridge_unset"] == [283, 283.0, "float"]
     assert out["agent"] == [2.0, "float", "float", True]
     assert out["localization"] == [3.0, "float", 7.0, "float"]

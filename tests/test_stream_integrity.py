@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import socket
 import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -251,7 +250,7 @@ def test_every_socket_listens_on_loopback_by_default():
     assert load_config().bind_host == "127.0.0.1"
     assert load_config({"simulator": {"host": "192.168.1.20"}}).bind_host == "0.0.0.0"  # SimTwo elsewhere: one flag
     assert load_config({"udp": {"bind_host": "192.168.1.5"}, "simulator": {"host": "*"}}).bind_host == "192.168.1.5"
-    assert load_config().camera_endpoint.startswith("tcp://127.0.0.1:")
+    assert load_config().camera.endpoint.startswith("tcp://127.0.0.1:")
     rc = RunnerConfig()
     assert rc.host == "127.0.0.1" and rc.server_host == "127.0.0.1" and rc.camera_bind.startswith("tcp://127.0.0.1:")
     for mod in (sim_cmd, server_cmd):

@@ -9,7 +9,7 @@ ORDER = 30
 DESCRIPTION = """\
 Run the bridge node. Settings are ROS parameters (defaults: config/bridge.yaml, every one listed in
 docs/bridge.md); --config FILE overrides them from a YAML file of the same shape, --set NAME=VALUE one by
-one (e.g. --set camera/fx=283.5 --set simulator/host=192.168.1.20), and the options below the usual ones.
+one (e.g. --set camera.fx=283.5 --set simulator/host=192.168.1.20), and the options below the usual ones.
 The node needs a ROS master (ROS_MASTER_URI); --roscore starts a private one on a free port.
 
 examples:
@@ -32,6 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--calibration", metavar="FILE",
                         help="camera calibration YAML from raf calibrate (the setting camera/calibration): "
                              "camera_info K and D and the camera TF")
+    parser.add_argument("--defaults", action="store_true",
+                        help="with --print-params: the defaults alone, as config/bridge.yaml holds them")
     add_node_arguments(parser, "raf_bridge")
 
 
@@ -64,27 +66,26 @@ def build_params(args) -> dict:
 
 
 def run(args) -> int:
-
-    import yaml
-
     from ..ros.config import load_config
 
-    cfg = load_config(build_params(args))
+    params = {} if args.defaults else build_params(args)
+    cfg = load_config(params)  # a bad name or value: a clear error before the middleware starts
     if args.print_params:
-        print(yaml.safe_dump(cfg.params, sort_keys=False), end="")
+        from ..ros.config import HEADER
+        from ..settings import to_yaml
+
+        # --defaults: the settings as config/bridge.yaml holds them (the robot file's unset); else every value
+        print(to_yaml(cfg.given, HEADER) if args.defaults else to_yaml(cfg.settings), end="")
         return 0
     from ..ros.cli import run_node
 
-    from ..ros.config import default_params, describe_param
-
-    # ROS 2: a whole number given for a real-valued setting is made a real when the node declares it
-    params = cfg.flat_params()
-
     def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.bridge_node import Bridge
+        from ..ros.config import default_params, describe_param
 
         node.params(default_params(), describe_param)  # ROS 2: declared (ros2 param list/describe), values = cfg's
         return Bridge(cfg, node).start()
 
-    return run_node(args, "bridge", params, make_node,
+    # the resolved settings as the node's parameters (ROS 1: rosparam shows them; ROS 2: overrides)
+    return run_node(args, "bridge", cfg.flat_params(), make_node,
                     lambda b: f"{args.name} listening on udp {cfg.bind_host}:{b.bound_port}")

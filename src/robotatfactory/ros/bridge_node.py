@@ -21,7 +21,6 @@ The algorithms are in ``robotatfactory.simtwo.stream``, ``robotatfactory.simtwo.
 """
 from __future__ import annotations
 
-import functools
 import math
 import socket
 from collections import deque
@@ -88,25 +87,26 @@ class Bridge:
         if field is None:
             from ..field import load_field
 
-            field = load_field(cfg.field)
+            field = load_field(cfg.settings.field)
         self.field = field
-        self.tracker = StreamTracker(cfg.reorder_window, cfg.restart_confirm, max_jump=cfg.max_jump,
+        st = cfg.stream
+        self.tracker = StreamTracker(st.reorder_window, st.restart_confirm, max_jump=st.max_jump,
                                      period_ms=cfg.control_period_ms, max_ticks_per_s=cfg.max_ticks_per_s)
-        self.gate = SourceGate(cfg.source, cfg.takeover_after, cfg.restart_confirm, cfg.control_period_ms,
-                               cfg.reorder_window)
+        self.gate = SourceGate(cfg.source, st.takeover_after, st.restart_confirm, cfg.control_period_ms,
+                               st.reorder_window)
         self.camera = None  # CameraLink: the camera half runs in its own process (camera_node)
         self.clock = SimClock()
-        self.odo = DiffDriveOdometry(wheel_radius=cfg.wheel_radius, track=cfg.odometry_track,
-                                     ticks_per_rev=cfg.ticks_per_rev,
-                                     slip_var_per_m=cfg.slip_var_per_m)
+        self.odo = DiffDriveOdometry(wheel_radius=cfg.robot.wheel_radius, track=cfg.odometry.track,
+                                     ticks_per_rev=cfg.robot.ticks_per_rev,
+                                     slip_var_per_m=cfg.odometry.slip_var_per_m)
         self.sweeps: WholeSweepAssembler | PerRayAssembler | None = None  # LIDAR sweeps (simtwo.scan)
         self.self_filter: SelfFilter | None = None  # the LIDAR's hits on its own robot -> NaN (simtwo.selfhits)
-        self.log = LogLimiter(cfg.log_period)
+        self.log = LogLimiter(cfg.settings.log_period)
         self.datagram_rate = RateMeter()
         self.counts = {"replies": 0, "reply_errors": 0, "cmd_vel": 0, "cmd_vel_rejected": 0, "magnet_cmds": 0,
                        "watchdog_stops": 0, "scans": 0, "publish_errors": 0}
         self._cmd_lock = threading.Lock()
-        self.watchdog = CommandWatchdog(cfg.watchdog_timeout)  # under self._cmd_lock
+        self.watchdog = CommandWatchdog(cfg.watchdog.timeout)  # under self._cmd_lock
         self._gt_prev = None
         self._gt_velocity = (0.0, 0.0)
         self._parts_truth = (0.0, ())
@@ -132,7 +132,7 @@ class Bridge:
     # ---- setup -----------------------------------------------------------------------------------------
     def start(self) -> "Bridge":
         cfg, t = self.cfg, self.cfg.topics
-        self.udp = TimestampedUDP(cfg.bind_host, cfg.port)  # ConfigError if the port is taken
+        self.udp = TimestampedUDP(cfg.bind_host, cfg.udp.port)  # ConfigError if the port is taken
         self.sock = self.udp.sock
         self.bound_port = self.udp.port
         # the GIL is handed between threads every 5 ms by default: a camera frame being converted would
@@ -153,16 +153,16 @@ class Bridge:
         self._subs = [node.subscribe(t["cmd_vel"], Twist, self._on_cmd_vel, QoS.CONTROL, 1),
                       node.subscribe(t["magnet"], Bool, self._on_magnet, QoS.CONTROL, 1)]
         self._send_static()
-        if cfg.publish_field:
+        if cfg.tf.publish_field:
             from .field_markers import field_marker_array
 
             self.pub_markers = node.publisher(t["field_markers"], MarkerArray, QoS.LATCHED, 1)
             self.pub_markers.publish(field_marker_array(self.field, cfg.frames["map"]))
         self._running = True
-        if cfg.camera_enabled:
+        if cfg.camera.enabled:
             from .camera_node import CameraLink
 
-            self.camera = CameraLink(cfg.params, f"{node.name.rsplit('/', 1)[-1]}_camera", node.namespace)
+            self.camera = CameraLink(cfg.given_params(), f"{node.name.rsplit('/', 1)[-1]}_camera", node.namespace)
         self._spawn(self._udp_loop, "udp")
         self._spawn(self._diag_loop, "diagnostics")
         from .sim_services import SimServices
@@ -173,8 +173,8 @@ class Bridge:
             self.standard = StandardServices(node, self._standard(), types).start()
         node.info(f"bridge: SensorFrames on udp {cfg.bind_host}:{self.bound_port} from "
                       f"{'any host' if cfg.sim_host == '*' else cfg.sim_host}, camera "
-                      f"{cfg.camera_endpoint if cfg.camera_enabled else 'off'}, field {self.field.name}, "
-                      f"frame prefix {cfg.frame_prefix or '(none)'}")
+                      f"{cfg.camera.endpoint if cfg.camera.enabled else 'off'}, field {self.field.name}, "
+                      f"frame prefix {cfg.settings.frame_prefix or '(none)'}")
         return self
 
     def _standard(self):
@@ -190,15 +190,11 @@ class Bridge:
                max(b[3] for b in boxes), 0.0, top)
         return SimulationStandard(self.field, self.sim_services.backend, self.cfg.frames["map"], robot_box=box)
 
-    @functools.cached_property
+    @property
     def robot(self):
-        """The robot description (``robot``), with the wheel radius and track this bridge is configured with."""
-        import dataclasses
-
-        from ..robot import load_robot
-
-        cfg = self.cfg
-        return dataclasses.replace(load_robot(cfg.robot), wheel_radius=cfg.wheel_radius, track=cfg.track)
+        """The robot description: the robot file with the geometry, LIDAR and camera this bridge is configured
+        with."""
+        return self.cfg.robot
 
     def _spawn(self, fn, name):
         th = threading.Thread(target=self._guard, args=(fn,), name=f"raf-bridge-{name}", daemon=True)
@@ -241,9 +237,9 @@ class Bridge:
 
         cfg = self.cfg
         tfs = robot_static_transforms(cfg)
-        if cfg.publish_field:
+        if cfg.tf.publish_field:
             tfs += marker_transforms(self.field, cfg.frames["map"], cfg.frames["marker_prefix"])
-        if cfg.map_to_odom == "identity":
+        if cfg.tf.map_to_odom == "identity":
             tfs.append(rm.transform(cfg.frames["map"], cfg.frames["odom"], np.eye(4)))
         elif map_odom is not None:
             tfs.append(rm.planar_transform(cfg.frames["map"], cfg.frames["odom"], *map_odom, rm.zero_stamp()))
@@ -272,7 +268,7 @@ class Bridge:
             if tripped:
                 self.counts["watchdog_stops"] += 1
                 self._warn("watchdog", f"bridge: cmd_vel is {self.watchdog.age_ms(time_ms) / 1000:.2f} s old "
-                                       f"(simulation time) > {self.cfg.watchdog_timeout} s: sending V = W = 0")
+                                       f"(simulation time) > {self.cfg.watchdog.timeout} s: sending V = W = 0")
             return cmd
 
     def _reset_commands(self) -> None:
@@ -333,10 +329,10 @@ class Bridge:
         if (cfg.sim_host != "*" and addr[0] != cfg.sim_host) or not gate.open_to(addr, arrival):
             self._foreign(addr)
             return
-        if len(data) > cfg.max_datagram:
+        if len(data) > cfg.udp.max_datagram:
             tr.reject("oversized")
             self._warn("oversized", f"bridge: ignoring a {len(data)}-byte datagram from {addr[0]}:{addr[1]} "
-                                    f"(over ~udp/max_datagram = {cfg.max_datagram})")
+                                    f"(over ~udp/max_datagram = {cfg.udp.max_datagram})")
             return
         try:
             frame = SensorFrame.decode(data)
@@ -366,7 +362,7 @@ class Bridge:
         if previous is None:
             self.node.info(f"bridge: SensorFrame stream bound to {source_key(addr)}")
         else:
-            self.node.warn(f"bridge: {source_key(previous)} silent for more than {cfg.takeover_after} s; "
+            self.node.warn(f"bridge: {source_key(previous)} silent for more than {cfg.stream.takeover_after} s; "
                           f"{source_key(addr)} takes over the SensorFrame stream")
         tr.reset()
         for i, (f, a) in enumerate(chain):  # the chain's frames, in order (the earlier ones were held back)
@@ -386,12 +382,12 @@ class Bridge:
         cfg = self.cfg
         try:
             extra = self.sim_services.teleports.labels() if self.sim_services is not None else b""
-            self.sock.sendto(cmd.encode() + extra, (addr[0], cfg.reply_port or addr[1]))
+            self.sock.sendto(cmd.encode() + extra, (addr[0], cfg.simulator.reply_port or addr[1]))
             self.counts["replies"] += 1
             self.reply_delay.append(time.monotonic() - arrival)
         except OSError as e:
             self.counts["reply_errors"] += 1
-            self._warn("send", f"bridge: cannot reply to {addr[0]}:{cfg.reply_port or addr[1]}: {e}")
+            self._warn("send", f"bridge: cannot reply to {addr[0]}:{cfg.simulator.reply_port or addr[1]}: {e}")
 
     def handle_frame(self, frame: SensorFrame, addr, arrival: float, reply: bool = True) -> None:
         """One decoded frame of the bound source: classify, answer, publish what is accepted."""
@@ -447,7 +443,7 @@ class Bridge:
             self.odo.reset(baseline=(0, 0), t=0.0)
         else:
             self.odo.reset()
-        if self.cfg.map_to_odom == "first_ground_truth":
+        if self.cfg.tf.map_to_odom == "first_ground_truth":
             self._send_static(map_odom=(frame.x, frame.y, frame.theta))
 
     def publish_frame(self, f: SensorFrame, arrival: float | None = None) -> None:
@@ -460,11 +456,11 @@ class Bridge:
         if arrival is not None:
             self.odom_delay.append(time.monotonic() - arrival)
         self.pub_clock.publish(Clock(clock=stamp))
-        tfs = [rm.wheel_transform(fr["base_link"], fr["left_wheel"], cfg.track / 2, cfg.wheel_radius,
+        tfs = [rm.wheel_transform(fr["base_link"], fr["left_wheel"], cfg.robot.track / 2, cfg.robot.wheel_radius,
                                   s.left_angle, stamp),
-               rm.wheel_transform(fr["base_link"], fr["right_wheel"], -cfg.track / 2, cfg.wheel_radius,
+               rm.wheel_transform(fr["base_link"], fr["right_wheel"], -cfg.robot.track / 2, cfg.robot.wheel_radius,
                                   s.right_angle, stamp)]
-        if cfg.publish_odom_tf:
+        if cfg.tf.publish_odom:
             tfs.insert(0, rm.planar_transform(fr["odom"], fr["base_link"], s.x, s.y, s.theta, stamp))
         self.node.send_tf(tfs)
         # ground truth, with its twist (body frame) from consecutive poses
@@ -486,42 +482,42 @@ class Bridge:
         self.pub_magnet.publish(Bool(data=bool(f.magnet)))
         if f.parts:  # last: a referee reading it has this frame's ground truth, contact and magnet already
             self.pub_parts.publish(rm.planar_poses(stamp, fr["map"], f.parts))
-        if cfg.lidar_enabled and len(f.ranges):
+        if cfg.lidar.enabled and len(f.ranges):
             self._publish_scan(f, stamp)
 
     def _publish_scan(self, f: SensorFrame, stamp) -> None:
         cfg = self.cfg
         n = len(f.ranges)
-        if cfg.lidar_mode == "cycle":
+        if cfg.lidar.mode == "cycle":
             self.pub_scan.publish(rm.laser_scan(stamp, cfg.frames["laser"], self._self_filtered(f.ranges),
-                                                cfg.lidar_fov_deg,
-                                                cfg.lidar_range_min, cfg.lidar_range_max, cfg.control_period, 0.0))
+                                                cfg.lidar.fov_deg, cfg.lidar.range_min, cfg.lidar.range_max,
+                                                cfg.robot.control_period, 0.0))
             self.counts["scans"] += 1
             return
         if self.sweeps is None or self.sweeps.n != n:
-            self.sweeps = make_assembler(cfg.lidar_update, n, cfg.lidar_period, cfg.control_period,
-                                         cfg.physics_step, cfg.lidar_ray_timing,
-                                         delivery_lag=cfg.lidar_delivery_lag or None)
+            self.sweeps = make_assembler(cfg.lidar.update, n, cfg.lidar.period, cfg.robot.control_period,
+                                         cfg.robot.physics_step, cfg.lidar.ray_timing,
+                                         delivery_lag=cfg.lidar.delivery_lag or None)
         for sw in self.sweeps.add(f.time_ms, f.ranges):
             self.pub_scan.publish(rm.laser_scan(rm.stamp_s(sw.t0), cfg.frames["laser"], self._self_filtered(sw.ranges),
-                                                cfg.lidar_fov_deg, cfg.lidar_range_min, cfg.lidar_range_max,
-                                                cfg.lidar_period, sw.time_increment))
+                                                cfg.lidar.fov_deg, cfg.lidar.range_min, cfg.lidar.range_max,
+                                                cfg.lidar.period, sw.time_increment))
             self.counts["scans"] += 1
 
     def _self_filtered(self, ranges):
         """The ranges with the rays that end on the robot itself as NaN (REP 117: invalid), if enabled."""
         cfg = self.cfg
-        if not cfg.lidar_self_filter:
+        if not cfg.lidar.self_filter:
             return ranges
         n = len(ranges)
         if self.self_filter is None or self.self_filter.n != n:
             from ..simtwo.selfhits import Footprint
 
             robot = self.robot
-            fov = math.radians(cfg.lidar_fov_deg)
+            fov = math.radians(cfg.lidar.fov_deg)
             angles = -fov / 2 + np.arange(n) * (fov / (n - 1) if n > 1 else 0.0)  # as rm.laser_scan
-            self.self_filter = SelfFilter(Footprint.from_robot(robot, cfg.lidar_xyz[2], cfg.lidar_self_margin),
-                                          angles, cfg.lidar_xyz[:2])
+            self.self_filter = SelfFilter(Footprint.from_robot(robot, cfg.lidar.xyz[2], cfg.lidar.self_margin),
+                                          angles, cfg.lidar.xyz[:2])
         return self.self_filter.apply(ranges)[0]
 
     def scan_diagnostics(self) -> dict:
@@ -539,7 +535,7 @@ class Bridge:
 
     # ---- diagnostics ---------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:
-        publish_every(self.cfg.diag_period, lambda: self._running and self.node.ok(), self.pub_diag,
+        publish_every(self.cfg.diagnostics.period, lambda: self._running and self.node.ok(), self.pub_diag,
                       self.diagnostics, errors=(Exception,))
 
     def diagnostics(self, now: float | None = None) -> DiagnosticArray:
@@ -555,7 +551,7 @@ class Bridge:
         stale = tr.staleness(now)
         counters = tr.counters.as_dict()
         level, text = stream_health(counters, self._counters_at_last_diag, stale, self.gate, self.bound_port,
-                                    cfg.stale_warn, cfg.stale_error)
+                                    cfg.diagnostics.stale_warn, cfg.diagnostics.stale_error)
         self._counters_at_last_diag = counters
         vals = {"datagram_rate_hz": self.datagram_rate.rate(now), "staleness_s": -1.0 if stale is None else stale,
                 "sim_time_s": -1.0 if ms is None else ms / 1000, "real_time_factor": self.clock.real_time_factor(now),
@@ -586,7 +582,7 @@ class Bridge:
                     "cmd_vel_rejected": c["cmd_vel_rejected"], "magnet_on": wd.magnet,
                     "v": wd.v, "w": wd.w}
             level = WARN if wd.stopping else OK
-            text = (f"watchdog: cmd_vel older than {cfg.watchdog_timeout} s, sending V = W = 0"
+            text = (f"watchdog: cmd_vel older than {cfg.watchdog.timeout} s, sending V = W = 0"
                     if wd.stopping else ("following cmd_vel" if wd.have_velocity else "no cmd_vel yet"))
         ss = self.sim_services
         if ss is not None:  # which sim/* services the connected simulator supports (as last probed)

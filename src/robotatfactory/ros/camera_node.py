@@ -31,23 +31,30 @@ RESET = -1
 RCVHWM = 64  # camera frames queued in ZMQ before it drops any (77 MB at 640x480 BGRA)
 
 
+def camera_stamper(cfg):
+    """The camera stamping (:class:`~robotatfactory.simtwo.timing.CameraStamper`) the bridge's settings ask for."""
+    from ..simtwo.timing import CameraStamper
+
+    cam = cfg.camera
+    return CameraStamper(cfg.control_period_ms, cam.render_fps, cam.decimation, max_wait=cam.max_wait,
+                         use_grid=cam.use_grid, rule=cam.bracket, latency=cam.latency)
+
+
 class CameraBridge:
     def __init__(self, cfg, node, timing_sock: socket.socket | None = None):
         from ..ratelog import LogLimiter
         from ..simtwo.stream import RateMeter
-        from ..simtwo.timing import CameraStamper
 
         self.cfg = cfg
         self.node = node  # the middleware's node (.mw)
-        self.stamper = CameraStamper(cfg.control_period_ms, cfg.render_fps, cfg.decimation, max_wait=cfg.max_wait,
-                                     use_grid=cfg.use_grid, rule=cfg.camera_bracket, latency=cfg.camera_latency)
+        self.stamper = camera_stamper(cfg)
         self.timing_sock = timing_sock
         if timing_sock is not None:
             # non-blocking (not merely MSG_DONTWAIT: a socket in timeout mode, as rospy's default timeout
             # makes new sockets, would wait for data anyway); the timing thread waits in select()
             timing_sock.setblocking(False)
         self.rate = RateMeter()
-        self.log = LogLimiter(cfg.log_period)
+        self.log = LogLimiter(cfg.settings.log_period)
         self.counts = {"received": 0, "skipped": 0, "wrong_size": 0, "published": 0, "timing_messages": 0,
                        "publisher_restarts": 0}
         self._mail = None
@@ -149,7 +156,7 @@ class CameraBridge:
         poller.register(sock, zmq.POLLIN)
         poller.register(monitor, zmq.POLLIN)
         connected = False
-        sock.connect(self.cfg.camera_endpoint)
+        sock.connect(self.cfg.camera.endpoint)
         try:
             while self._running:
                 ready = dict(poller.poll(200))
@@ -194,7 +201,7 @@ class CameraBridge:
             if connected:
                 self.counts["publisher_restarts"] += 1
                 self.stamper.resync_frames()
-                self._warn("restart", f"camera: the publisher at {self.cfg.camera_endpoint} restarted "
+                self._warn("restart", f"camera: the publisher at {self.cfg.camera.endpoint} restarted "
                                       f"(reconnected); frame stamping re-synchronised")
             connected = True
         return connected
@@ -204,11 +211,11 @@ class CameraBridge:
 
         from . import messages as rm
 
-        cfg = self.cfg
-        w, h = cfg.width, cfg.height
+        cfg, cam = self.cfg, self.cfg.robot.camera
+        w, h = cam.width, cam.height
         expected = w * h * 4
         frame_id = cfg.frames["camera_optical"]
-        info = rm.camera_info(rm.zero_stamp(), frame_id, w, h, cfg.fx, cfg.fy, cfg.cx, cfg.cy, cfg.distortion)
+        info = rm.camera_info(rm.zero_stamp(), frame_id, w, h, cam.fx, cam.fy, cam.cx, cam.cy, cam.distortion)
         carried = 0  # skipped frames counted with a wrong-sized message, passed on to the next frame
         while self._running:
             with self._cv:
@@ -234,7 +241,7 @@ class CameraBridge:
                 continue
             # B G R A (bottom row first) to top-row-first bgr8 bytes in ONE strided copy
             bgra = np.frombuffer(buf, dtype=np.uint8).reshape(h, w, 4)
-            data = (bgra[::-1, :, :3] if cfg.bottom_up else bgra[:, :, :3]).tobytes()
+            data = (bgra[::-1, :, :3] if cam.bottom_up else bgra[:, :, :3]).tobytes()
             stamp = rm.stamp_s(est.stamp)
             self.pub_image.publish(rm.image_bgr8(stamp, frame_id, data, w, h))
             info.header.stamp = stamp
@@ -262,7 +269,7 @@ class CameraBridge:
     def _diag_loop(self) -> None:
         from .cli import publish_every
 
-        publish_every(self.cfg.diag_period, lambda: self._running, self.pub_diag, self.diagnostics,
+        publish_every(self.cfg.diagnostics.period, lambda: self._running, self.pub_diag, self.diagnostics,
                       errors=(Exception,))
 
     def diagnostics(self, now: float | None = None):
@@ -275,10 +282,10 @@ class CameraBridge:
         cfg, c = self.cfg, self.counts
         age = self.rate.age(now)
         if age is None:
-            level, text = WARN, f"no camera frame yet from {cfg.camera_endpoint}"
-        elif age > cfg.stale_error:
+            level, text = WARN, f"no camera frame yet from {cfg.camera.endpoint}"
+        elif age > cfg.diagnostics.stale_error:
             level, text = ERROR, f"stale: no camera frame for {age:.1f} s"
-        elif age > 4 * cfg.stale_warn:
+        elif age > 4 * cfg.diagnostics.stale_warn:
             level, text = WARN, f"no camera frame for {age:.1f} s"
         else:
             level, text = OK, "receiving"
@@ -291,7 +298,7 @@ class CameraBridge:
         vals.update({f"stamps_{k}": v for k, v in self.stamper.counters.as_dict().items()})
         arr = DiagnosticArray()
         arr.header.stamp = rm.zero_stamp()
-        arr.status = [rm.diagnostic_status(f"{self.node.name}: camera", level, text, cfg.camera_endpoint, vals)]
+        arr.status = [rm.diagnostic_status(f"{self.node.name}: camera", level, text, cfg.camera.endpoint, vals)]
         return arr
 
 

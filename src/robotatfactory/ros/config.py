@@ -1,56 +1,290 @@
-"""The bridge's settings: defaults (from the robot spec), validation, and the flat ROS parameter names.
+"""The bridge's settings: one typed object (:class:`BridgeSettings`) for the bridge node and its camera process.
 
-Plain Python (no rospy import), so it is unit-tested without ROS. The node reads its private parameters
-(``~udp/port``, ``~camera/fx``, ...) into a nested dict and calls :func:`load_config`; ``raf bridge`` builds
-the same dict from ``config/bridge.yaml`` and its options. Every bad value raises
-:class:`~robotatfactory.errors.ConfigError` naming the parameter (``~camera/fx``) and what is allowed.
+Every setting has its default, meaning and allowed values here and nowhere else; the robot's geometry, its
+LIDAR's mount and range and the camera's mount and intrinsics are the robot file's (``data/robot_*.json``:
+:class:`~robotatfactory.robot.RobotSpec`, :class:`~robotatfactory.robot.CameraSpec` declare what they mean),
+so here they are *unset* unless a user gives them. ``raf bridge`` fills the object from ``--config FILE`` (the
+shape of ``config/bridge.yaml``, generated from this module) and ``--set camera/fx=283.5``, the node from its
+ROS parameters (``~camera/fx`` on ROS 1, ``camera.fx`` on ROS 2), all through
+:func:`robotatfactory.settings.build`: one validation, whose errors name the setting and what is allowed.
+
+:func:`load_config` then resolves the settings against the robot file and the camera calibration
+(``camera.calibration``, parsed once into the camera object ``raf localize`` makes of it too) into a
+:class:`BridgeConfig`: what the node runs with. A camera value given explicitly wins over the calibration's.
+Plain Python (no ROS import), unit-tested without ROS.
 """
 from __future__ import annotations
 
-import copy
+import dataclasses
 import ipaddress
 import math
-import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 from ..errors import ConfigError
-from ..robot import CameraSpec, RobotSpec, load_robot
+from ..field import DEFAULT_FIELD
+from ..robot import CameraSpec, LidarSpec, RobotSpec, load_robot
+from ..settings import build, given, over, overlay, section, setting, tree
 from ..sim.control import CONTROL_PORT_OFFSET
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
 
-#: Topic names (relative: a namespace puts each robot's bridge in its own space). ``/clock`` and
-#: ``/diagnostics`` are global by ROS convention.
-DEFAULT_TOPICS = {
-    "clock": "/clock",
-    "scan": "scan",
-    "odom": "odom",
-    "ground_truth": "ground_truth",
-    "parts_ground_truth": "ground_truth/parts",
-    "joint_states": "joint_states",
-    "contact": "contact",
-    "magnet_state": "electromagnet/state",
-    "image": "camera/image_raw",
-    "camera_info": "camera/camera_info",
-    "cmd_vel": "cmd_vel",
-    "magnet": "electromagnet",
-    "field_markers": "field/markers",
-    "diagnostics": "/diagnostics",
-}
+_TOPIC = r"[A-Za-z_/~][A-Za-z0-9_/]*"
+_FRAME = r"[A-Za-z_][A-Za-z0-9_/]*"
 
-#: Frame ids. Robot frames get ``frame_prefix/`` in front; ``map`` and the markers' frames do not.
-DEFAULT_FRAMES = {
-    "map": "map",
-    "odom": "odom",
-    "base_link": "base_link",
-    "laser": "laser",
-    "camera_link": "camera_link",
-    "camera_optical": "camera_optical",
-    "left_wheel": "left_wheel",
-    "right_wheel": "right_wheel",
-    "marker_prefix": "aruco_",
-}
+
+def _topic(default: str, doc: str):
+    return setting(default, doc, pattern=_TOPIC, what="a ROS name (letters, digits, _, / and ~)")
+
+
+def _frame(default: str, doc: str = ""):
+    return setting(default, doc, pattern=_FRAME, what="a frame id (letters, digits, _ and /, no leading /)")
+
+
+@dataclass(frozen=True)
+class Udp:
+    """Where SensorFrames arrive (``udp.*``)."""
+
+    bind_host: str = setting("auto", "auto: 127.0.0.1 while simulator.host is this machine, every interface when "
+                                     "it is another; else the address to listen on")
+    port: int = setting(BRIDGE_UDP_PORT, "SimTwo scripts send SensorFrames here (0: any free port)", lo=0,
+                        hi=65535)
+    max_datagram: int = setting(16384, "bytes; larger datagrams are rejected as oversized (a 360-ray frame is "
+                                       "~2.9 KB)", lo=64, hi=65507)
+
+
+@dataclass(frozen=True)
+class Simulator:
+    """The simulator the bridge talks to (``simulator.*``)."""
+
+    host: str = setting(LOCALHOST, "accept SensorFrames from this host only (\"*\": any); replies go to the "
+                                   "datagram's source")
+    port: int = setting(0, "the simulator's source port; 0: bind to the first sender whose frames form a stream",
+                        lo=0, hi=65535)
+    reply_port: int = setting(0, "0: reply to the source port; else this port on the simulator's host (SimTwo: "
+                                 "9808)", lo=0, hi=65535)
+    control: str = setting(f"{LOCALHOST}:{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}",
+                           "raf sim's control channel for the sim/* services (\"\" for none; SimTwo has none)",
+                           pattern=r"|[A-Za-z0-9_.\-]+:\d{1,5}",
+                           what="host:port of raf sim's control channel, e.g. 127.0.0.1:9812, or empty for none")
+
+
+@dataclass(frozen=True)
+class Stream:
+    """How the SensorFrame stream is checked (``stream.*``, docs/reliability.md)."""
+
+    reorder_window: int = setting(25, "frames: a late Seq up to this far behind is stale (reordered); the most a "
+                                      "chain may skip", lo=1, hi=10 ** 6)
+    restart_confirm: int = setting(3, "frames in a consistent chain that confirm a restart, a jump or a new "
+                                      "sender", lo=1, hi=1000)
+    max_jump: int = setting(250, "cycles: a Seq/Tms further ahead is held until restart_confirm frames confirm "
+                                 "it", lo=1, hi=10 ** 9)
+    takeover_after: float = setting(2.0, "wall s the bound sender must be silent before another sender may take "
+                                         "over", lo=0.0)
+    max_wheel_speed: float = setting(None, "rad/s: encoder totals moving faster are rejected (unset: twice the "
+                                           "robot's motor's no-load speed, 54.4 for SimTwo's)", lo=0.0,
+                                     lo_open=True, kind=float)
+
+
+@dataclass(frozen=True)
+class Watchdog:
+    timeout: float = setting(0.5, "s of SIMULATION time: cmd_vel older than this -> replies carry V = W = 0",
+                             lo=0.0, lo_open=True)
+
+
+#: ``geometry.*``: the robot file's control period, physics step, wheel radius, track and ticks per revolution
+Geometry = overlay(RobotSpec, ("control_period", "physics_step", "wheel_radius", "track", "ticks_per_rev"),
+                   "Geometry")
+
+
+@dataclass(frozen=True)
+class Odometry:
+    slip_var_per_m: float = setting(1e-4, "m^2 per m of wheel travel: odometry covariance growth", lo=0.0)
+    track: float = setting(None, "m: the track odometry turns with (unset: the robot file's odometry_track; "
+                                 "SimTwo's robot turns 2.1 % more than its 0.135 m wheel spacing says)",
+                           lo=0.0, hi=10.0, lo_open=True, kind=float)
+
+
+@dataclass(frozen=True)
+class Lidar(overlay(LidarSpec, ("xyz", "fov_deg", "range_min", "range_max", "period"))):
+    """The LIDAR (``lidar.*``): its mount and ranges are the robot file's unless given (the datagram carries
+    only the ranges)."""
+
+    enabled: bool = setting(True, "publish scan")
+    mode: str = setting("sweep", "sweep: one time-ordered scan per completed sweep; cycle: every datagram's array "
+                                 "as is", choices=("sweep", "cycle"))
+    update: str = setting("sweep", "sweep: the simulator delivers all rays at once per period (SimTwo, raf sim's "
+                                   "default); per_ray: each ray as soon as measured (raf sim --lidar-update "
+                                   "per_ray)", choices=("sweep", "per_ray"))
+    ray_timing: str = setting("rolling", "rolling: ray i measured at delivery - period + i*period/N (SimTwo); "
+                                         "instant: all at delivery", choices=("rolling", "instant"))
+    self_filter: bool = setting(True, "rays ending inside the robot's own footprint (wheels, base) are published "
+                                      "as NaN")
+    self_margin: float = setting(0.009, "m around the footprint: 5 sigma of the range noise at the wheels, < "
+                                        "magnet face - base front", lo=0.0, hi=0.1)
+    delivery_lag: float = setting(0.001, "s from the frame before a sweep's delivery to it (SimTwo: 1 ms); 0: "
+                                         "unknown, bracket middle; at most the control period", lo=0.0, hi=10.0)
+
+
+@dataclass(frozen=True)
+class Camera(overlay(CameraSpec)):
+    """The camera (``camera.*``): its mount and intrinsics are the robot file's, then the calibration's, unless
+    given."""
+
+    enabled: bool = setting(True, "subscribe to the camera and publish camera/image_raw and camera_info")
+    endpoint: str = setting(f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}",
+                            "SimTwo's ZMQ PUB (use the simulator's address when remote)",
+                            pattern=r"(tcp|ipc|inproc)://\S+", what="a ZMQ endpoint such as tcp://192.168.1.20:9899")
+    calibration: str = setting("", "a calibration file (raf calibrate): its mount, intrinsics and distortion over "
+                                   "the robot file's (a camera value given here wins over it)")
+    bracket: str = setting("elapsed", "how a frame's render time is found (docs/bridge.md, camera stamping): "
+                                      "elapsed (SimTwo and raf sim) | following | nearest",
+                           choices=("elapsed", "following", "nearest"))
+    use_grid: bool = setting(False, "nearest/following only: lock onto a render grid of k/15 s of simulation time "
+                                    "(only raf sim --camera-timing grid has one; SimTwo does not)")
+    latency: float = setting(0.004, "s (wall): a frame's transport time, subtracted by the elapsed rule", lo=0.0,
+                             hi=0.1)
+    max_wait: float = setting(0.02, "s (wall): nearest only: longest wait for the SensorFrame after a frame",
+                              lo=0.0, hi=1.0)
+
+
+@dataclass(frozen=True)
+class Tf:
+    publish_odom: bool = setting(True, "TF odom -> base_link (off when another node, e.g. an EKF, publishes it)")
+    publish_field: bool = setting(True, "static TFs map -> aruco_<id> and the latched field/markers")
+    map_to_odom: str = setting("none", "none (localization publishes it) | identity | first_ground_truth (demos "
+                                       "only)", choices=("none", "identity", "first_ground_truth"))
+
+
+@dataclass(frozen=True)
+class Diagnostics:
+    period: float = setting(1.0, "s (wall) between /diagnostics messages", lo=0.0, hi=60.0, lo_open=True)
+    stale_warn: float = setting(0.5, "s (wall) without a SensorFrame: WARN", lo=0.0, lo_open=True)
+    stale_error: float = setting(2.0, "s (wall) without a SensorFrame: ERROR (at least stale_warn)", lo=0.0,
+                                 lo_open=True)
+
+
+@dataclass(frozen=True)
+class Topics:
+    """Topic names (``topics.*``): relative ones live in the node's namespace; ``/clock`` and ``/diagnostics``
+    are global by ROS convention."""
+
+    clock: str = _topic("/clock", "rosgraph_msgs/Clock: every frame's Tms")
+    scan: str = _topic("scan", "sensor_msgs/LaserScan")
+    odom: str = _topic("odom", "nav_msgs/Odometry: wheel odometry")
+    ground_truth: str = _topic("ground_truth", "nav_msgs/Odometry: the simulator's pose (evaluation only)")
+    parts_ground_truth: str = _topic("ground_truth/parts", "geometry_msgs/PoseArray: the parts' poses (referee)")
+    joint_states: str = _topic("joint_states", "sensor_msgs/JointState: the wheels")
+    contact: str = _topic("contact", "std_msgs/Bool: the micro switch")
+    magnet_state: str = _topic("electromagnet/state", "std_msgs/Bool: the magnet as the simulator applied it")
+    image: str = _topic("camera/image_raw", "sensor_msgs/Image")
+    camera_info: str = _topic("camera/camera_info", "sensor_msgs/CameraInfo")
+    cmd_vel: str = _topic("cmd_vel", "geometry_msgs/Twist in")
+    magnet: str = _topic("electromagnet", "std_msgs/Bool in: the magnet's command")
+    field_markers: str = _topic("field/markers", "visualization_msgs/MarkerArray, latched")
+    diagnostics: str = _topic("/diagnostics", "diagnostic_msgs/DiagnosticArray")
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Frame ids (``frames.*``): robot frames get ``frame_prefix/`` in front; ``map`` and the markers' do not."""
+
+    map: str = _frame("map")
+    odom: str = _frame("odom")
+    base_link: str = _frame("base_link")
+    laser: str = _frame("laser")
+    camera_link: str = _frame("camera_link")
+    camera_optical: str = _frame("camera_optical")
+    left_wheel: str = _frame("left_wheel")
+    right_wheel: str = _frame("right_wheel")
+    marker_prefix: str = _frame("aruco_", "marker k's frame is this followed by k")
+
+
 ROBOT_FRAMES = ("odom", "base_link", "laser", "camera_link", "camera_optical", "left_wheel", "right_wheel")
+
+
+@dataclass(frozen=True)
+class BridgeSettings:
+    """Every setting of the bridge (and its camera process)."""
+
+    field: str = setting(DEFAULT_FIELD, "competition map (shipped name or a field .json): static TFs map -> "
+                                        "aruco_<id>, field/markers")
+    robot: str = setting("simtwo", "robot file the geometry, LIDAR and camera come from (shipped name or a .json "
+                                   "path)")
+    frame_prefix: str = setting("", "\"robot1\" makes robot1/odom, robot1/base_link, ... (several robots, one "
+                                    "bridge each)", pattern=r"|[A-Za-z_][A-Za-z0-9_/]*[A-Za-z0-9_]",
+                                what="empty or a frame prefix such as robot1 (letters, digits, _ and /, no "
+                                     "leading or trailing /)")
+    log_period: float = setting(5.0, "s: each kind of warning is logged at most once per period (with a count)",
+                                lo=0.0)
+    udp: Udp = section(Udp, "where SensorFrames arrive")
+    simulator: Simulator = section(Simulator, "the simulator")
+    stream: Stream = section(Stream, "the SensorFrame stream's checks")
+    watchdog: Watchdog = section(Watchdog, "the command watchdog")
+    geometry: Geometry = section(Geometry, "unset: the robot file's")
+    odometry: Odometry = section(Odometry, "wheel odometry")
+    lidar: Lidar = section(Lidar, "the LIDAR; mount and ranges unset: the robot file's")
+    camera: Camera = section(Camera, "the camera; mount and intrinsics unset: the robot file's, then the "
+                                     "calibration's")
+    tf: Tf = section(Tf, "TF")
+    diagnostics: Diagnostics = section(Diagnostics, "/diagnostics")
+    topics: Topics = section(Topics, "topic names")
+    frames: Frames = section(Frames, "frame ids")
+
+
+# ---- resolved against the robot file ------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    """What the bridge runs with. ``settings``: every setting with its value (the robot file's and the
+    calibration's filled in); ``given``: the settings as given; ``robot``: the robot file with the given
+    geometry, LIDAR and camera over it (``robot.camera`` is the camera the TF and camera_info describe). The
+    resolved settings' sections read through: ``cfg.udp.port``, ``cfg.camera.endpoint``."""
+
+    settings: BridgeSettings
+    given: BridgeSettings
+    robot: RobotSpec
+    bind_host: str  # the address listened on (udp.bind_host resolved)
+    sim_host: str  # the simulator's address, or "*": any
+    sim_control: tuple[str, int] | None  # raf sim's control channel (the sim/* services); None: off
+    topics: dict
+    frames: dict  # frame ids with the prefix applied
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name == "settings":
+            raise AttributeError(name)
+        return getattr(self.settings, name)
+
+    @property
+    def source(self) -> tuple[str, int] | None:
+        """The configured sender (host, port), or None: the first consistent one binds the stream."""
+        port = self.settings.simulator.port
+        return (self.sim_host, port) if self.sim_host != "*" and port else None
+
+    @property
+    def max_ticks_per_s(self) -> float:
+        return self.stream.max_wheel_speed * self.geometry.ticks_per_rev / (2 * math.pi)
+
+    @property
+    def control_period_ms(self) -> int:
+        return int(round(self.geometry.control_period * 1000))
+
+    def marker_frame(self, marker_id: int) -> str:
+        return f"{self.frames['marker_prefix']}{marker_id}"
+
+    @property
+    def params(self) -> dict:
+        """Every setting with its value, as the nested parameter tree (``raf bridge --print-params``)."""
+        return tree(self.settings)
+
+    def given_params(self) -> dict:
+        """The settings as given (what :func:`load_config` turns into this same config again)."""
+        return given(self.given)
+
+    def flat_params(self) -> dict[str, Any]:
+        """``{"udp/port": 9810, ...}``: the resolved tree as flat parameter names (without the ``~``)."""
+        from .mw.base import flatten
+
+        return flatten(self.params, "/")
 
 
 def _max_wheel_speed(r: RobotSpec) -> float:
@@ -61,175 +295,7 @@ def _max_wheel_speed(r: RobotSpec) -> float:
     return round(2.0 * MotorParams.from_spec(r.motor).no_load_speed(), 1)
 
 
-def default_params(robot: RobotSpec | None = None) -> dict:
-    """The full nested parameter tree with its defaults (the robot spec gives the geometry)."""
-    r = robot or load_robot()
-    cam, lid = r.camera, r.lidar
-    return {
-        "field": "rules2026",
-        "robot": "simtwo",
-        "frame_prefix": "",
-        "udp": {"bind_host": "auto", "port": BRIDGE_UDP_PORT, "max_datagram": 16384},
-        "simulator": {"host": LOCALHOST, "port": 0, "reply_port": 0,
-                      "control": f"{LOCALHOST}:{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}"},
-        "stream": {"reorder_window": 25, "restart_confirm": 3, "max_jump": 250, "takeover_after": 2.0,
-                   "max_wheel_speed": _max_wheel_speed(r)},
-        "watchdog": {"timeout": 0.5},
-        "geometry": {
-            "control_period": r.control_period, "physics_step": r.physics_step,
-            "wheel_radius": r.wheel_radius, "track": r.track, "ticks_per_rev": r.ticks_per_rev,
-        },
-        "odometry": {"slip_var_per_m": 1e-4, "track": r.odometry_track},
-        "lidar": {
-            "enabled": True, "xyz": list(lid.xyz), "fov_deg": lid.fov_deg, "range_min": lid.range_min,
-            "range_max": lid.range_max, "period": lid.period, "mode": "sweep", "update": "sweep",
-            "ray_timing": "rolling", "self_filter": True, "self_margin": 0.009,
-            "delivery_lag": 0.001,
-        },
-        "camera": {
-            "enabled": True, "endpoint": f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}", "calibration": "",
-            "xyz": list(cam.xyz), "pitch_down_deg": cam.pitch_down_deg, "roll_deg": cam.roll_deg,
-            "distortion": list(cam.distortion),
-            "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
-            "bottom_up": cam.bottom_up, "render_fps": cam.render_fps, "decimation": cam.decimation,
-            "use_grid": False, "bracket": "elapsed", "max_wait": 0.02, "latency": 0.004,
-        },
-        "tf": {"publish_odom": True, "publish_field": True, "map_to_odom": "none"},
-        "diagnostics": {"period": 1.0, "stale_warn": 0.5, "stale_error": 2.0},
-        "log_period": 5.0,
-        "topics": dict(DEFAULT_TOPICS),
-        "frames": dict(DEFAULT_FRAMES),
-    }
-
-
-# ---- validation ----------------------------------------------------------------------------------------
-
-def _name(path: tuple[str, ...]) -> str:
-    return "~" + "/".join(path)
-
-
-def merge(defaults: dict, overrides: dict | None, path: tuple[str, ...] = ()) -> dict:
-    """Overrides onto defaults; an unknown key or a section given as a scalar is an error naming it."""
-    out = copy.deepcopy(defaults)
-    for k, v in (overrides or {}).items():
-        p = path + (str(k),)
-        if k not in defaults:
-            known = ", ".join(sorted(defaults))
-            raise ConfigError(f"unknown parameter {_name(p)}; known here: {known}")
-        if isinstance(defaults[k], dict):
-            if not isinstance(v, dict):
-                raise ConfigError(f"parameter {_name(p)} is a section ({', '.join(sorted(defaults[k]))}), "
-                                  f"got {v!r}")
-            out[k] = merge(defaults[k], v, p)
-        else:
-            out[k] = v
-    return out
-
-
-#: The numeric ranges the validation below allows, by parameter path (recorded as it runs): ROS 2 declares
-#: the parameters with them (:func:`describe_param`).
-RANGES: dict[tuple[str, ...], tuple[float, float]] = {}
-
-
-def _note_range(path, lo, hi, big=1e9) -> None:
-    if lo is not None or hi is not None:
-        RANGES[path] = (-big if lo is None else lo, big if hi is None else hi)
-
-
-def describe_param(flat: str) -> tuple[str, tuple[float, float] | None]:
-    """(description, (min, max) or None) of a parameter (``udp.port``): the comment in config/bridge.yaml
-    and the range the validation allows."""
-    from ..settings import yaml_comments
-
-    global _COMMENTS
-    if _COMMENTS is None:
-        from .master import ROOT
-
-        _COMMENTS = yaml_comments(ROOT / "config" / "bridge.yaml")
-        load_config({})  # records RANGES
-    return _COMMENTS.get(flat, ""), RANGES.get(tuple(flat.split(".")))
-
-
-_COMMENTS: dict | None = None
-
-
-def _real(d: dict, path: tuple[str, ...], lo: float | None = None, hi: float | None = None,
-          lo_open: bool = False) -> float:
-    _note_range(path, lo, hi)
-    v = _get(d, path)
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ConfigError(f"parameter {_name(path)} must be a number, got {v!r}")
-    v = float(v)
-    if not math.isfinite(v):
-        raise ConfigError(f"parameter {_name(path)} must be finite, got {v!r}")
-    if lo is not None and (v <= lo if lo_open else v < lo):
-        raise ConfigError(f"parameter {_name(path)} must be {'>' if lo_open else '>='} {lo}, got {v!r}")
-    if hi is not None and v > hi:
-        raise ConfigError(f"parameter {_name(path)} must be <= {hi}, got {v!r}")
-    return v
-
-
-def _int(d: dict, path: tuple[str, ...], lo: int | None = None, hi: int | None = None) -> int:
-    _note_range(path, lo, hi, big=2**31 - 1)
-    v = _get(d, path)
-    if isinstance(v, bool) or not isinstance(v, int):
-        if isinstance(v, float) and v.is_integer():
-            v = int(v)
-        else:
-            raise ConfigError(f"parameter {_name(path)} must be an integer, got {v!r}")
-    if (lo is not None and v < lo) or (hi is not None and v > hi):
-        raise ConfigError(f"parameter {_name(path)} must be in [{lo}, {hi}], got {v!r}")
-    return v
-
-
-def _bool(d: dict, path: tuple[str, ...]) -> bool:
-    v = _get(d, path)
-    if not isinstance(v, bool):
-        raise ConfigError(f"parameter {_name(path)} must be true or false, got {v!r}")
-    return v
-
-
-def _str(d: dict, path: tuple[str, ...], pattern: str | None = None, what: str = "",
-         allowed: tuple[str, ...] | None = None) -> str:
-    v = _get(d, path)
-    if not isinstance(v, str):
-        raise ConfigError(f"parameter {_name(path)} must be a string, got {v!r}")
-    if allowed is not None and v not in allowed:
-        raise ConfigError(f"parameter {_name(path)} must be one of {', '.join(allowed)}; got {v!r}")
-    if pattern is not None and not re.fullmatch(pattern, v):
-        raise ConfigError(f"parameter {_name(path)} must be {what}; got {v!r}")
-    return v
-
-
-def _xyz(d: dict, path: tuple[str, ...]) -> tuple[float, float, float]:
-    v = _get(d, path)
-    if not isinstance(v, (list, tuple)) or len(v) != 3 or not all(
-            isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v):
-        raise ConfigError(f"parameter {_name(path)} must be a list of three numbers [x, y, z] in metres, got {v!r}")
-    return (float(v[0]), float(v[1]), float(v[2]))
-
-
-def _distortion(d: dict, path: tuple[str, ...]) -> tuple[float, ...]:
-    v = _get(d, path)
-    if not isinstance(v, (list, tuple)) or not 1 <= len(v) <= 5 or not all(
-            isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v):
-        raise ConfigError(f"parameter {_name(path)} must be a list of up to five numbers [k1, k2, p1, p2, k3] "
-                          f"(OpenCV, ROS plumb_bob), got {v!r}")
-    return tuple(float(c) for c in v) + (0.0,) * (5 - len(v))
-
-
-def _get(d: dict, path: tuple[str, ...]) -> Any:
-    for k in path:
-        d = d[k]
-    return d
-
-
-_NAME = r"[A-Za-z_/~][A-Za-z0-9_/]*"
-_FRAME = r"[A-Za-z_][A-Za-z0-9_/]*"
-
-
-def _host(d: dict, path: tuple[str, ...], allow_any: bool) -> str:
-    v = _str(d, path)
+def _host(path: str, v: str, allow_any: bool) -> str:
     if allow_any and v in ("*", ""):
         return "*"
     try:
@@ -240,269 +306,118 @@ def _host(d: dict, path: tuple[str, ...], allow_any: bool) -> str:
         try:
             return socket.gethostbyname(v)
         except OSError:
-            raise ConfigError(f"parameter {_name(path)}: {v!r} is neither an IPv4 address nor a resolvable host "
-                              + ("name (use \"*\" to accept any host)" if allow_any else "name")) from None
+            raise ConfigError(f"setting {path}: {v!r} is neither an IPv4 address nor a resolvable host name"
+                              + (" (use \"*\" to accept any host)" if allow_any else "")) from None
     return v
 
 
-def _bind_host(p: dict) -> str:
-    """``udp/bind_host``: ``auto`` listens on loopback when the simulator is on this machine (the default), on
-    every interface when ``simulator/host`` names another machine or any host; else the address given."""
-    if _str(p, ("udp", "bind_host")) != "auto":
-        return _host(p, ("udp", "bind_host"), allow_any=False)
-    sim = _host(p, ("simulator", "host"), allow_any=True)
-    return "127.0.0.1" if sim != "*" and ipaddress.ip_address(sim).is_loopback else "0.0.0.0"
-
-
-# ---- the typed result ----------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class BridgeConfig:
-    """Validated settings. ``params`` is the full nested tree (for writing back to the parameter server)."""
-
-    params: dict
-    field: str
-    robot: str
-    frame_prefix: str
-    bind_host: str
-    port: int
-    max_datagram: int
-    sim_host: str  # "*" = any
-    reply_port: int
-    reorder_window: int
-    restart_confirm: int
-    watchdog_timeout: float  # s of simulation time
-    control_period: float
-    physics_step: float
-    wheel_radius: float
-    track: float
-    ticks_per_rev: int
-    slip_var_per_m: float
-    odometry_track: float  # m: the track odometry turns with (the robot file's measured one; geometry/track: TF)
-    lidar_enabled: bool
-    lidar_xyz: tuple[float, float, float]
-    lidar_fov_deg: float
-    lidar_range_min: float
-    lidar_range_max: float
-    lidar_period: float
-    lidar_mode: str
-    lidar_update: str  # "sweep": all rays delivered at once per period (SimTwo) | "per_ray"
-    lidar_ray_timing: str  # "rolling": ray i measured at t_u - P + i*P/N (SimTwo) | "instant": all at t_u
-    lidar_self_filter: bool  # rays ending inside the robot's footprint published as NaN
-    lidar_self_margin: float  # m, added around the footprint
-    lidar_delivery_lag: float  # s from the frame before a sweep's delivery to it (SimTwo 0.001); 0 = unknown
-    camera_enabled: bool
-    camera_endpoint: str
-    camera_xyz: tuple[float, float, float]
-    camera_pitch_down_deg: float
-    camera_roll_deg: float  # about the optical axis (CameraSpec)
-    distortion: tuple[float, ...]  # OpenCV (k1, k2, p1, p2, k3): CameraInfo.D
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    bottom_up: bool
-    render_fps: float
-    decimation: int
-    use_grid: bool
-    max_wait: float
-    camera_bracket: str
-    camera_latency: float  # s (wall): a camera frame's transport time, subtracted by the elapsed rule
-    publish_odom_tf: bool
-    publish_field: bool
-    map_to_odom: str
-    diag_period: float
-    stale_warn: float
-    stale_error: float
-    log_period: float
-    topics: dict
-    frames: dict  # final frame ids, prefix applied
-    sim_port: int = 0  # 0: the first consistent sender's port
-    max_jump: int = 250  # cycles
-    takeover_after: float = 2.0  # wall s
-    max_wheel_speed: float = 54.0  # rad/s
-    sim_control: tuple[str, int] | None = None  # raf sim's control channel (the sim/* services); None: off
-
-    @property
-    def source(self) -> tuple[str, int] | None:
-        """The configured sender (host, port), or None: the first consistent one binds the stream."""
-        return (self.sim_host, self.sim_port) if self.sim_host != "*" and self.sim_port else None
-
-    @property
-    def max_ticks_per_s(self) -> float:
-        return self.max_wheel_speed * self.ticks_per_rev / (2 * math.pi)
-
-    @property
-    def camera(self) -> CameraSpec:
-        """The camera's mount and intrinsics as set by the parameters."""
-        return CameraSpec(self.camera_xyz, self.camera_pitch_down_deg, self.width, self.height, self.fx, self.fy,
-                          self.cx, self.cy, self.bottom_up, self.render_fps, self.decimation,
-                          roll_deg=self.camera_roll_deg, distortion=self.distortion)
-
-    @property
-    def control_period_ms(self) -> int:
-        return int(round(self.control_period * 1000))
-
-    def frame(self, key: str) -> str:
-        return self.frames[key]
-
-    def marker_frame(self, marker_id: int) -> str:
-        return f"{self.frames['marker_prefix']}{marker_id}"
-
-    def flat_params(self) -> dict[str, Any]:
-        """``{"udp/port": 9810, ...}``: the tree as flat parameter names (without the ``~``)."""
-        out: dict[str, Any] = {}
-
-        def walk(d, prefix):
-            for k, v in d.items():
-                if isinstance(v, dict):
-                    walk(v, f"{prefix}{k}/")
-                else:
-                    out[f"{prefix}{k}"] = v
-        walk(self.params, "")
-        return out
-
-
-def _control(p: dict) -> tuple[str, int] | None:
-    """``simulator/control``: ``host:port`` of raf sim's control channel (ros/sim_services.py), "" for none."""
-    text = _str(p, ("simulator", "control"), r"|[A-Za-z0-9_.\-]+:\d{1,5}", "host:port of raf sim's control "
-                "channel, e.g. 127.0.0.1:9812, or empty for none")
+def _control(text: str) -> tuple[str, int] | None:
     if not text:
         return None
     host, port = text.rsplit(":", 1)
     if not 0 < int(port) <= 65535:
-        raise ConfigError(f"parameter ~simulator/control {text!r}: port must be 1..65535")
+        raise ConfigError(f"setting simulator.control {text!r}: port must be 1..65535")
     return host, int(port)
 
 
-def _calibrated(cfg: BridgeConfig, path: str, defaults: dict) -> BridgeConfig:
-    """``cfg`` with the camera of a calibration file (raf calibrate), parsed once into the camera object raf
-    localize makes of it too (``Calibration.apply``). A camera/* value set to something else than the robot
-    file's (``--set camera/cy=240.25``, a launch file's) is a deliberate override and stays."""
-    from ..localization.calibration import load_calibration
-
+def _robot(name: str) -> RobotSpec:
     try:
-        cam = load_calibration(path).apply(cfg.camera)
-    except ConfigError as e:
-        raise ConfigError(f"parameter ~camera/calibration: {e}") from None
-    out = {}
-    for key, attr, value in (("xyz", "camera_xyz", tuple(cam.xyz)), ("pitch_down_deg", "camera_pitch_down_deg",
-                                                                      cam.pitch_down_deg),
-                             ("roll_deg", "camera_roll_deg", cam.roll_deg),
-                             ("distortion", "distortion", tuple(cam.distortion)),
-                             ("fx", "fx", cam.fx), ("fy", "fy", cam.fy), ("cx", "cx", cam.cx), ("cy", "cy", cam.cy)):
-        given = getattr(cfg, attr)
-        default = defaults[key]
-        unchanged = (list(given) == [float(v) for v in default]) if isinstance(given, tuple) else \
-            given == float(default)
-        out[attr] = value if unchanged else given
-    return replace(cfg, **out)
+        return load_robot(name)
+    except FileNotFoundError as e:
+        raise ConfigError(f"setting robot: {e}") from None
 
 
-def load_config(overrides: dict | None = None, robot: RobotSpec | None = None) -> BridgeConfig:
-    """Defaults merged with ``overrides`` (nested dict as in config/bridge.yaml), validated."""
-    base = default_params(robot)
-    p = merge(base, overrides)
-    if robot is None and p["robot"] != base["robot"]:
+def _camera(s: BridgeSettings, robot: RobotSpec) -> CameraSpec:
+    """The robot file's camera, then the calibration's (``camera.calibration``: parsed once per process into the
+    camera ``raf localize`` makes of it too), then the camera values given."""
+    cam = robot.camera
+    if s.camera.calibration:
+        from ..localization.calibration import load_calibration
+
         try:
-            base = default_params(load_robot(p["robot"]))
-        except FileNotFoundError as e:
-            raise ConfigError(f"parameter ~robot: {e}") from None
-        p = merge(base, overrides)
-    prefix = _str(p, ("frame_prefix",), r"|[A-Za-z_][A-Za-z0-9_/]*[A-Za-z0-9_]", "empty or a frame prefix such "
-                  "as robot1 (letters, digits, _ and /, no leading or trailing /)")
-    frames = {}
-    for k in DEFAULT_FRAMES:
-        v = _str(p, ("frames", k), _FRAME, "a frame id (letters, digits, _ and /, no leading /)")
-        frames[k] = f"{prefix}/{v}" if prefix and k in ROBOT_FRAMES else v
-    topics = {k: _str(p, ("topics", k), _NAME, "a ROS name") for k in DEFAULT_TOPICS}
-    period = _real(p, ("geometry", "control_period"), 0.0, 10.0, lo_open=True)
-    step = _real(p, ("geometry", "physics_step"), 0.0, period, lo_open=True)
+            cam = load_calibration(s.camera.calibration).apply(cam)
+        except ConfigError as e:
+            raise ConfigError(f"setting camera.calibration: {e}") from None
+    return over(s.camera, cam)
+
+
+def resolve(s: BridgeSettings) -> BridgeConfig:
+    """The settings resolved against their robot file and calibration, with the rules between settings checked
+    (errors name the settings)."""
+    robot = _robot(s.robot)
+    g = over(s.geometry, robot)
+    robot = dataclasses.replace(g, lidar=over(s.lidar, robot.lidar), camera=_camera(s, robot))
+    period, cam, lid = robot.control_period, robot.camera, robot.lidar
     if abs(period * 1000 - round(period * 1000)) > 1e-6:
-        raise ConfigError(f"parameter ~geometry/control_period must be whole milliseconds, got {period!r}")
-    cfg = BridgeConfig(
-        params=p,
-        field=_str(p, ("field",)),
-        robot=_str(p, ("robot",)),
-        frame_prefix=prefix,
-        bind_host=_bind_host(p),
-        port=_int(p, ("udp", "port"), 0, 65535),
-        max_datagram=_int(p, ("udp", "max_datagram"), 64, 65507),
-        sim_host=_host(p, ("simulator", "host"), allow_any=True),
-        reply_port=_int(p, ("simulator", "reply_port"), 0, 65535),
-        sim_port=_int(p, ("simulator", "port"), 0, 65535),
-        sim_control=_control(p),
-        max_jump=_int(p, ("stream", "max_jump"), 1, 10 ** 9),
-        takeover_after=_real(p, ("stream", "takeover_after"), 0.0),
-        max_wheel_speed=_real(p, ("stream", "max_wheel_speed"), 0.0, lo_open=True),
-        reorder_window=_int(p, ("stream", "reorder_window"), 1, 10 ** 6),
-        restart_confirm=_int(p, ("stream", "restart_confirm"), 1, 1000),
-        watchdog_timeout=_real(p, ("watchdog", "timeout"), 0.0, lo_open=True),
-        control_period=period,
-        physics_step=step,
-        wheel_radius=_real(p, ("geometry", "wheel_radius"), 0.0, 10.0, lo_open=True),
-        track=_real(p, ("geometry", "track"), 0.0, 10.0, lo_open=True),
-        ticks_per_rev=_int(p, ("geometry", "ticks_per_rev"), 1, 10 ** 9),
-        slip_var_per_m=_real(p, ("odometry", "slip_var_per_m"), 0.0),
-        odometry_track=_real(p, ("odometry", "track"), 0.0, 10.0, lo_open=True),
-        lidar_enabled=_bool(p, ("lidar", "enabled")),
-        lidar_xyz=_xyz(p, ("lidar", "xyz")),
-        lidar_fov_deg=_real(p, ("lidar", "fov_deg"), 0.0, 360.0, lo_open=True),
-        lidar_range_min=_real(p, ("lidar", "range_min"), 0.0),
-        lidar_range_max=_real(p, ("lidar", "range_max"), 0.0, lo_open=True),
-        lidar_period=_real(p, ("lidar", "period"), 0.0, lo_open=True),
-        lidar_mode=_str(p, ("lidar", "mode"), allowed=("sweep", "cycle")),
-        lidar_update=_str(p, ("lidar", "update"), allowed=("sweep", "per_ray")),
-        lidar_ray_timing=_str(p, ("lidar", "ray_timing"), allowed=("rolling", "instant")),
-        lidar_self_filter=_bool(p, ("lidar", "self_filter")),
-        lidar_self_margin=_real(p, ("lidar", "self_margin"), 0.0, 0.1),
-        lidar_delivery_lag=_real(p, ("lidar", "delivery_lag"), 0.0, period),
-        camera_enabled=_bool(p, ("camera", "enabled")),
-        camera_endpoint=_str(p, ("camera", "endpoint"), r"(tcp|ipc|inproc)://\S+",
-                             "a ZMQ endpoint such as tcp://192.168.1.20:9899"),
-        camera_xyz=_xyz(p, ("camera", "xyz")),
-        camera_pitch_down_deg=_real(p, ("camera", "pitch_down_deg"), -90.0, 90.0),
-        camera_roll_deg=_real(p, ("camera", "roll_deg"), -90.0, 90.0),
-        distortion=_distortion(p, ("camera", "distortion")),
-        width=_int(p, ("camera", "width"), 1, 16384),
-        height=_int(p, ("camera", "height"), 1, 16384),
-        fx=_real(p, ("camera", "fx"), 0.0, lo_open=True),
-        fy=_real(p, ("camera", "fy"), 0.0, lo_open=True),
-        cx=_real(p, ("camera", "cx")),
-        cy=_real(p, ("camera", "cy")),
-        bottom_up=_bool(p, ("camera", "bottom_up")),
-        render_fps=_real(p, ("camera", "render_fps"), 0.0, lo_open=True),
-        decimation=_int(p, ("camera", "decimation"), 1, 10 ** 6),
-        use_grid=_bool(p, ("camera", "use_grid")),
-        max_wait=_real(p, ("camera", "max_wait"), 0.0, 1.0),
-        camera_bracket=_str(p, ("camera", "bracket"), allowed=("elapsed", "following", "nearest")),
-        camera_latency=_real(p, ("camera", "latency"), 0.0, 0.1),
-        publish_odom_tf=_bool(p, ("tf", "publish_odom")),
-        publish_field=_bool(p, ("tf", "publish_field")),
-        map_to_odom=_str(p, ("tf", "map_to_odom"), allowed=("none", "identity", "first_ground_truth")),
-        diag_period=_real(p, ("diagnostics", "period"), 0.0, 60.0, lo_open=True),
-        stale_warn=_real(p, ("diagnostics", "stale_warn"), 0.0, lo_open=True),
-        stale_error=_real(p, ("diagnostics", "stale_error"), 0.0, lo_open=True),
-        log_period=_real(p, ("log_period",), 0.0),
-        topics=topics,
-        frames=frames,
+        raise ConfigError(f"setting geometry.control_period must be whole milliseconds, got {period!r}")
+    if robot.physics_step > period:
+        raise ConfigError(f"setting geometry.physics_step ({robot.physics_step}) must be at most "
+                          f"geometry.control_period ({period})")
+    if s.lidar.delivery_lag > period:
+        raise ConfigError(f"setting lidar.delivery_lag ({s.lidar.delivery_lag}) must be at most the control period "
+                          f"({period})")
+    if lid.range_min >= lid.range_max:
+        raise ConfigError(f"setting lidar.range_min ({lid.range_min}) must be below lidar.range_max "
+                          f"({lid.range_max})")
+    if s.diagnostics.stale_error < s.diagnostics.stale_warn:
+        raise ConfigError(f"setting diagnostics.stale_error ({s.diagnostics.stale_error}) must be >= "
+                          f"diagnostics.stale_warn ({s.diagnostics.stale_warn})")
+    if not (0 <= cam.cx <= cam.width and 0 <= cam.cy <= cam.height):
+        raise ConfigError(f"settings camera.cx, camera.cy ({cam.cx}, {cam.cy}) must lie in the "
+                          f"{cam.width}x{cam.height} image")
+    _check_field(s.field)
+    camera_fields = {f.name: getattr(cam, f.name) for f in dataclasses.fields(Camera) if hasattr(cam, f.name)}
+    lidar_fields = {f.name: getattr(lid, f.name) for f in dataclasses.fields(Lidar) if hasattr(lid, f.name)}
+    full = dataclasses.replace(
+        s,
+        geometry=Geometry(**{f.name: getattr(robot, f.name) for f in dataclasses.fields(Geometry)}),
+        odometry=dataclasses.replace(s.odometry, track=s.odometry.track or robot.odometry_track),
+        stream=dataclasses.replace(s.stream, max_wheel_speed=s.stream.max_wheel_speed or _max_wheel_speed(robot)),
+        lidar=dataclasses.replace(s.lidar, **lidar_fields),
+        camera=dataclasses.replace(s.camera, **camera_fields),
     )
-    if cfg.lidar_range_min >= cfg.lidar_range_max:
-        raise ConfigError(f"parameter ~lidar/range_min ({cfg.lidar_range_min}) must be below ~lidar/range_max "
-                          f"({cfg.lidar_range_max})")
-    if cfg.stale_error < cfg.stale_warn:
-        raise ConfigError(f"parameter ~diagnostics/stale_error ({cfg.stale_error}) must be >= "
-                          f"~diagnostics/stale_warn ({cfg.stale_warn})")
-    if not (0 <= cfg.cx <= cfg.width and 0 <= cfg.cy <= cfg.height):
-        raise ConfigError(f"parameters ~camera/cx, ~camera/cy ({cfg.cx}, {cfg.cy}) must lie in the "
-                          f"{cfg.width}x{cfg.height} image")
-    calibration = _str(p, ("camera", "calibration"))
-    if calibration:
-        cfg = _calibrated(cfg, calibration, base["camera"])
-    _check_field(cfg.field)
-    return cfg
+    prefix = s.frame_prefix
+    frames = {k: f"{prefix}/{v}" if prefix and k in ROBOT_FRAMES else v for k, v in tree(s.frames).items()}
+    sim_host = _host("simulator.host", s.simulator.host, allow_any=True)
+    if s.udp.bind_host != "auto":
+        bind = _host("udp.bind_host", s.udp.bind_host, allow_any=False)
+    else:  # loopback while the simulator is on this machine, every interface when it is another or any
+        bind = "127.0.0.1" if sim_host != "*" and ipaddress.ip_address(sim_host).is_loopback else "0.0.0.0"
+    return BridgeConfig(settings=full, given=s, robot=robot, bind_host=bind, sim_host=sim_host,
+                        sim_control=_control(s.simulator.control), topics=tree(s.topics), frames=frames)
+
+
+def load_config(overrides: dict | None = None) -> BridgeConfig:
+    """The bridge's settings from a nested mapping (config/bridge.yaml's shape, ROS parameters, ``--set``;
+    what it lacks keeps its default), validated and resolved."""
+    return resolve(build(BridgeSettings, overrides or {}))
+
+
+def default_params() -> dict:
+    """The node's parameters with their defaults (what ROS 2 declares; unset: None): every bridge setting."""
+    return tree(BridgeSettings())
+
+
+def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
+    """(description, (min, max) or None) of a parameter (``udp.port``): this module's."""
+    from ..settings import descriptions
+
+    global _DESCRIPTIONS
+    if _DESCRIPTIONS is None:
+        _DESCRIPTIONS = descriptions(BridgeSettings)
+    return _DESCRIPTIONS.get(name, ("", None))
+
+
+_DESCRIPTIONS: dict | None = None
+
+HEADER = """\
+robotatfactory bridge: its settings (ROS parameters ~udp/port, ~camera/fx, ...) with their defaults.
+GENERATED from src/robotatfactory/ros/config.py by `raf bridge --print-params --defaults > config/bridge.yaml`:
+edit that module, then regenerate (tests/test_bridge_config.py fails while this file is out of date).
+launch/bridge.launch loads this file into the node's namespace; `raf bridge --config FILE` takes a file of
+the same shape, `--set camera/fx=283.5` single values. The geometry, the LIDAR's and the camera's values are
+unset here: they come from the robot file (src/robotatfactory/data/robot_simtwo.json) and the calibration.
+A bad value stops the node with an error that names the setting. See docs/bridge.md."""
 
 
 def _check_field(name: str) -> None:
@@ -512,4 +427,4 @@ def _check_field(name: str) -> None:
     try:
         load_field(name)
     except (FieldError, FileNotFoundError) as e:
-        raise ConfigError(f"parameter ~field: {e}") from None
+        raise ConfigError(f"setting field: {e}") from None

@@ -93,8 +93,8 @@ def marker_transforms(field, parent: str = "map", prefix: str = "aruco_") -> lis
 def robot_static_transforms(cfg) -> list:
     """base_link -> laser, base_link -> camera_link (pitched down), camera_link -> camera_optical."""
     T_laser = np.eye(4)
-    T_laser[:3, 3] = cfg.lidar_xyz
+    T_laser[:3, 3] = cfg.lidar.xyz
     f = cfg.frames
     return [transform(f["base_link"], f["laser"], T_laser),
-            transform(f["base_link"], f["camera_link"], cfg.camera.base_to_link()),
-            transform(f["camera_link"], f["camera_optical"], cfg.camera.link_to_optical())]
+            transform(f["base_link"], f["camera_link"], cfg.robot.camera.base_to_link()),
+            transform(f["camera_link"], f["camera_optical"], cfg.robot.camera.link_to_optical())]
