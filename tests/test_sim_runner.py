@@ -54,7 +54,9 @@ def run_in_thread(runner):
 
 
 def test_bad_command_datagrams_are_counted_and_the_last_valid_command_kept(field, robot, bridge):
-    runner = make_runner(field, robot, bridge, mode="realtime", duration=1.6, sim={"start_pose": (-0.6, -0.38, 0.0)})
+    # the command timeout off (raf sim --command-timeout 0): the one valid command must last the whole run
+    runner = make_runner(field, robot, bridge, mode="realtime", duration=1.6, sim={"start_pose": (-0.6, -0.38, 0.0)},
+                         command_timeout=None)
     t, box = run_in_thread(runner)
     bad = [b"hello", b"RAF\r\n1\r\n\r\nV\r\nfast\r\n\r\n", b"RAF\r\n2\r\n\r\nV\r\n0\r\n\r\nW\r\n0\r\n\r\nS\r\n0\r\n\r\n",
            b"\xff\xfe\x00", b"RAF\r\n1\r\n\r\nSeq\r\n3\r\n\r\nV\r\ninf\r\n\r\nW\r\n0\r\n\r\nS\r\n0\r\n\r\n", b""]
@@ -94,9 +96,10 @@ def test_latest_valid_command_wins(field, robot, bridge):
 
 @pytest.mark.parametrize("policy", ["stop", "hold", "exit"])
 def test_lockstep_timeout_policy(field, robot, bridge, policy):
-    """The controller answers 10 frames with V = 0.3 and the magnet on, then falls silent."""
+    """The controller answers 10 frames with V = 0.3 and the magnet on, then falls silent (the command timeout off:
+    the lockstep policy alone decides)."""
     runner = make_runner(field, robot, bridge, duration=2.0, lockstep=True, lockstep_timeout=0.05, on_timeout=policy,
-                         sim={"start_pose": (-0.7, -0.38, 0.0)})
+                         sim={"start_pose": (-0.7, -0.38, 0.0)}, command_timeout=None)
     t, box = run_in_thread(runner)
     answered = 0
     for f, addr in frames_from(bridge, t):

@@ -80,9 +80,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--on-timeout", choices=("stop", "hold", "exit"), default=RunnerConfig.on_timeout,
                    help="when no reply comes in time: stop the robot (V=W=0, magnet kept), hold the last "
                         "command, or exit (code 3); always with a warning (default stop)")
-    g.add_argument("--command-timeout", type=float, default=0.5, metavar="S",
+    g.add_argument("--command-timeout", type=float, default=RunnerConfig.command_timeout, metavar="S",
                    help="simulation seconds without a valid command before the robot stops, as SimTwo's "
-                        "control.pas does (default 0.5; 0: keep the last command forever)")
+                        f"control.pas does (default {RunnerConfig.command_timeout:g}; 0: keep the last command "
+                        "forever)")
     g.add_argument("--duration", type=float, default=None, metavar="S",
                    help="simulation seconds to run, then print the score and exit (default: until Ctrl-C)")
 

@@ -75,7 +75,9 @@ class RunnerConfig:
     log_period: float = 5.0  # rate limit of repeated warnings
     controller: tuple[str, int] | None = None  # the only source of commands; None: the first valid sender
     takeover_after: float = 2.0  # wall s the controller must be silent before another source may take over
-    command_timeout: float | None = None  # simulation s without a valid command: stop (raf sim: 0.5); None: keep
+    #: simulation s without a valid command before the robot stops, as control.pas's COMMAND_TIMEOUT_MS (500);
+    #: None: keep the last command forever (an idealisation: SimTwo's script has no such mode)
+    command_timeout: float | None = 0.5
     control_port: int | None = None  # the control channel's UDP port on host (sim/control.py); None: none
     start_paused: bool = False  # start paused (the control channel's step/resume run it)
     control_optional: bool = False  # True: a control port that cannot be bound is a warning, not an error
