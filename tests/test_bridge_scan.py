@@ -174,7 +174,6 @@ def test_the_old_per_ray_assembler_stamps_simtwo_sweeps_one_sweep_late():
     errs = []
     for _ in range(60):
         t, arr = sim.frame()
-        truth0 = sim.values_at[0] / 1000
         for sw in old.add(t, arr):
             ok = ~np.isnan(sw.ranges)
             measured = (sw.ranges[ok] - 1.0)  # when the rays it published were really measured
