@@ -80,7 +80,8 @@ def test_values_are_the_ros1_files(kind):
 
 def test_tree_is_the_defaults_updated_by_the_ros1_file():
     t = tree("bridge")
-    assert t["udp"]["port"] == 9810 and t["stream"]["max_wheel_speed"] == 54.4 and t["frame_prefix"] == ""
+    assert t["udp"]["port"] == 9810 and t["stream"]["takeover_after"] == 2.0 and t["frame_prefix"] == ""
+    assert t["stream"]["max_wheel_speed"] is None and t["camera"]["fx"] is None  # unset: the robot file's
     assert set(t) == set(NODES["bridge"].defaults())
 
 
