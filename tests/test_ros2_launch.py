@@ -38,12 +38,38 @@ def _strings(node) -> list[str]:
     return [n.value for n in ast.walk(node) if isinstance(n, ast.Constant) and isinstance(n.value, str)]
 
 
-def _args2(name: str) -> dict:
-    """name -> default (a string, or the ast node when it is a substitution) of the DeclareLaunchArguments."""
+# the shared constants a launch file may import (docs/protocol.md's ports, raf sim's control channel offset)
+SHARED = ("robotatfactory.simtwo.ports", "robotatfactory.sim.control")
+
+
+def _shared_names(tree: ast.Module) -> dict:
+    """The names the launch file imports from SHARED, with their values."""
+    import importlib
+
     out = {}
-    for c in _calls(_tree(name), "DeclareLaunchArgument"):
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.module in SHARED:
+            module = importlib.import_module(node.module)
+            out.update({a.asname or a.name: getattr(module, a.name) for a in node.names})
+    return out
+
+
+def _args2(name: str) -> dict:
+    """name -> default of the DeclareLaunchArguments: a string (a literal, or built from the shared constants
+    with str(), f-strings and +), or the ast node when it is a substitution."""
+    tree = _tree(name)
+    shared = _shared_names(tree)
+    out = {}
+    for c in _calls(tree, "DeclareLaunchArgument"):
         d = _kw(c, "default_value")
-        out[c.args[0].value] = d.value if isinstance(d, ast.Constant) else d
+        if isinstance(d, ast.Constant):
+            out[c.args[0].value] = d.value
+        elif {n.id for n in ast.walk(d) if isinstance(n, ast.Name)} <= set(shared) | {"str"}:
+            value = eval(compile(ast.Expression(d), name, "eval"), {"__builtins__": {"str": str}}, dict(shared))
+            assert isinstance(value, str), f"{name}: {c.args[0].value}'s default is no string: {value!r}"
+            out[c.args[0].value] = value
+        else:
+            out[c.args[0].value] = d
     return out
 
 
@@ -84,9 +110,10 @@ def test_launch_file_defines_a_launch_description(name):
     funcs = [n.name for n in tree.body if isinstance(n, ast.FunctionDef)]
     assert "generate_launch_description" in funcs
     assert ast.get_docstring(tree) and f"launch/{name}.launch" in ast.get_docstring(tree), "names its ROS 1 twin"
-    for node in ast.walk(tree):  # only the launch system's own modules (and the standard library)
+    for node in ast.walk(tree):  # only the launch system's own modules, the shared constants and the stdlib
         if isinstance(node, ast.ImportFrom):
-            assert node.module.split(".")[0] in ("launch", "launch_ros", "ament_index_python"), node.module
+            assert node.module.split(".")[0] in ("launch", "launch_ros", "ament_index_python") or node.module in SHARED, \
+                node.module
         elif isinstance(node, ast.Import):
             assert all(a.name in ("os", "shlex") for a in node.names)
 

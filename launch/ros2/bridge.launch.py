@@ -16,6 +16,9 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
+from robotatfactory.sim.control import CONTROL_PORT_OFFSET
+from robotatfactory.simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
+
 
 def generate_launch_description():
     def arg(name):
@@ -27,14 +30,16 @@ def generate_launch_description():
     return LaunchDescription([
         DeclareLaunchArgument("ns", default_value="/", description="namespace of the node and its topics"),
         DeclareLaunchArgument("frame_prefix", default_value="", description="robot1 makes robot1/odom, ..."),
-        DeclareLaunchArgument("sim_host", default_value="127.0.0.1",
+        DeclareLaunchArgument("sim_host", default_value=LOCALHOST,
                               description="accept SensorFrames from this host only ('*': any)"),
         DeclareLaunchArgument("reply_port", default_value="0",
-                              description="0: reply to the source port; else this port (SimTwo: 9808)"),
-        DeclareLaunchArgument("sim_control", default_value="127.0.0.1:9812",
+                              description=f"0: reply to the source port; else this port (SimTwo: {SIMTWO_UDP_PORT})"),
+        DeclareLaunchArgument("sim_control", default_value=f"{LOCALHOST}:{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}",
                               description="raf sim's control channel (sim/* services); empty for none"),
-        DeclareLaunchArgument("port", default_value="9810", description="UDP port the SensorFrames come to"),
-        DeclareLaunchArgument("camera", default_value="tcp://127.0.0.1:9899", description="the camera's ZMQ endpoint"),
+        DeclareLaunchArgument("port", default_value=str(BRIDGE_UDP_PORT),
+                              description="UDP port the SensorFrames come to"),
+        DeclareLaunchArgument("camera", default_value=f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}",
+                              description="the camera's ZMQ endpoint"),
         DeclareLaunchArgument("camera_enabled", default_value="true", description="subscribe to the camera"),
         DeclareLaunchArgument("field", default_value="rules2026", description="competition map"),
         DeclareLaunchArgument("map_to_odom", default_value="none",

@@ -14,6 +14,9 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
+from robotatfactory.sim.control import CONTROL_PORT_OFFSET
+from robotatfactory.simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
+
 
 def generate_launch_description():
     def arg(name):
@@ -26,11 +29,14 @@ def generate_launch_description():
         DeclareLaunchArgument("seed", default_value="0", description="seed of the round and the noise"),
         DeclareLaunchArgument("start_after", default_value="3", description="s before the round starts"),
         DeclareLaunchArgument("sim_extra", default_value="", description="more raf sim options"),
-        DeclareLaunchArgument("port", default_value="9810", description="the bridge's UDP port"),
-        DeclareLaunchArgument("sim_port", default_value="9808", description="raf sim's command port"),
-        DeclareLaunchArgument("control_port", default_value="9812", description="raf sim's control channel"),
-        DeclareLaunchArgument("camera", default_value="tcp://127.0.0.1:9899", description="the camera's ZMQ endpoint"),
-        DeclareLaunchArgument("server_port", default_value="44832", description="factory-state server UDP port"),
+        DeclareLaunchArgument("port", default_value=str(BRIDGE_UDP_PORT), description="the bridge's UDP port"),
+        DeclareLaunchArgument("sim_port", default_value=str(SIMTWO_UDP_PORT), description="raf sim's command port"),
+        DeclareLaunchArgument("control_port", default_value=str(SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET),
+                              description="raf sim's control channel"),
+        DeclareLaunchArgument("camera", default_value=f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}",
+                              description="the camera's ZMQ endpoint"),
+        DeclareLaunchArgument("server_port", default_value=str(SERVER_UDP_PORT),
+                              description="factory-state server UDP port"),
         DeclareLaunchArgument("max_input_age", default_value="0.5",
                               description="s after which pose/odom count as stale (the robot stops)"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz 2"),

@@ -20,6 +20,9 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
+from robotatfactory.sim.control import CONTROL_PORT_OFFSET
+from robotatfactory.simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
+
 
 def _raf_sim(context):
     """raf sim's command line (sim_args is split as a shell would)."""
@@ -29,7 +32,7 @@ def _raf_sim(context):
         return LaunchConfiguration(name).perform(context)
 
     raf = os.path.join(get_package_prefix("robotatfactory"), "lib", "robotatfactory", "raf")
-    cmd = [raf, "--field", a("field"), "sim", "--bridge", f"127.0.0.1:{a('port')}", "--port", a("sim_port"),
+    cmd = [raf, "--field", a("field"), "sim", "--bridge", f"{LOCALHOST}:{a('port')}", "--port", a("sim_port"),
            "--camera-bind", a("camera"), "--server-port", a("server_port"), "--control-port", a("control_port"),
            *shlex.split(a("sim_args"))]
     return [ExecuteProcess(cmd=cmd, name="raf_sim", output="screen", on_exit=Shutdown(reason="raf sim ended"),
@@ -47,12 +50,14 @@ def generate_launch_description():
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz 2 (fixed frame map)"),
         DeclareLaunchArgument("map_to_odom", default_value="first_ground_truth",
                               description="the bridge's map -> odom (none when a localization node runs)"),
-        DeclareLaunchArgument("port", default_value="9810", description="the bridge's UDP port"),
-        DeclareLaunchArgument("sim_port", default_value="9808", description="raf sim's command port"),
-        DeclareLaunchArgument("control_port", default_value="9812",
+        DeclareLaunchArgument("port", default_value=str(BRIDGE_UDP_PORT), description="the bridge's UDP port"),
+        DeclareLaunchArgument("sim_port", default_value=str(SIMTWO_UDP_PORT), description="raf sim's command port"),
+        DeclareLaunchArgument("control_port", default_value=str(SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET),
                               description="raf sim's control channel, the bridge's sim/* services use it"),
-        DeclareLaunchArgument("camera", default_value="tcp://127.0.0.1:9899", description="the camera's ZMQ endpoint"),
-        DeclareLaunchArgument("server_port", default_value="44832", description="factory-state server UDP port"),
+        DeclareLaunchArgument("camera", default_value=f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}",
+                              description="the camera's ZMQ endpoint"),
+        DeclareLaunchArgument("server_port", default_value=str(SERVER_UDP_PORT),
+                              description="factory-state server UDP port"),
         OpaqueFunction(function=_raf_sim),
         GroupAction(scoped=True, actions=[  # the include's arguments stay in it, as in roslaunch
             IncludeLaunchDescription(
@@ -62,7 +67,7 @@ def generate_launch_description():
                     "map_to_odom": arg("map_to_odom"),
                     "port": arg("port"),
                     "camera": arg("camera"),
-                    "sim_control": ["127.0.0.1:", arg("control_port")],
+                    "sim_control": [f"{LOCALHOST}:", arg("control_port")],
                 }.items(),
             ),
         ]),

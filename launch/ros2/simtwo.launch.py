@@ -20,6 +20,8 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
+from robotatfactory.simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
+
 
 def _raf_simtwo(context):
     """raf simtwo run's command line (simtwo_args is split as a shell would)."""
@@ -30,7 +32,7 @@ def _raf_simtwo(context):
 
     raf = os.path.join(get_package_prefix("robotatfactory"), "lib", "robotatfactory", "raf")
     cmd = [raf, "--field", a("field"), "simtwo", "run", "--port", a("sim_port"), "--bridge",
-           f"127.0.0.1:{a('port')}", "--camera-port", a("camera_port"), "--round", a("round"), "--seed", a("seed"),
+           f"{LOCALHOST}:{a('port')}", "--camera-port", a("camera_port"), "--round", a("round"), "--seed", a("seed"),
            *shlex.split(a("simtwo_args"))]
     return [ExecuteProcess(cmd=cmd, name="raf_simtwo", output="screen", on_exit=Shutdown(reason="SimTwo ended"),
                            additional_env={"RAF_MIDDLEWARE": "ros2"})]
@@ -44,7 +46,7 @@ def _bridge(share, arg, map_to_odom: str, condition):
                 "field": arg("field"),
                 "map_to_odom": map_to_odom,
                 "port": arg("port"),
-                "camera": ["tcp://127.0.0.1:", arg("camera_port")],
+                "camera": [f"tcp://{LOCALHOST}:", arg("camera_port")],
                 "sim_control": "",
             }.items(),
         ),
@@ -63,9 +65,10 @@ def generate_launch_description():
         DeclareLaunchArgument("simtwo_args", default_value="", description="more raf simtwo run options"),
         DeclareLaunchArgument("localize", default_value="true", description="run the localization node"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz 2 (fixed frame map)"),
-        DeclareLaunchArgument("port", default_value="9810", description="the bridge's UDP port"),
-        DeclareLaunchArgument("sim_port", default_value="9808", description="SimTwo's UDP port"),
-        DeclareLaunchArgument("camera_port", default_value="9899", description="SimTwo's camera port (ZMQ)"),
+        DeclareLaunchArgument("port", default_value=str(BRIDGE_UDP_PORT), description="the bridge's UDP port"),
+        DeclareLaunchArgument("sim_port", default_value=str(SIMTWO_UDP_PORT), description="SimTwo's UDP port"),
+        DeclareLaunchArgument("camera_port", default_value=str(CAMERA_ZMQ_PORT),
+                              description="SimTwo's camera port (ZMQ)"),
         OpaqueFunction(function=_raf_simtwo),
         _bridge(share, arg, "none", IfCondition(arg("localize"))),
         _bridge(share, arg, "first_ground_truth", UnlessCondition(arg("localize"))),
