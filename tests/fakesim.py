@@ -11,7 +11,8 @@ row, after the bottom-up flip) holds the tick number k (render time k/60 s) in i
 little-endian, B channel first.
 
 Use in-process (``FakeSim(...).start()`` runs a thread) or as a script:
-``python tests/fakesim.py --bridge 127.0.0.1:9810 --camera tcp://127.0.0.1:9899 --lockstep``.
+``python tests/fakesim.py --lockstep --camera ENDPOINT [--bridge HOST:PORT]``; ``--help`` shows the default
+bridge address and an endpoint (robotatfactory.simtwo.ports' names).
 Also answers nothing: it only records the Command datagrams the bridge sends back.
 """
 from __future__ import annotations
@@ -27,6 +28,7 @@ import numpy as np
 
 from robotatfactory.robot import load_robot
 from robotatfactory.simtwo import Command, ProtocolError, SensorFrame, encode_frame
+from robotatfactory.simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST
 
 
 @dataclass
@@ -44,8 +46,8 @@ def tick_of_image(bgr: np.ndarray) -> int:
 
 
 class FakeSim:
-    def __init__(self, bridge=("127.0.0.1", 9810), camera: str | None = None, lockstep=False, realtime=True,
-                 rate=1.0, lockstep_timeout=0.5, rays=360, start_seq=0, bind_host="127.0.0.1", width=640,
+    def __init__(self, bridge=(LOCALHOST, BRIDGE_UDP_PORT), camera: str | None = None, lockstep=False, realtime=True,
+                 rate=1.0, lockstep_timeout=0.5, rays=360, start_seq=0, bind_host=LOCALHOST, width=640,
                  height=480, lidar_update="sweep"):
         self.robot = load_robot()
         self.lidar_update = lidar_update  # "sweep" (SimTwo) | "per_ray"
@@ -267,8 +269,8 @@ class FakeSim:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--bridge", default="127.0.0.1:9810")
-    ap.add_argument("--camera", default=None, help="ZMQ endpoint to bind, e.g. tcp://127.0.0.1:9899")
+    ap.add_argument("--bridge", default=f"{LOCALHOST}:{BRIDGE_UDP_PORT}", help="HOST:PORT (default: %(default)s)")
+    ap.add_argument("--camera", default=None, help=f"ZMQ endpoint to bind, e.g. tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}")
     ap.add_argument("--lockstep", action="store_true")
     ap.add_argument("--fast", action="store_true")
     ap.add_argument("--rate", type=float, default=1.0, help="real-time factor when not --fast")

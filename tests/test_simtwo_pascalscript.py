@@ -41,6 +41,7 @@ import pytest
 
 from robotatfactory.robot import load_robot
 from robotatfactory.simtwo import Command, ProtocolError, SensorFrame
+from robotatfactory.simtwo.ports import BRIDGE_UDP_PORT, LOCALHOST, SIMTWO_UDP_PORT
 
 REPO = Path(__file__).resolve().parents[1]
 SIMTWO = REPO / "simtwo"
@@ -231,7 +232,7 @@ def run_harness(exe: Path, tmp_path: Path, cycles: int, policy, *, frame_timeout
         bridge.sendto(TICK, harness_addr)
         for k in range(cycles):
             raw, addr = bridge.recvfrom(65536)
-            assert addr == harness_addr, "frames must come from the port SimTwo listens on (9808)"
+            assert addr == harness_addr, f"frames must come from the port SimTwo listens on ({SIMTWO_UDP_PORT})"
             frames.append(raw)
             out = list(policy(k, raw))
             replies.append(out)
@@ -424,8 +425,8 @@ def test_commands_become_wheel_speeds_and_magnet(main_run):
 
 def test_defaults_and_geometry_match_the_project(main_run):
     run, _ = main_run
-    assert run.cfg_default["BridgeIP"] == "127.0.0.1"
-    assert run.cfg_default["BridgePort"] == "9810"
+    assert run.cfg_default["BridgeIP"] == LOCALHOST
+    assert run.cfg_default["BridgePort"] == str(BRIDGE_UDP_PORT)
     assert "LOCKSTEP" not in CONST and "GetTickCount" not in CONTROL.read_text(), "no waiting in Control"
     assert int(run.cfg_default["CommandTimeoutMs"]) == 500
     assert float(CONST["WHEEL_RADIUS"]) == ROBOT.wheel_radius
@@ -434,7 +435,7 @@ def test_defaults_and_geometry_match_the_project(main_run):
     assert float(CONST["LIDAR_NOISE_B"]) == ROBOT.lidar.noise_b
     assert round(ROBOT.lidar.period / ROBOT.control_period) == int(CONST["LIDAR_NOISE_EVERY"])
     # the frames went where the settings said (the test's port), from the port SimTwo listens on
-    assert run.cfg["BridgePort"] != "9810"
+    assert run.cfg["BridgePort"] != str(BRIDGE_UDP_PORT)
     assert all(line.split()[3] == run.cfg["BridgePort"] for line in run.record if line.startswith("SEND "))
 
 
@@ -865,7 +866,7 @@ def test_settings_files():
     p.read(SIMTWO / "settings" / "config_Params.ini")
     c = p["Config"]
     assert c["CBUDPConnect_Checked"] == "1"
-    assert c["EditUDPPort_Text"] == "9808"
+    assert c["EditUDPPort_Text"] == str(SIMTWO_UDP_PORT)
     assert c["RGControlBlock_ItemIndex"] == "1"
     assert int(c["EditScriptPeriod_Text"]) == round(ROBOT.control_period * 1000)
     p = configparser.ConfigParser()
