@@ -7,11 +7,15 @@ from __future__ import annotations
 
 import argparse
 
+from ..sim.control import CONTROL_PORT_OFFSET
+from ..simtwo.ports import LOCALHOST, SIMTWO_UDP_PORT
+
+CONTROL = f"{LOCALHOST}:{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}"  # raf sim's control channel by default
 NAME = "simctl"
 HELP = "control a running raf sim: reset, pause, resume, step, set_robot_pose, place_part, remove_part, get_state"
 ORDER = 25
-DESCRIPTION = """\
-Send one request to raf sim's control channel (UDP, JSON; default 127.0.0.1:9812, the command port + 4) and
+DESCRIPTION = f"""\
+Send one request to raf sim's control channel (UDP, JSON; default {CONTROL}, the command port + {CONTROL_PORT_OFFSET}) and
 print the reply.
 
   raf simctl get_state
@@ -32,8 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("op", choices=OPS, help="the request")
     parser.add_argument("values", nargs="*", type=float, metavar="N",
                         help="step: cycles; set_robot_pose: x y theta; place_part, remove_part: the part id")
-    parser.add_argument("--control", default="127.0.0.1:9812", metavar="HOST:PORT",
-                        help="raf sim's control channel (default 127.0.0.1:9812)")
+    parser.add_argument("--control", default=CONTROL, metavar="HOST:PORT",
+                        help=f"raf sim's control channel (default {CONTROL})")
     parser.add_argument("--slot", help="place_part: a slot of the field, e.g. outgoing_2")
     parser.add_argument("--at", nargs=3, type=float, metavar=("X", "Y", "FACING"),
                         help="place_part: a pose (m, m, rad: the plate's heading)")

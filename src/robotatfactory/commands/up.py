@@ -76,11 +76,12 @@ def _ports(free: bool) -> dict:
     import socket
 
     from ..ros.master import free_port
+    from ..sim.control import control_port_for
     from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, SERVER_UDP_PORT, SIMTWO_UDP_PORT
 
     if not free:
-        return {"sim": SIMTWO_UDP_PORT, "bridge": BRIDGE_UDP_PORT, "control": 9812, "camera": CAMERA_ZMQ_PORT,
-                "server": SERVER_UDP_PORT}
+        return {"sim": SIMTWO_UDP_PORT, "bridge": BRIDGE_UDP_PORT, "control": control_port_for(SIMTWO_UDP_PORT),
+                "camera": CAMERA_ZMQ_PORT, "server": SERVER_UDP_PORT}
     udp = lambda: free_port(socket.SOCK_DGRAM)  # noqa: E731
     return {"sim": udp(), "bridge": udp(), "control": udp(), "camera": free_port(), "server": udp()}
 
