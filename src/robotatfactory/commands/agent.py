@@ -3,10 +3,12 @@ from __future__ import annotations
 
 import argparse
 
+from ..simtwo.ports import SERVER_UDP_PORT
+
 NAME = "agent"
 HELP = "run the autonomous robot: factory-state server, pose from raf localize, cmd_vel and electromagnet out"
 ORDER = 37
-DESCRIPTION = """\
+DESCRIPTION = f"""\
 Run the agent node next to `raf bridge` and `raf localize`. It asks the factory-state server for the part
 list and the factory's state (UDP), plans the round, and drives on the `pose` topic (never ground truth).
 docs/agent.md describes what it does.
@@ -17,7 +19,7 @@ config/agent.yaml), then the options below, then `--set NAME=VALUE` (`dock.appro
 
 examples:
   raf agent                                  # next to raf sim + raf bridge + raf localize
-  raf agent --server-port 44832 --set max_input_age=0.3
+  raf agent --server-port {SERVER_UDP_PORT} --set max_input_age=0.3
   raf agent --config agent.yaml --set dock.approach_speed=0.16
 """
 

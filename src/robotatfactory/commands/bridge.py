@@ -3,10 +3,14 @@ from __future__ import annotations
 
 import argparse
 
+from ..sim.multirunner import PORT_STRIDE
+from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST
+
 NAME = "bridge"
 HELP = "run the ROS bridge: SimTwo's UDP/ZMQ streams as ROS topics and TF, cmd_vel back (needs a roscore)"
 ORDER = 30
-DESCRIPTION = """\
+_ROBOT2 = f"--port {BRIDGE_UDP_PORT + PORT_STRIDE} --camera tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT + PORT_STRIDE}"
+DESCRIPTION = f"""\
 Run the bridge node. Settings are ROS parameters (defaults: config/bridge.yaml, every one listed in
 docs/bridge.md); --config FILE overrides them from a YAML file of the same shape, --set NAME=VALUE one by
 one (e.g. --set camera.fx=283.5 --set simulator/host=192.168.1.20), and the options below the usual ones.
@@ -14,14 +18,13 @@ The node needs a ROS master (ROS_MASTER_URI); --roscore starts a private one on 
 
 examples:
   raf bridge                                     # raf sim on this machine, default ports
-  raf bridge --sim-host 192.168.1.20 --camera tcp://192.168.1.20:9899   # SimTwo on another machine
-  raf bridge --ns robot2 --frame-prefix robot2 --port 9820 --camera tcp://127.0.0.1:9909   # raf sim --robots 2's second
+  raf bridge --sim-host 192.168.1.20 --camera tcp://192.168.1.20:{CAMERA_ZMQ_PORT}   # SimTwo on another machine
+  raf bridge --ns robot2 --frame-prefix robot2 {_ROBOT2}   # raf sim --robots 2's second
 """
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..ros.cli import add_node_arguments, add_settings_arguments
-    from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST
 
     add_settings_arguments(parser, "config/bridge.yaml", "udp/port=9811")
     parser.add_argument("--sim-host", metavar="HOST", help="accept SensorFrames from this host only ('*': any)")

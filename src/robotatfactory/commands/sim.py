@@ -6,16 +6,19 @@ import argparse
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT
 from ..sim.config import (CAMERA_TIMINGS, LIDAR_UPDATES, MAGNETS, PID_TIMINGS, REPLY_TIMINGS, SPEED_CONTROLS,
                           SimConfig)
+from ..sim.control import CONTROL_PORT_OFFSET
+from ..sim.multirunner import PORT_STRIDE
 from ..sim.runner import RunnerConfig
 
 NAME = "sim"
 HELP = "run the stand-in simulator: MuJoCo physics, SimTwo's UDP/ZMQ protocol, the competition and its server"
 ORDER = 20
-DESCRIPTION = """\
+_ROBOT2 = "/".join(str(p + PORT_STRIDE) for p in (SIMTWO_UDP_PORT, BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT))
+DESCRIPTION = f"""\
 The RobotAtFactory 4.0 scene in MuJoCo, talking to the outside world as SimTwo does: one SensorFrame
 datagram per 40 ms control cycle to the bridge, Commands received on --port, camera frames on a ZMQ PUB
 socket (raw B G R A, bottom-up, about 15 frames/s, rendered when SimTwo's GUI loop would render them:
---camera-timing), the factory-state server on UDP 44832.
+--camera-timing), the factory-state server on UDP {SERVER_UDP_PORT}.
 
 examples:
   raf sim                                  # real time, round 1, camera and server on
@@ -23,7 +26,7 @@ examples:
   raf sim --lockstep --on-timeout stop     # wait for the controller's reply every cycle
   raf sim --round 3 --parts RGBX --seed 4  # round 3 with a given layout
   raf sim --snapshot field.png             # an overview picture, then exit
-  raf sim --robots 2                       # two robots: robot 2 on ports 9818/9820/9909 (+10 per robot)
+  raf sim --robots 2                       # two robots: robot 2 on ports {_ROBOT2} (+{PORT_STRIDE} per robot)
 """
 
 
@@ -56,7 +59,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ctl.add_argument("--control-port", type=int, default=None, metavar="PORT",
                      help="UDP port of the control channel (reset, pause, resume, step, set_robot_pose, "
                           "place_part, remove_part, get_state: JSON requests, docs/protocol.md) on --host "
-                          "(default: --port + 4, i.e. 9812; when that one is taken, a warning and no channel)")
+                          f"(default: --port + {CONTROL_PORT_OFFSET}, i.e. {SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}; when "
+                          "that one is taken, a warning and no channel)")
     ctl.add_argument("--no-control", action="store_true", help="no control channel")
     g.add_argument("--controller", default=None, metavar="HOST:PORT",
                    help="accept commands from this source only (default: the first that sends a valid command; "
@@ -104,7 +108,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         f"{SimConfig.start_after:g})")
     g.add_argument("--robots", type=int, default=SimConfig.robots, metavar="N",
                    help="robots in the scene, 1..4 (default 1). Robot k's command, bridge and camera ports are "
-                        "robot 1's + 10*(k-1) (printed at start); one factory server sees them all; no control "
+                        f"robot 1's + {PORT_STRIDE}*(k-1) (printed at start); one factory server sees them all; "
+                        "no control "
                         "channel with several robots; start poses: the start area's 2x2 cells or --start-pose")
     g.add_argument("--start-pose", default=None, action="append", metavar="X,Y,THETA",
                    help="robot start pose in metres and radians (default: the field's start pose); with --robots "

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import argparse
 
+from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
+
 NAME = "simtwo"
 HELP = "the real SimTwo on Linux: build it from pinned sources (build), run it headless (run)"
 ORDER = 21
-DESCRIPTION = """\
+DESCRIPTION = f"""\
 SimTwo, the competition's simulator, built from pinned sources with the project's Linux patches
 (simtwo/linux/) and run headless under its own Xvfb, with the project's control.pas, LIDAR and settings
 installed into a fresh copy of the scene (docs/simtwo.md, "SimTwo on Linux").
@@ -19,8 +21,8 @@ installed into a fresh copy of the scene (docs/simtwo.md, "SimTwo on Linux").
   raf simtwo build                                     the same; the sources from $RAF_SIMTWO_SOURCES, else
                                                        ../shared/vendor/simtwo beside the repository, else
                                                        git clones at the pinned commits
-  raf simtwo run                                       RobotFactoryPro2022 on the default ports (UDP 9808 in,
-                                                       frames to 127.0.0.1:9810, camera tcp 9899) until Ctrl-C
+  raf simtwo run                                       RobotFactoryPro2022 on the default ports (UDP {SIMTWO_UDP_PORT} in,
+                                                       frames to {LOCALHOST}:{BRIDGE_UDP_PORT}, camera tcp {CAMERA_ZMQ_PORT}) until Ctrl-C
   raf simtwo run --free-ports                          free ports (printed), for a run beside others
   raf simtwo run --robot robot.json                    the scene's camera set to the robot file's (fx = fy,
                                                        centred principal point, pitch, mount)
@@ -57,8 +59,6 @@ def robot_camera(path: str | None):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
-
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     b = sub.add_parser("build", help="build SimTwo from the pinned sources (cached)",
                        description="Build SimTwo: Debian's packages checked, the pinned sources (an archive "

@@ -61,11 +61,12 @@ class Simulator:
     port: int = setting(0, "the simulator's source port; 0: bind to the first sender whose frames form a stream",
                         lo=0, hi=65535)
     reply_port: int = setting(0, "0: reply to the source port; else this port on the simulator's host (SimTwo: "
-                                 "9808)", lo=0, hi=65535)
+                                 f"{SIMTWO_UDP_PORT})", lo=0, hi=65535)
     control: str = setting(f"{LOCALHOST}:{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}",
                            "raf sim's control channel for the sim/* services (\"\" for none; SimTwo has none)",
                            pattern=r"|[A-Za-z0-9_.\-]+:\d{1,5}",
-                           what="host:port of raf sim's control channel, e.g. 127.0.0.1:9812, or empty for none")
+                           what="host:port of raf sim's control channel, e.g. "
+                                f"{LOCALHOST}:{SIMTWO_UDP_PORT + CONTROL_PORT_OFFSET}, or empty for none")
 
 
 @dataclass(frozen=True)
@@ -133,7 +134,8 @@ class Camera(overlay(CameraSpec)):
     enabled: bool = setting(True, "subscribe to the camera and publish camera/image_raw and camera_info")
     endpoint: str = setting(f"tcp://{LOCALHOST}:{CAMERA_ZMQ_PORT}",
                             "SimTwo's ZMQ PUB (use the simulator's address when remote)",
-                            pattern=r"(tcp|ipc|inproc)://\S+", what="a ZMQ endpoint such as tcp://192.168.1.20:9899")
+                            pattern=r"(tcp|ipc|inproc)://\S+",
+                            what=f"a ZMQ endpoint such as tcp://192.168.1.20:{CAMERA_ZMQ_PORT}")
     calibration: str = setting("", "a calibration file (raf calibrate): its mount, intrinsics and distortion over "
                                    "the robot file's (a camera value given here wins over it)")
     bracket: str = setting("elapsed", "how a frame's render time is found (docs/bridge.md, camera stamping): "
@@ -281,7 +283,7 @@ class BridgeConfig:
         return given(self.given)
 
     def flat_params(self) -> dict[str, Any]:
-        """``{"udp/port": 9810, ...}``: the resolved tree as flat parameter names (without the ``~``)."""
+        """``{"udp/port": BRIDGE_UDP_PORT, ...}``: the resolved tree as flat parameter names (without the ``~``)."""
         from .mw.base import flatten
 
         return flatten(self.params, "/")

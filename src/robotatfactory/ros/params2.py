@@ -6,8 +6,8 @@ as a ROS 2 parameter file for ``ros2 launch`` / ``ros2 run ... --ros-args --para
 
     /**/raf_bridge:            # the node raf_bridge in any namespace (robot1/raf_bridge too)
       ros__parameters:
-        udp:
-          port: 9810           # ROS 2 flattens nested keys with dots: the parameter udp.port
+        diagnostics:
+          period: 1.0          # ROS 2 flattens nested keys with dots: the parameter diagnostics.period
 
 Every leaf of the node's defaults is written (what ``node.params(defaults)`` declares), each value with the
 type of its default (ROS 2 parameters keep the type they are declared with: a real written ``60`` would be

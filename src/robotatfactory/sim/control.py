@@ -30,7 +30,7 @@ import math
 
 log = logging.getLogger(__name__)
 
-CONTROL_PORT_OFFSET = 4  # default control port = command port + 4 (9808 -> 9812)
+CONTROL_PORT_OFFSET = 4  # default control port = command port + 4 (control_port_for)
 MAX_REQUEST = 4096  # bytes
 MAX_STEP_CYCLES = 100_000  # cycles one step request may ask for (~67 simulated minutes)
 OPS = ("reset", "pause", "resume", "step", "set_robot_pose", "place_part", "remove_part", "get_state")

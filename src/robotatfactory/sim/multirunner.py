@@ -1,8 +1,9 @@
 """Several robots in one ``raf sim``: one set of endpoints per robot, one physics scene, one clock.
 
 Robot k (1-based) has its own command socket, SensorFrame destination and camera publisher, at ports
-derived from robot 1's by ``PORT_STRIDE`` (:func:`robot_ports`): with the defaults robot 1 uses 9808
-(commands), 9810 (frames to its bridge) and tcp 9899 (camera), robot 2 uses 9818, 9820 and 9909, and so on.
+derived from robot 1's by ``PORT_STRIDE`` (:func:`robot_ports`): with the defaults robot 1 uses SIMTWO_UDP_PORT
+(commands), BRIDGE_UDP_PORT (frames to its bridge) and tcp CAMERA_ZMQ_PORT (camera) of simtwo/ports.py, robot 2
+each + PORT_STRIDE, and so on (``raf sim --help`` shows the numbers).
 The factory-state server is one (robot 1's endpoints open it) and sees every robot; there is no control
 channel with several robots (sim/control.py drives one robot). Instead each robot's Command datagrams may
 carry SimTwo's teleport labels (simtwo/teleport.py, docs/protocol.md), applied as simtwo/control.pas does
