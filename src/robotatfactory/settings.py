@@ -331,3 +331,18 @@ def descriptions(cls: type, sep: str = ".", where: str = "") -> dict[str, tuple[
             doc = m.get("doc", "")
             out[path] = (doc + (f" ({_allowed(m)})" if m.get("choices") else ""), rng)
     return out
+
+
+def describer(cls: type, sep: str = "."):
+    """``describe(name) -> (doc, (lo, hi) or None)`` of ``cls``'s settings by parameter name (``udp.port``): what
+    a node hands :meth:`~robotatfactory.ros.mw.base.Node.params` for ROS 2's parameter descriptors. The table is
+    made on first use."""
+    table: dict | None = None
+
+    def describe(name: str) -> tuple[str, tuple | None]:
+        nonlocal table
+        if table is None:
+            table = descriptions(cls, sep)
+        return table.get(name, ("", None))
+
+    return describe

@@ -38,6 +38,7 @@ from ..agent.settings import AgentSettings, agent_settings
 from ..agent.tasks import Move, Wait, plan_round
 from ..field import load_field
 from ..robot import load_robot
+from ..settings import describer
 from . import messages as rm
 from .mw import QoS
 from .mw.base import OK, WARN, Node
@@ -330,17 +331,8 @@ def default_params() -> dict:
     return tree(AgentSettings())
 
 
-def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
-    """(description, (min, max) or None) of a parameter (``dock.approach_speed``): agent/settings.py's."""
-    from ..settings import descriptions
-
-    global _DESCRIPTIONS
-    if _DESCRIPTIONS is None:
-        _DESCRIPTIONS = descriptions(AgentSettings)
-    return _DESCRIPTIONS.get(name, ("", None))
-
-
-_DESCRIPTIONS: dict | None = None
+#: (description, (min, max) or None) of a parameter (``dock.approach_speed``): agent/settings.py's
+describe_param = describer(AgentSettings)
 
 
 def node_params(node: Node, given: dict | None = None) -> dict:

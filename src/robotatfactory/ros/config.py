@@ -24,7 +24,7 @@ from typing import Any
 from ..errors import ConfigError
 from ..field import DEFAULT_FIELD
 from ..robot import CameraSpec, LidarSpec, RobotSpec, load_robot
-from ..settings import build, given, over, overlay, section, setting, tree
+from ..settings import build, describer, given, over, overlay, section, setting, tree
 from ..sim.control import CONTROL_PORT_OFFSET
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
 
@@ -400,17 +400,8 @@ def default_params() -> dict:
     return tree(BridgeSettings())
 
 
-def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
-    """(description, (min, max) or None) of a parameter (``udp.port``): this module's."""
-    from ..settings import descriptions
-
-    global _DESCRIPTIONS
-    if _DESCRIPTIONS is None:
-        _DESCRIPTIONS = descriptions(BridgeSettings)
-    return _DESCRIPTIONS.get(name, ("", None))
-
-
-_DESCRIPTIONS: dict | None = None
+#: (description, (min, max) or None) of a parameter (``udp.port``): its setting's
+describe_param = describer(BridgeSettings)
 
 HEADER = """\
 robotatfactory bridge: its settings (ROS parameters ~udp/port, ~camera/fx, ...) with their defaults.

@@ -39,7 +39,7 @@ from ..localization.geometry import inv, matrix_se2, se2_matrix
 from ..localization.lidar import extract_beacons
 from ..localization.pipeline import FrameLocalizer
 from ..localization.scanmatch import ScanLocalizer
-from ..settings import tree
+from ..settings import describer, tree
 from . import messages as rm
 from .cli import publish_every, spin_node
 from .mw import QoS, api
@@ -412,19 +412,14 @@ def default_params() -> dict:
     return params
 
 
+_describe = describer(LocalizationConfig)
+
+
 def describe_param(name: str) -> tuple[str, tuple[float, float] | None]:
     """(description, (min, max) or None) of a parameter (``ekf.history_s``): its setting's."""
-    from ..settings import descriptions
-
-    global _DESCRIPTIONS
-    if _DESCRIPTIONS is None:
-        _DESCRIPTIONS = descriptions(LocalizationConfig)
     if name.startswith("detector.extra."):
         return f"cv2.aruco.DetectorParameters.{name.rsplit('.', 1)[1]} (detector.extra)", None
-    return _DESCRIPTIONS.get(name, ("", None))
-
-
-_DESCRIPTIONS: dict | None = None
+    return _describe(name)
 
 
 def node_params(node: Node, settings: dict | None = None) -> dict:
