@@ -124,11 +124,13 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     ``simtwo2022``) instead of ``raf sim``, and ``raf referee`` (the factory, the machines, the score and the
     trace from the part positions SimTwo reports) instead of raf sim's own; the referee ends the run."""
     from ..ros.master import private_graph
+    from ..ros.mw import bag_format
     from ..ros.mw import name as middleware
     from ..ros.processes import Procs
     from ._competition_log import wait_for_report
 
     mw = middleware()
+    fmt = bag_format(mw)  # a ROS 1 bag is a file; a rosbag2 a directory
     simtwo = simulator == "simtwo"
     if simtwo:
         from ..field import DEFAULT_FIELD
@@ -139,7 +141,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     log_dir = Path(out_dir) / f"{tag}_r{round_no}_s{seed}" if out_dir else Path(tempfile.mkdtemp(prefix="raf-comp-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     trace_path = log_dir / "trace.jsonl"
-    bag_path = log_dir / ("pose.bag" if mw == "ros1" else "pose_bag")
+    bag_path = log_dir / ("pose.bag" if fmt == "bag" else "pose_bag")
     # (each run's own; a port another run took meanwhile makes raf sim exit at once: SimStartError, retried)
     sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()  # (TCP)
     field_args = ["--field", field_name] if field_name else []
@@ -152,7 +154,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                   f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", env=env)
         procs.raf("localize", *field_args, "localize", *[a for s in localize for a in ("--set", s)], env=env)
         procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
-                  *(["--format", "bag"] if mw == "ros1" else []), env=env)
+                  "--format", fmt, env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
             procs.raf("referee", *field_args, "referee", "--round", str(round_no), "--seed", str(seed),
                       "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
