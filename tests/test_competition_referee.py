@@ -1,5 +1,7 @@
 """The referee against the rules: blue counts once, green up to twice, red up to three times; only
-correct places score; only during the run; ties by parts in the outgoing warehouse, then time."""
+correct places score; only during the run; a part scores where it rests at the end (knocked out: its point
+is lost; put back: it scores again); the time is when the final score was reached and held; ties by parts in
+the outgoing warehouse, then time."""
 import pytest
 
 from robotatfactory.competition import KinematicWorld, PartType, Referee, RoundSetup, ScoreReport
@@ -81,7 +83,9 @@ def test_each_delivery_counts_once_per_part():
         fetch(w, 1, "outgoing", n)
     rep = w.report()
     assert rep.points == 1 and rep.outgoing == 1
-    assert rep.last_score_time == pytest.approx(rep.events[0].elapsed)  # the first delivery counts
+    # picked up in between, the part was out of the warehouse: the final score stands since the last placement
+    assert rep.last_score_time == pytest.approx(rep.events[-1].elapsed) and rep.events[-1].points == 1
+    assert [e.points for e in rep.events] == [1, -1, 1, -1, 1, -1, 1] and rep.lost == 3
 
 
 def test_red_dropped_twice_at_machine_a_before_processing_counts_once():
@@ -172,3 +176,137 @@ def test_small_jitter_before_the_start_is_not_a_false_start():
     w.start()
     w.step()
     assert w.report().notes == ()
+
+
+# ------------------------------------------------------------------ a part counts where it rests at the end
+def test_a_part_knocked_out_after_it_scored_loses_its_point():
+    w = world("BBXX", round_no=1)
+    fetch(w, 1, "outgoing", 1)
+    w.advance(2.0)
+    fetch(w, 2, "outgoing", 2)
+    t_two = w.t
+    assert w.report().points == 2
+    w.advance(1.0)
+    w.move_part(1, (0.245, -0.45))  # pushed 8.5 cm out of its slot by the robot
+    w.step()
+    t_out = w.t
+    w.advance(1.0)
+    rep = w.report()
+    assert rep.points == 1 and rep.outgoing == 1 and rep.lost == 1
+    assert rep.events[-1].points == -1 and rep.events[-1].part_id == 1 and rep.events[-1].t == pytest.approx(t_out)
+    # the final score (1) was first reached at part 1's delivery and never fell below it since
+    assert rep.last_score_time == pytest.approx(rep.events[0].elapsed)
+    assert "left outgoing warehouse slot 1" in str(rep) and "1 point(s) lost on the way" in str(rep)
+    assert Referee(w.factory).report(t_two).points == 2  # as if the run had ended before the knock
+
+
+def test_scored_knocked_out_and_put_back_scores_again_at_the_later_time():
+    w = world("BXXX", round_no=1)
+    fetch(w, 1, "outgoing", 2)
+    first = w.report().last_score_time
+    w.advance(1.0)
+    w.move_part(1, (0.395, -0.45))  # knocked out
+    w.step()
+    w.advance(2.0)
+    assert w.report().points == 0 and w.report().last_score_time is None
+    fetch(w, 1, "outgoing", 2)  # put back
+    rep = w.report()
+    assert rep.points == 1 and rep.outgoing == 1
+    assert [e.points for e in rep.events] == [1, -1, 1]
+    assert rep.last_score_time == pytest.approx(rep.events[-1].elapsed) and rep.last_score_time > first + 2.5
+
+
+def test_final_score_reached_lost_reached_again_the_time_is_the_last_reaching():
+    w = world("BBBX", round_no=1)
+    fetch(w, 1, "outgoing", 1)
+    fetch(w, 2, "outgoing", 2)
+    w.advance(1.0)
+    fetch(w, 3, "outgoing", 3)  # 3: the final score, first reached
+    first = w.report().last_score_time
+    w.advance(1.0)
+    w.move_part(2, (0.395, -0.40))  # 2: knocked out
+    w.step()
+    w.advance(3.0)
+    assert w.report().points == 2
+    fetch(w, 2, "outgoing", 2)  # 3 again
+    rep = w.report()
+    assert rep.points == 3 and rep.last_score_time > first + 3.5
+    assert rep.last_score_time == pytest.approx(rep.events[-1].elapsed)
+
+
+def test_a_higher_score_lost_leaves_the_time_the_final_score_was_first_held():
+    w = world("BBXX", round_no=1)
+    fetch(w, 1, "outgoing", 1)
+    held_from = w.report().last_score_time
+    w.advance(2.0)
+    fetch(w, 2, "outgoing", 2)  # 2 points for a while
+    w.advance(1.0)
+    w.move_part(2, (0.395, -0.40))  # knocked out again: the final score is 1, held since part 1's delivery
+    w.step()
+    rep = w.report()
+    assert rep.points == 1 and rep.last_score_time == pytest.approx(held_from)
+
+
+def test_a_part_in_a_machine_picked_up_again_loses_the_point_but_a_processed_part_keeps_it():
+    w = world("RXXX", delay=2.0)
+    fetch(w, 1, "machine_A", 1)
+    assert w.report().points == 1
+    w.pick(1)  # taken away before the machine finished: no longer delivered
+    assert w.report().points == 0
+    w.place(1, "machine_A", 1)
+    w.advance(2.5)  # processed: green at the output, machine A's point banked
+    assert w.factory.part_type(1) is G and w.report().points == 1
+    w.pick(1)
+    w.move_part(1, (0.0, -0.3))
+    w.held.clear()  # dropped on the floor on the way to machine B: the banked point stays
+    w.step()
+    rep = w.report()
+    assert rep.points == 1 and [e.points for e in rep.events] == [1, -1, 1]
+
+
+def test_the_state_at_the_end_of_the_round_is_final():
+    w = world("BXXX", round_no=1, duration=5.0)
+    fetch(w, 1, "outgoing", 1)
+    w.advance(6.0)  # the round is over
+    w.move_part(1, (0.245, -0.40))  # knocked out after the end: does not count
+    w.step()
+    rep = w.report()
+    assert rep.points == 1 and rep.outgoing == 1 and rep.lost == 0
+
+
+def test_live_referee_and_the_runner_take_a_lost_maximum_back():
+    from robotatfactory.competition.live import LiveReferee
+    from robotatfactory.robot import load_robot
+
+    live = LiveReferee(FIELD, load_robot(), RoundSetup.make(1, parts="BXXX"), start_after=0.0)
+    slot = FIELD.slot("outgoing", 1)
+    part = (-0.695, 0.535, 0.0)
+    t = 0.0
+    for k in range(5):
+        t += 0.04
+        live.cycle(t, k, (-0.725, -0.4, 1.57), {1: part}, False)
+    for k in range(30):  # delivered and left there 1.2 s
+        t += 0.04
+        live.cycle(t, k, (-0.725, -0.4, 1.57), {1: (*slot.xy, 0.0)}, False)
+    assert live.max_held_for(1.0)
+    t += 0.04
+    live.cycle(t, 99, (-0.725, -0.4, 1.57), {1: (slot.xy[0], slot.xy[1] + 0.1, 0.0)}, False)
+    assert not live.max_held_for(0.0) and live.max_at is None and live.report().points == 0
+
+
+def test_the_experiments_read_the_same_score_from_the_report_text():
+    """raf sim and raf referee print str(report); the competition experiment reads it back (_competition_log)."""
+    from robotatfactory.experiments._competition_log import parse_sim_report, points_lost
+
+    w = world("BBXX", round_no=1)
+    fetch(w, 1, "outgoing", 1)
+    w.advance(1.0)
+    fetch(w, 2, "outgoing", 2)
+    w.move_part(2, (0.395, -0.40))
+    w.step()
+    rep = w.report()
+    points, max_points, last, found = parse_sim_report(str(rep))
+    assert found and (points, max_points) == (rep.points, rep.max_points) == (1, 2)
+    assert last == pytest.approx(rep.last_score_time, abs=0.01) and points_lost(str(rep)) == rep.lost == 1
+    fetch(w, 2, "outgoing", 2)
+    assert points_lost(str(w.report())) == 1 and parse_sim_report(str(w.report()))[0] == 2

@@ -106,9 +106,11 @@ class LiveReferee:
                          "held": held, "cmd": [round(float(cmd[0]), 4), round(float(cmd[1]), 4), bool(cmd[2])],
                          "contact": bool(contact), "enc": [int(enc[0]), int(enc[1])],
                          "parts": [[pid, *(round(float(v), 5) for v in p)] for pid, p in sorted(by_id.items())]})
-        if self.max_at is None and self.factory.started:
+        if self.factory.started:  # the maximum must stand: a part knocked out takes it back (referee.py)
             rep = self.report()
-            if rep.points >= rep.max_points:
+            if rep.points < rep.max_points:
+                self.max_at = None
+            elif self.max_at is None:
                 self.max_at = t
         return teleports
 
@@ -117,7 +119,7 @@ class LiveReferee:
         return self.referee.report(self.t if self.t is not None else 0.0)
 
     def max_held_for(self, seconds: float) -> bool:
-        """True once the maximum score has stood for ``seconds`` of simulation time."""
+        """True once the maximum score has stood for ``seconds`` of simulation time (without a point lost)."""
         return self.max_at is not None and self.t is not None and self.t - self.max_at >= seconds - 1e-9
 
     def over(self) -> bool:

@@ -221,7 +221,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     from ..robot import load_robot
     from ..sim.trace import read_trace
     from ._competition_observe import RunObserver
-    from ._competition_log import notes_of, parse_sim_report
+    from ._competition_log import notes_of, parse_sim_report, points_lost
 
     text = _read(log_dir / report_log)
     agent_log = _read(log_dir / "agent.log")
@@ -230,6 +230,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     events = agent_events(agent_log)
     out = {"round": round_no, "seed": seed, "points": points, "max_points": max_points,
            "max_score": found and points == max_points, "last_score_s": last, "notes": notes,
+           "points_lost": points_lost(text),
            "false_start": any("false start" in n.lower() for n in notes),
            "picks_attempted": sum(e.startswith(("picked ", "pick at ")) for _, e in events),
            "pick_failures": sum(bool(re.match(r"pick at .* failed", e)) for _, e in events),

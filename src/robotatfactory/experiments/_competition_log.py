@@ -1,5 +1,9 @@
 """Reading ``raf sim``'s log in the competition experiment: the final score report, the periodic status
-lines and the referee's rule notes."""
+lines and the referee's rule notes.
+
+The report is the referee's (competition/referee.py), the same rule in ``raf sim`` and ``raf referee``: the
+points of the parts resting in a correct place at the end (machine stages banked), the time the final score
+was reached and held, and the points lost on the way (parts knocked out of a correct place)."""
 from __future__ import annotations
 
 import math
@@ -23,6 +27,16 @@ def parse_sim_report(text: str) -> tuple[int, int, float, bool]:
             p, mx, t = m[-1]
             return int(p), int(mx), float(t) if t else math.nan, True
     return 0, -1, math.nan, False
+
+
+_LOST = re.compile(r"total: \d+ of \d+ points[^\n]*?; (\d+) point\(s\) lost on the way")
+
+
+def points_lost(text: str) -> int:
+    """Points the final report says were taken back during the run (parts knocked out of a correct place);
+    0 when it says none (or there is no report)."""
+    m = _LOST.findall(text)
+    return int(m[-1]) if m else 0
 
 
 def wait_for_report(log: Path, limit: float = 10.0, poll: float = 0.2) -> bool:

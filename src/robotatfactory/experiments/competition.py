@@ -207,7 +207,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             "round": round_no, "seed": seed, "points": rep.points, "max_points": rep.max_points,
             "max_score": rep.points == rep.max_points,
             "last_score_s": rep.last_score_time if rep.last_score_time is not None else math.nan,
-            "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
+            "points_lost": rep.lost, "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
             "picks_attempted": cnt.picks + cnt.pick_failures, "pick_failures": cnt.pick_failures,
             "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
             "no_path": cnt.no_path, "moved_before_start_cycles": moved_early,
@@ -331,6 +331,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_points"] = r["points"]
         out[f"{p}_max_points"] = r["max_points"]
         out[f"{p}_last_score_s"] = round(r["last_score_s"], 2)
+        out[f"{p}_points_lost"] = r.get("points_lost", 0)
         out[f"{p}_picks_attempted"] = r["picks_attempted"]
         out[f"{p}_pick_failures"] = r["pick_failures"]
         out[f"{p}_timeouts"] = r["timeouts"]
@@ -383,6 +384,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         knocked = sum(int(r.get("parts_knocked_out", 0)) for r in rs)
         out[f"{p}_parts_knocked_out"] = knocked
         out[f"{p}_parts_knocked_out_target_met"] = knocked == 0 and not any("error" in r for r in rs)
+        out[f"{p}_points_lost"] = sum(int(r.get("points_lost", 0)) for r in rs)  # the referee took them back
         out[f"{p}_pick_failures"] = sum(int(r.get("pick_failures", 0)) for r in rs)
         out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
         if mode.endswith("full_stack"):  # the agent's pose against the truth while it picks or places (issue: <= 2 cm)

@@ -560,14 +560,17 @@ class SimRunner:
                                   f"{self.config.bridge[1]}: {e}")
 
     def _max_reached(self, sim, after: float) -> bool:
-        """True once the run has had its maximum score for ``after`` simulation seconds (checked once per
-        simulated second, and every cycle once reached)."""
+        """True once the run has had its maximum score for ``after`` simulation seconds without losing it
+        (checked once per simulated second, and every cycle once reached)."""
+        if sim.referee is None:
+            return False
+        if self._max_at is None and sim.seq % max(1, round(1.0 / sim.robot.control_period)):
+            return False
+        rep = sim.referee.report(sim.time)
+        if not rep.started or rep.points < rep.max_points:
+            self._max_at = None  # not reached, or taken back (a part knocked out of its slot)
+            return False
         if self._max_at is None:
-            if sim.referee is None or sim.seq % max(1, round(1.0 / sim.robot.control_period)):
-                return False
-            rep = sim.referee.report(sim.time)
-            if not rep.started or rep.points < rep.max_points:
-                return False
             self._max_at = sim.time
         return sim.time - self._max_at >= after - 1e-9
 
