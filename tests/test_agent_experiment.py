@@ -22,16 +22,16 @@ def args(**kw):
 
 def test_round_1_one_seed_scores_the_maximum_and_writes_its_figure(tmp_path):
     # the simulator's default magnet: SimTwo's force (docs/simulator.md, "The electromagnet"; docs/agent.md)
-    res = competition.run(args(mode="bare_truth", rounds="1", seeds=1, jobs=1), tmp_path)
+    res = competition.run(args(mode="bare_truth", rounds="1", seeds=1, jobs=1, seed_set="tuned"), tmp_path)
     assert res["mode"] == "bare_truth" and "ground truth" in res["pose_source"]
     assert all(k.startswith("bare_truth_") for k in res if k.endswith("_target_met"))
-    assert res["bare_truth_r1_s0_points"] == res["bare_truth_r1_s0_max_points"] == 4
-    assert res["bare_truth_r1_max_score_target_met"] is True
-    assert res["bare_truth_r1_false_starts"] == 0 and res["bare_truth_r1_parts_pushed"] == 0
-    assert res["bare_truth_r1_collisions"] == 0 and res["bare_truth_r1_pick_failures"] == 0
-    t = res["bare_truth_r1_last_score_median_s"]
+    assert res["bare_truth_tuned_r1_s0_points"] == res["bare_truth_tuned_r1_s0_max_points"] == 4
+    assert res["bare_truth_tuned_r1_max_score_target_met"] is True
+    assert res["bare_truth_tuned_r1_false_starts"] == 0 and res["bare_truth_tuned_r1_parts_pushed"] == 0
+    assert res["bare_truth_tuned_r1_collisions"] == 0 and res["bare_truth_tuned_r1_pick_failures"] == 0
+    t = res["bare_truth_tuned_r1_last_score_median_s"]
     assert 10.0 < t < 300.0
-    assert res["bare_truth_r1_last_score_median_target_met"] == (t <= 60.0)
+    assert res["bare_truth_tuned_r1_last_score_median_target_met"] == (t <= 60.0)
     assert (tmp_path / "round1_seed0_bare_truth.png").stat().st_size > 10_000
     runs = json.loads((tmp_path / "runs.json").read_text())
     assert sum(text.startswith("picked") for _, text, _, _ in runs[0]["events"]) == 4
@@ -43,10 +43,10 @@ def test_a_missed_run_is_the_worst_time_and_fails_the_rate():
           "timeouts": 0, "collision_checks_hit": 0, "wall_s": 1.0}
     miss = dict(ok, seed=1, points=3, max_score=False, last_score_s=40.0)
     res = competition.summarize("bare_truth", [ok, miss, dict(ok, seed=2, last_score_s=55.0)])
-    assert res["bare_truth_r1_max_score_runs"] == 2
-    assert res["bare_truth_r1_max_score_target_met"] is False  # 1 miss in 3 > one tenth
-    assert res["bare_truth_r1_last_score_median_s"] == 55.0  # the miss counts as infinitely slow
-    assert res["bare_truth_r1_last_score_worst_s"] is None
+    assert res["bare_truth_tuned_r1_max_score_runs"] == 2
+    assert res["bare_truth_tuned_r1_max_score_target_met"] is False  # 1 miss in 3 > one tenth
+    assert res["bare_truth_tuned_r1_last_score_median_s"] == 55.0  # the miss counts as infinitely slow
+    assert res["bare_truth_tuned_r1_last_score_worst_s"] is None
 
 
 def test_bad_options_are_config_errors():
@@ -68,13 +68,13 @@ def test_the_full_stack_mode_names_itself_and_reports_the_pose_error_against_its
          "logs": "x", "pose_error_docking_max_m": 0.012, "pose_error_median_m": 0.001}
     res = competition.summarize("full_stack", [r, dict(r, seed=1, pose_error_docking_max_m=0.025)])
     assert res["mode"] == "full_stack" and "EKF" in res["pose_source"]
-    assert res["full_stack_r1_last_score_median_s"] == 84.3
-    assert res["full_stack_r1_last_score_median_target_met"] is False
-    assert res["full_stack_r1_collisions"] == 4 and res["full_stack_r1_parts_knocked_out_target_met"] is True
-    assert res["full_stack_r1_pose_error_docking_max_m"] == 0.025
-    assert res["full_stack_r1_pose_error_docking_max_target_met"] is False  # 2.5 cm > 2 cm in one run
+    assert res["full_stack_tuned_r1_last_score_median_s"] == 84.3
+    assert res["full_stack_tuned_r1_last_score_median_target_met"] is False
+    assert res["full_stack_tuned_r1_collisions"] == 4 and res["full_stack_tuned_r1_parts_knocked_out_target_met"] is True
+    assert res["full_stack_tuned_r1_pose_error_docking_max_m"] == 0.025
+    assert res["full_stack_tuned_r1_pose_error_docking_max_target_met"] is False  # 2.5 cm > 2 cm in one run
     res = competition.summarize("full_stack", [r, dict(r, seed=1, pose_error_docking_max_m=float("nan"))])
-    assert res["full_stack_r1_pose_error_docking_max_target_met"] is False  # a run without the measure fails it
+    assert res["full_stack_tuned_r1_pose_error_docking_max_target_met"] is False  # a run without the measure fails it
     with pytest.raises(ConfigError, match="bare_truth's"):  # raf sim runs its defaults: refused before any run
         competition.run(args(stack="full", rounds="1", seeds=1, pose_delay=2), None)
     with pytest.raises(ConfigError, match="--agent: .*drive.a_max must be"):  # raf agent takes --agent, checked now
@@ -106,6 +106,30 @@ def test_the_full_stack_reads_raf_sims_final_report_or_its_last_status_line(tmp_
 
 
 def test_analyse_measures_kept_runs_again_and_names_a_missing_one(tmp_path):
-    res = competition.run(args(mode="full_stack", analyse=str(tmp_path), rounds="1", seeds=1), None)
-    assert "no such run kept" in res["full_stack_r1_s0_error"]
-    assert res["full_stack_r1_max_score_target_met"] is False
+    res = competition.run(args(mode="full_stack", analyse=str(tmp_path), rounds="1", seeds=1, seed_set="tuned"), None)
+    assert "no such run kept" in res["full_stack_tuned_r1_s0_error"]
+    assert res["full_stack_tuned_r1_max_score_target_met"] is False
+
+
+def test_the_held_out_seeds_are_reported_apart_from_the_tuned_ones():
+    assert competition.pick_seeds("heldout") == list(range(100, 120))
+    assert competition.pick_seeds("tuned", 3) == [0, 1, 2]
+    assert competition.pick_seeds("both", 2) == [0, 1, 100, 101]
+    assert competition.pick_seeds("heldout", 2, first=50) == [50, 51]
+    assert [competition.seed_set_of(s) for s in (0, 9, 10, 100, 119, 120)] == [
+        "tuned", "tuned", "other", "heldout", "heldout", "other"]
+    with pytest.raises(ConfigError):
+        competition.pick_seeds("tuned", 0)
+    r = {"round": 2, "seed": 0, "points": 5, "max_points": 5, "max_score": True, "last_score_s": 60.0, "notes": [],
+         "false_start": False, "picks_attempted": 3, "pick_failures": 0, "timeouts": 0, "collision_checks_hit": 0,
+         "parts_pushed": 0, "wall_s": 1.0}
+    runs = [r, dict(r, seed=1, last_score_s=70.0), dict(r, seed=100, last_score_s=80.0, max_score=False, points=4),
+            dict(r, seed=101, last_score_s=90.0)]
+    res = competition.summarize("bare_truth", runs)
+    assert res["bare_truth_tuned_seeds"] == "0-1" and res["bare_truth_heldout_seeds"] == "100-101"
+    assert res["bare_truth_tuned_r2_max_score_runs"] == 2 and res["bare_truth_tuned_r2_last_score_median_s"] == 65.0
+    assert res["bare_truth_heldout_r2_max_score_runs"] == 1 and res["bare_truth_heldout_r2_s100_points"] == 4
+    assert "bare_truth_r2_max_score_runs" not in res and "heldout: 100-119" in res["seed_sets"]
+    assert all(any(k.startswith(p) for k in competition.TARGETS) for p in ("bare_truth_heldout_r2", "full_stack_tuned_r1"))
+    text = competition.table("bare_truth", [dict(x, time_split={}) for x in runs])
+    assert "tuned 0-1" in text and "heldout 100-101" in text

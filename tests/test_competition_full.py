@@ -56,15 +56,15 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
     """raf sim + bridge + localize + agent + record on a private graph: the maximum, the pose error while
     docking within the issue's 2 cm, nothing pushed, the figure. About 70 s (realtime)."""
     r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "competition", "--rounds", "1",
-                        "--seeds", "1", "--out", str(tmp_path)], capture_output=True, text=True, timeout=400)
+                        "--seed-set", "tuned", "--seeds", "1", "--out", str(tmp_path)], capture_output=True, text=True, timeout=400)
     res = json.loads((tmp_path / "results.json").read_text())  # written even when a target is missed
     assert res["mode"] == "full_stack" and "EKF" in res["pose_source"], r.stderr[-2000:]
     runs = json.loads((tmp_path / "runs.json").read_text())
     assert runs[0]["middleware"] == middleware and "error" not in runs[0], runs[0].get("error")
-    assert res["full_stack_r1_s0_points"] == res["full_stack_r1_s0_max_points"] == 4, runs[0]["logs"]
-    assert res["full_stack_r1_false_starts"] == 0 and res["full_stack_r1_parts_knocked_out"] == 0
-    assert 0 < res["full_stack_r1_s0_pose_error_docking_max_m"] <= 0.02
-    assert res["full_stack_r1_pose_error_docking_max_target_met"] is True
+    assert res["full_stack_tuned_r1_s0_points"] == res["full_stack_tuned_r1_s0_max_points"] == 4, runs[0]["logs"]
+    assert res["full_stack_tuned_r1_false_starts"] == 0 and res["full_stack_tuned_r1_parts_knocked_out"] == 0
+    assert 0 < res["full_stack_tuned_r1_s0_pose_error_docking_max_m"] <= 0.02
+    assert res["full_stack_tuned_r1_pose_error_docking_max_target_met"] is True
     assert runs[0]["pose_samples_docking"] > 50  # the pose was recorded while docking (25 Hz)
     # the loop's latency was measured: one or two control cycles
     assert 0.0 <= runs[0]["command_delay_median_s"] <= 0.12

@@ -16,8 +16,13 @@ Mode (every key and the table carry it, ``mode`` key):
   late and noisy like the whole stack's. Faster than real time (about 1.5 s of wall time per run); the
   pose-error target is not measurable here and reported as such.
 
-Per run (keys ``{mode}_r{round}_s{seed}_...``): score and maximum score, time of the last scoring
-delivery, referee rule notes, picks attempted / failed, places, timeouts, collisions of the robot's outline
+Seeds (``--seed-set``): ``heldout`` (the default, seeds 100-119: never used while the agent was tuned),
+``tuned`` (0-9, the seeds it was tuned on through issues 11-19: in-sample figures) or ``both``, reported
+separately: every key carries the set, ``{mode}_{set}_r{round}_...`` (``other`` for a seed in neither, with
+``--first-seed``), and the table has a line per set and round.
+
+Per run (keys ``{mode}_{set}_r{round}_s{seed}_...``): score and maximum score, the referee's delivery time
+(when the final score was reached and held), points the referee took back (``points_lost``), referee rule notes, picks attempted / failed, places, timeouts, collisions of the robot's outline
 with walls or ribs, or beyond the floor's 2 cm overhang allowance (``floor``), checked every 5 cycles, parts pushed (a part not on the magnet moving 2 mm - 5 cm
 within 5 cycles: a push, not a machine's teleport), and the wheel odometry's error against the truth over
 each second (``odometry_error_per_m``: the sum of those errors over the distance driven; slip that ground
@@ -54,20 +59,57 @@ HELP = ("the autonomous robot plays rounds 1-3 over seeds on the whole stack (or
 MODES = ("bare_truth", "full_stack")
 SIMTWO_MODE = "simtwo_full_stack"  # full_stack on the real SimTwo (--simulator simtwo): the keys' prefix
 TIME_TARGETS = {1: 60.0, 2: 80.0, 3: 120.0}  # s, median time of the last scoring delivery (issue 11)
+#: the seeds the agent was tuned on (issues 11-19) and a held-out set it never saw (issue 20): every result key
+#: says which (``{mode}_{set}_r{round}_...``); a seed in neither is ``other``
+TUNED_SEEDS = range(0, 10)
+HELDOUT_SEEDS = range(100, 120)
+SEED_SETS = ("tuned", "heldout", "both")
 POSE_TARGET = 0.02  # m: the agent's pose input against the truth while it picks or places (issue 11)
 POSE_SOURCE = {"bare_truth": "pose = ground truth, bare in-process simulator, no bridge/EKF",
                "full_stack": "pose = EKF, raf sim + raf bridge + raf localize + raf agent",
                SIMTWO_MODE: "pose = EKF, the real SimTwo + raf bridge + raf localize + raf agent, raf referee"}
 TARGETS = {}
 for _m in (*MODES, SIMTWO_MODE):
-    for _r, _t in TIME_TARGETS.items():
-        TARGETS[f"{_m}_r{_r}_max_score_rate"] = (">= 0.8 (4 of 5 seeds: issue 19)" if _m == SIMTWO_MODE
-                                                 else ">= 0.9 (9 of 10 seeds)")
-        TARGETS[f"{_m}_r{_r}_last_score_median_s"] = f"<= {_t:.0f} s (simulated)"
-        TARGETS[f"{_m}_r{_r}_false_starts"] = "== 0"
-        TARGETS[f"{_m}_r{_r}_parts_knocked_out"] = "== 0 (out of their slots)"
-        if _m != "bare_truth":
-            TARGETS[f"{_m}_r{_r}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
+    for _set in ("tuned", "heldout", "other"):
+        for _r, _t in TIME_TARGETS.items():
+            _p = f"{_m}_{_set}_r{_r}"
+            TARGETS[f"{_p}_max_score_rate"] = (">= 0.8 (4 of 5 seeds: issue 19)" if _m == SIMTWO_MODE
+                                               else ">= 0.9 (9 of 10 seeds)")
+            TARGETS[f"{_p}_last_score_median_s"] = f"<= {_t:.0f} s (simulated)"
+            TARGETS[f"{_p}_false_starts"] = "== 0"
+            TARGETS[f"{_p}_parts_knocked_out"] = "== 0 (out of their slots)"
+            if _m != "bare_truth":
+                TARGETS[f"{_p}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
+
+
+def seed_set_of(seed: int) -> str:
+    """``tuned`` (the seeds the agent was tuned on), ``heldout`` (never seen while tuning) or ``other``."""
+    return "tuned" if seed in TUNED_SEEDS else "heldout" if seed in HELDOUT_SEEDS else "other"
+
+
+def _span(seeds) -> str:
+    seeds = sorted(seeds)
+    if seeds and seeds == list(range(seeds[0], seeds[-1] + 1)):
+        return f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+    return ",".join(str(x) for x in seeds)
+
+
+def pick_seeds(seed_set: str = "heldout", n: int | None = None, first: int | None = None) -> list[int]:
+    """The seeds to run: ``first``..``first+n-1`` when ``first`` is given (each then labelled by
+    :func:`seed_set_of`), else the first ``n`` of the set (all of it when ``n`` is None; ``both``: of each)."""
+    from ..errors import ConfigError
+
+    if n is not None and n < 1:
+        raise ConfigError("--seeds must be at least 1")
+    if first is not None:
+        if first < 0:
+            raise ConfigError("--first-seed must be >= 0")
+        return list(range(first, first + (10 if n is None else n)))
+    if seed_set not in SEED_SETS:
+        raise ConfigError(f"--seed-set {seed_set!r}: choose one of {', '.join(SEED_SETS)}")
+    sets = (TUNED_SEEDS, HELDOUT_SEEDS) if seed_set == "both" else \
+        (TUNED_SEEDS,) if seed_set == "tuned" else (HELDOUT_SEEDS,)
+    return [s for rng in sets for s in list(rng)[:n]]
 
 def add_arguments(parser) -> None:
     parser.add_argument("--mode", choices=MODES, default="full_stack",
@@ -86,8 +128,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--stack", choices=("bare", "full"), default=None,
                         help="same as --mode bare_truth / full_stack")
     parser.add_argument("--rounds", default="1,2,3", help="comma-separated rounds (default 1,2,3)")
-    parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 per round (default 10)")
-    parser.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seed-set", choices=SEED_SETS, default="heldout",
+                        help=f"which seeds: heldout (default: {_span(HELDOUT_SEEDS)}, never used while tuning the "
+                             f"agent), tuned ({_span(TUNED_SEEDS)}, the seeds it was tuned on: in-sample figures) or "
+                             "both, reported separately; every key says which ({mode}_{set}_r{round}_...)")
+    parser.add_argument("--seeds", type=int, default=None,
+                        help="the first N seeds of the set (of each set with both; default: all of it)")
+    parser.add_argument("--first-seed", type=int, default=None,
+                        help="run seeds FIRST..FIRST+N-1 instead of a set (N = --seeds, default 10); each is "
+                             "labelled tuned, heldout or other")
     parser.add_argument("--jobs", type=int, default=2, help="runs at once (default 2: the machine's cores)")
     parser.add_argument("--limit", type=float, default=300.0, help="simulated seconds per run (default 300)")
     parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
@@ -320,11 +369,17 @@ def _nan_last(x: float) -> float:
 
 
 def summarize(mode: str, runs: list[dict]) -> dict:
-    """Flat keys per run and per round (see the module docstring)."""
+    """Flat keys per run (``{mode}_{set}_r{round}_s{seed}_...``) and per set and round
+    (``{mode}_{set}_r{round}_...``), the set being :func:`seed_set_of` the seed (see the module docstring)."""
     out: dict = {"mode": mode, "pose_source": POSE_SOURCE[mode]}
-    rounds = sorted({r["round"] for r in runs})
+    groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
+                    key=lambda g: (("tuned", "heldout", "other").index(g[0]), g[1]))
+    for k in dict.fromkeys(g[0] for g in groups):
+        out[f"{mode}_{k}_seeds"] = _span({r["seed"] for r in runs if seed_set_of(r["seed"]) == k})
+    out["seed_sets"] = (f"tuned: {_span(TUNED_SEEDS)} (the agent was tuned on them: in-sample); heldout: "
+                        f"{_span(HELDOUT_SEEDS)} (never used while tuning); other: any other seed")
     for r in sorted(runs, key=lambda r: (r["round"], r["seed"])):
-        p = f"{mode}_r{r['round']}_s{r['seed']}"
+        p = f"{mode}_{seed_set_of(r['seed'])}_r{r['round']}_s{r['seed']}"
         if "error" in r:
             out[f"{p}_error"] = r["error"]
             continue
@@ -358,9 +413,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_odometry_error_per_m"] = round(r["odometry_error_per_m"], 4)
         if r["notes"]:
             out[f"{p}_notes"] = "; ".join(r["notes"])
-    for rn in rounds:
-        rs = [r for r in runs if r["round"] == rn]
-        p = f"{mode}_r{rn}"
+    for k, rn in groups:
+        rs = [r for r in runs if r["round"] == rn and seed_set_of(r["seed"]) == k]
+        p = f"{mode}_{k}_r{rn}"
         n = len(rs)
         ok = sum(bool(r["max_score"]) for r in rs)
         times = [r["last_score_s"] for r in rs if r["max_score"]]
@@ -412,14 +467,17 @@ def summarize(mode: str, runs: list[dict]) -> dict:
 def table(mode: str, runs: list[dict]) -> str:
     bare = mode == "bare_truth"
     lines = [f"competition, mode {mode} ({POSE_SOURCE[mode]})",
-             f"{'round':>5} {'runs':>4} {'max score':>9} {'median s':>9} {'worst s':>8} {'target s':>8} "
+             f"{'seeds':<14} {'round':>5} {'runs':>4} {'max score':>9} {'median s':>9} {'worst s':>8} {'target s':>8} "
              f"{'pick fail':>9} {'knocked':>7} {'pushed':>6} {'notes':>5} {'collide':>7} {'odo mm/m':>8}"
              + ("" if bare else f" {'pose err docking max mm':>23}")]
-    for rn in sorted({r["round"] for r in runs}):
-        rs = [r for r in runs if r["round"] == rn]
+    groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
+                    key=lambda g: (("tuned", "heldout", "other").index(g[0]), g[1]))
+    for k, rn in groups:
+        rs = [r for r in runs if r["round"] == rn and seed_set_of(r["seed"]) == k]
         ts = [r["last_score_s"] if r["max_score"] else math.inf for r in rs]
         med, worst = statistics.median(ts), max(ts)
-        lines.append(f"{rn:>5} {len(rs):>4} {sum(bool(r['max_score']) for r in rs):>5}/{len(rs):<3} "
+        label = f"{k} {_span({r['seed'] for r in rs})}"
+        lines.append(f"{label:<14} {rn:>5} {len(rs):>4} {sum(bool(r['max_score']) for r in rs):>5}/{len(rs):<3} "
                      f"{med:>9.1f} {worst:>8.1f} {TIME_TARGETS.get(rn, math.nan):>8.0f} "
                      f"{sum(int(r.get('pick_failures', 0)) for r in rs):>9} "
                      f"{sum(int(r.get('parts_knocked_out', 0)) for r in rs):>7} "
@@ -432,10 +490,11 @@ def table(mode: str, runs: list[dict]) -> str:
     if bare:
         acts = ("wait_start", "decide", "drive", "turn", "final_turn", "dock_approach", "dock_wait", "dock_back")
         lines.append("time split, median s per run (RoundAgent.activity): " + " ".join(f"{a:>13}" for a in acts))
-        for rn in sorted({r["round"] for r in runs}):
-            sp = [r["time_split"] for r in runs if r["round"] == rn and r.get("time_split")]
+        for k, rn in groups:
+            sp = [r["time_split"] for r in runs if r["round"] == rn and seed_set_of(r["seed"]) == k
+                  and r.get("time_split")]
             if sp:
-                lines.append(f"  round {rn}{'':>44}" + " ".join(
+                lines.append(f"  {k:<7} round {rn}{'':>36}" + " ".join(
                     f"{statistics.median(s.get(a, 0.0) for s in sp):>13.1f}" for a in acts))
     return "\n".join(lines)
 
@@ -505,15 +564,15 @@ def run(args, out_dir: Path | None) -> dict:
         raise ConfigError(f"--rounds {args.rounds!r}: expected e.g. 1,2,3") from None
     if not rounds or any(r not in (1, 2, 3) for r in rounds):
         raise ConfigError(f"--rounds {args.rounds!r}: rounds are 1, 2 and 3")
-    if args.seeds < 1:
-        raise ConfigError("--seeds must be at least 1")
+    seeds = pick_seeds(getattr(args, "seed_set", "heldout"), getattr(args, "seeds", None),
+                       getattr(args, "first_seed", None))
+    firsts = {min(s for s in seeds if seed_set_of(s) == k) for k in {seed_set_of(s) for s in seeds}}
     field_name = getattr(args, "field", None)
     if simulator == "simtwo":  # SimTwo's scene is not the rules' field
         from ..field import DEFAULT_FIELD
         from ..simtwo_linux.scene import field_for_simtwo
 
         field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
-    first = int(args.first_seed)
     agent_items = tuple(getattr(args, "agent", None) or ())
     agent_options = parse_agent(agent_items)
     sim_options = parse_sim(getattr(args, "sim", None))
@@ -526,9 +585,9 @@ def run(args, out_dir: Path | None) -> dict:
     cmd_delay = int(getattr(args, "cmd_delay", 0))
     if delay < 0 or cmd_delay < 0:
         raise ConfigError("--pose-delay and --cmd-delay must be >= 0")
-    specs = [(r, s, float(args.limit), field_name, out_dir is not None and s == first, agent_options,
+    specs = [(r, s, float(args.limit), field_name, out_dir is not None and s in firsts, agent_options,
               sim_options, noise, delay, bool(getattr(args, "pose_predict", False)), cmd_delay)
-             for r in rounds for s in range(first, first + args.seeds)]
+             for r in rounds for s in seeds]
     t0 = time.perf_counter()
     jobs = max(1, int(args.jobs))
     if simulator == "simtwo":
@@ -565,6 +624,8 @@ def run(args, out_dir: Path | None) -> dict:
         if "error" in r:
             print(f"round {r['round']} seed {r['seed']}: {r['error']}", file=sys.stderr)
     out = summarize(mode, runs)
+    out["seed_set"] = (f"seeds {_span(seeds)} (--first-seed)" if getattr(args, "first_seed", None) is not None
+                       else getattr(args, "seed_set", "heldout"))
     out["agent_settings"] = json.dumps(agent_options) if agent_options else "defaults"
     out["sim_settings"] = json.dumps(sim_options) if sim_options else "defaults"
     out["pose_noise_m_rad"] = ",".join(f"{x:g}" for x in noise)
