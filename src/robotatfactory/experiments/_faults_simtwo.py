@@ -8,8 +8,9 @@ SimTwo's SensorFrames carry its ground truth, so the proxy's record is the truth
 
 What the real SimTwo cannot do, and how the result says so (:data:`NOT_APPLICABLE`, :data:`DIFFERENCES`):
 
-* no ``--fast`` and no lockstep (it runs in real time and never waits for a reply): the soak (one simulated
-  hour of ``raf sim --fast --lockstep``) is not run; its targets are listed as not applicable, its keys absent;
+* no control channel: the soak (:mod:`._faults_soak`: rounds one after another, the simulation paused and
+  reset to the next round and seed through ``raf sim``'s control channel) is not run; its targets are listed
+  as not applicable, its keys absent;
 * no start pose option: the robot is teleported through the bridge's ``sim/set_robot_pose`` (after the
   start and after the restart);
 * no seed: ``--seed`` seeds the fuzz and the proxy only;
@@ -20,7 +21,7 @@ What the real SimTwo cannot do, and how the result says so (:data:`NOT_APPLICABL
   timeout plus one cycle, 0.54 s) is judged as on the stand-in;
 * its camera publishes only while its Cameras window is open: after a restart the images come back once
   ``raf simtwo run`` has reopened it (``restart_sim_image_back_s``);
-* no control channel: the campaign does not use one on either simulator (``raf sim --no-server``).
+* the fuzz, loss and restart parts use no control channel on either simulator (``raf sim --no-server``).
 """
 from __future__ import annotations
 
@@ -30,22 +31,25 @@ import signal
 import time
 from pathlib import Path
 
+from ._faults_soak import TARGETS as SOAK_TARGETS
+
 MODE = "real_simtwo"  # the result's mode and the prefix of its keys (as raf experiment localization's)
 PARTS = ("fuzz", "loss", "restarts")
 NOT_APPLICABLE = {
-    "soak": "one simulated hour of raf sim --fast --lockstep: SimTwo runs only in real time and never waits "
-            "for a reply (no --fast, no lockstep)",
+    "soak": "the soak plays round after round, pausing the simulation and resetting it to the next round and "
+            "seed through raf sim's control channel: SimTwo has no control channel (its sim/reset puts the robot "
+            "back only; the parts and its clock run on)",
 }
 #: the targets of the parts SimTwo cannot run (reported as not applicable, never as met)
-TARGETS_NOT_APPLICABLE = ("soak_rss_growth_max_pct", "soak_queue_lag_late_s")
+TARGETS_NOT_APPLICABLE = tuple(SOAK_TARGETS)
 DIFFERENCES = ("start poses by teleport (sim/set_robot_pose); no simulator seed (--seed: the fuzz and the proxy "
                "only); restart_bridge_stop_s from control.pas's own log line: its timeout stops the wheels in the "
                "first 40 ms cycle more than 500 ms after the last valid command (TimeMs - LastValidMs > 500: 520 "
                "ms, as raf sim); images come back once raf simtwo run has reopened SimTwo's "
                "Cameras window; a SimTwo restart takes seconds (restart_sim_process_start_to_first_frame_s)")
 HELP = ("standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, field simtwo2022, the robot "
-        "teleported to each part's start; keys start with " + MODE + "). SimTwo has no --fast and no lockstep, "
-        "so the soak is not run (its targets are reported as not applicable); the command timeout is read "
+        "teleported to each part's start; keys start with " + MODE + "). SimTwo has no control channel to "
+        "reset rounds, so the soak is not run (its targets are reported as not applicable); the command timeout is read "
         "from control.pas's own log line")
 TIMEOUT_RE = re.compile(r"raf: no valid command for (\d+) ms: wheels stopped")
 
