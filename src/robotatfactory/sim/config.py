@@ -5,7 +5,8 @@ import math
 from dataclasses import dataclass, field
 
 from ..errors import ConfigError
-from ..settings import setting
+from ..settings import section, setting
+from .perturb import Perturb
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,12 @@ class SimConfig:
       (s), ``start_after`` (s of simulation time before the run may start; the factory server says STOP
       until then) and ``round_duration`` (s) configure it.
     * ``extra_parts``: more parts placed by hand (they take part in physics, LIDAR, camera and magnet).
+    * ``perturb``: a world that is not the map (:mod:`robotatfactory.sim.perturb`): the field's fixtures and
+      floor sheets displaced (``field_mm``), the parts put into their slots with an error (``parts_mm``,
+      ``parts_deg``), the robot started off its nominal pose (``start_cm``, ``start_deg``), the rendering
+      camera's intrinsics and mount off the robot file's (``camera_pct``, ``camera_px``, ``camera_deg``);
+      seeded by round and seed; all 0 (off) by default. Only the simulated world changes: whatever reads the
+      map or the robot file (agent, localization, bridge) keeps the nominal ones.
 
     SimTwo's behaviours are the defaults; the idealisations are named options (docs/simulator.md):
 
@@ -122,6 +129,9 @@ class SimConfig:
     magnet: str = setting("force", "force (SimTwo's electromagnet: a 5 N pull along one ray; a part can hang "
                                    "askew, slip off or be lost) or weld (the idealisation: never lost)",
                           choices=MAGNETS)
+    perturb: Perturb = section(Perturb, "a world that is not the map (issue 20; sim/perturb.py): the field's "
+                                        "fixtures, the parts, the start pose and the rendering camera drawn off "
+                                        "their nominal values, seeded per round and seed; all 0 (off) by default")
 
     def __post_init__(self):
         if self.start_pose is not None:

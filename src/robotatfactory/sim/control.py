@@ -250,7 +250,8 @@ class SimControl:
 
         try:
             config = dataclasses.replace(sim.config, **changes)
-            new = Simulator(sim.field, sim.robot, config, reference_drive=sim.reference_drive)
+            # the nominal map and robot: the new simulator draws its own world from them (sim/perturb.py)
+            new = Simulator(sim.nominal_field, sim.nominal_robot, config, reference_drive=sim.reference_drive)
         except (ConfigError, ValueError, KeyError) as e:
             raise ControlError("reset_failed", f"{e}") from None
         self.runner.replace_sim(new)

@@ -13,6 +13,7 @@ Units: metres, radians, seconds, volts, amperes, newton-metres. Poses are in the
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
@@ -57,15 +58,27 @@ class Simulator:
     def __init__(self, field: Field, robot: RobotSpec, config: SimConfig | None = None, *,
                  offscreen: tuple[int, int] | None = None, reference_drive: bool = False):
         self.reference_drive = reference_drive  # True: the plain (slow) motor/controller loop, for tests
+        self.config = config = config or SimConfig()
+        # the map and the robot file as given; with config.perturb the simulated world departs from them
+        # (sim/perturb.py): self.field and self.robot are then the world's (the factory and the referee too)
+        self.nominal_field, self.nominal_robot = field, robot
+        self.world = None
+        scene_config = config
+        if config.perturb.any:
+            from .perturb import World
+
+            self.world = World.draw(field, robot, config.perturb, config.round_no, config.seed, config.start_pose)
+            field, robot = self.world.field, self.world.robot
+            if self.world.start is not None and config.robots == 1:
+                scene_config = dataclasses.replace(config, start_pose=self.world.start)
         self.field = field
         self.robot = robot
-        self.config = config = config or SimConfig()
         self.factory = self.referee = self.setup = None
         parts = self._initial_parts()
         cam = robot.camera
         off = offscreen or (cam.width, cam.height)
         off = (max(off[0], cam.width), max(off[1], cam.height))
-        spec, self.info = sc.build_spec(field, robot, config, parts, offscreen=off)
+        spec, self.info = sc.build_spec(field, robot, scene_config, parts, offscreen=off)
         eq_names: list[dict[int, str]] = []  # per robot: part id -> its magnet's weld
         for names in self.info.robots:
             per = {}
@@ -233,8 +246,15 @@ class Simulator:
                                          processing_delay=cfg.processing_delay, duration=cfg.round_duration)
             self.factory = Factory(self.field, self.setup)
             self.referee = Referee(self.factory)
+            p = cfg.perturb
             for pid, ptype, slot in self.factory.initial_parts():
-                parts.append((int(pid), ptype.letter, slot.xy[0], slot.xy[1], slot.facing))
+                if p.parts_mm or p.parts_deg:  # put in by hand, off the slot's centre (sim/perturb.py)
+                    from .perturb import part_pose
+
+                    x, y, facing = part_pose(self.field, slot, int(pid), p, cfg.round_no, cfg.seed)
+                else:
+                    x, y, facing = slot.xy[0], slot.xy[1], slot.facing
+                parts.append((int(pid), ptype.letter, x, y, facing))
         next_id = max([p[0] for p in parts], default=0) + 1
         for k, pp in enumerate(cfg.extra_parts):
             parts.append((next_id + k, pp.letter, pp.x, pp.y, pp.facing))
@@ -889,7 +909,7 @@ class RobotUnit(Simulator):
     Simulator (``pose``, ``held``, ``take_frames()``, ``render_camera()``...); the scene advances with the
     main simulator's :meth:`Simulator.step_all`."""
 
-    _SHARED = ("reference_drive", "field", "robot", "config", "factory", "referee", "setup", "info", "spec",
+    _SHARED = ("reference_drive", "field", "robot", "nominal_field", "nominal_robot", "world", "config", "factory", "referee", "setup", "info", "spec",
                "model", "data", "dt", "steps_per_cycle", "parts", "_plate_geoms", "_part_geoms", "motor_params",
                "controller_params", "_ctrl_every", "speed_control", "pid_params", "_magnet_groups",
                "_contact_groups", "units")
