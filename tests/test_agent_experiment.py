@@ -133,3 +133,32 @@ def test_the_held_out_seeds_are_reported_apart_from_the_tuned_ones():
     assert all(any(k.startswith(p) for k in competition.TARGETS) for p in ("bare_truth_heldout_r2", "full_stack_tuned_r1"))
     text = competition.table("bare_truth", [dict(x, time_split={}) for x in runs])
     assert "tuned 0-1" in text and "heldout 100-101" in text
+
+
+def test_perturbed_world_and_lossy_link_are_named_in_every_result():
+    assert competition.parse_loss("0.05") == pytest.approx((0.05, 0.01, 0.01))
+    assert competition.parse_loss("0.1,0,0.02") == (0.1, 0.0, 0.02) and competition.parse_loss("0") == (0, 0, 0)
+    for bad in ("x", "1.5", "0.5,0.5,0.1", "0.1,0.2"):
+        with pytest.raises(ConfigError, match="--loss"):
+            competition.parse_loss(bad)
+    with pytest.raises(ConfigError, match="whole stack only"):  # no link to lose datagrams on in bare_truth
+        competition.run(args(mode="bare_truth", rounds="1", seeds=1, loss="0.05"), None)
+    with pytest.raises(ConfigError, match="bare_truth's"):  # the whole stack takes perturb.NAME only
+        competition.run(args(mode="full_stack", rounds="1", seeds=1, sim=["magnet=weld"]), None)
+    res = competition.run(args(mode="bare_truth", rounds="1", seeds=1, jobs=1, perturb=True,
+                               sim=["perturb.field_mm=1"]), None)
+    assert res["perturb_field_mm"] == 1.0 and res["perturb_parts_deg"] == 2.0  # --sim wins over --perturb
+    assert res["perturb"].startswith("field 1 mm") and res["link"] == "lossless loopback"
+    assert 0 < res["bare_truth_heldout_r1_s100_world_field_slot_max_mm"] < 10
+    assert res["bare_truth_heldout_r1_s100_world_start_error_cm"] > 0
+    plain = competition.run(args(mode="bare_truth", rounds="1", seeds=1, jobs=1), None)
+    assert plain["perturb"] == "none" and not any("_world_" in k for k in plain)
+
+
+def test_the_full_stack_reads_the_worlds_draw_from_raf_sims_log(tmp_path):
+    from robotatfactory.experiments._competition_full import analyse
+
+    (tmp_path / "sim.log").write_text('raf sim: world perturbed: field 2 mm, ...; offsets {"field_slot_max_mm": 4.2}\n'
+                                      + REPORT)
+    r = analyse(1, 100, tmp_path, tmp_path / "none.jsonl", tmp_path / "none.bag", False, None, 1.0, "ros1")
+    assert r["world"] == {"field_slot_max_mm": 4.2} and r["points"] == 3 and "no ground-truth trace" in r["error"]

@@ -245,6 +245,12 @@ def run(args) -> int:
         extras.append(f"magnet {sim.config.magnet}")  # force (SimTwo's) or weld (the idealisation)
         print(f"raf sim: field {field.name}, commands on udp {host}:{port}, frames to udp {c.bridge[0]}:{c.bridge[1]}, "
               f"{c.mode}{' lockstep' if c.lockstep else ''}; " + "; ".join(extras), flush=True)
+        if sim.world is not None:  # a world that is not the map (sim/perturb.py): sizes and this run's draw
+            import json
+
+            print(f"raf sim: world perturbed: {sim.config.perturb.describe()}; offsets "
+                  f"{json.dumps(sim.world.offsets(sim.nominal_field, sim.nominal_robot, sim.config.start_pose))}",
+                  flush=True)
         result = runner.run()
     finally:
         for s, h in old.items():

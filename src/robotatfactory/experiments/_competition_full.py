@@ -116,13 +116,18 @@ def _udp_port() -> int:
 
 def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path: bool = False,
                     field_name: str | None = None, simulator: str = "standin", localize: tuple[str, ...] = (),
-                    agent: tuple[str, ...] = ()) -> dict:
+                    agent: tuple[str, ...] = (), sim_set: tuple[str, ...] = (),
+                    loss: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict:
     """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
     :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``).
 
     ``simulator="simtwo"``: the real SimTwo (``raf simtwo run``, the round's parts in its scene, field
     ``simtwo2022``) instead of ``raf sim``, and ``raf referee`` (the factory, the machines, the score and the
-    trace from the part positions SimTwo reports) instead of raf sim's own; the referee ends the run."""
+    trace from the part positions SimTwo reports) instead of raf sim's own; the referee ends the run.
+
+    ``sim_set``: raf sim ``--set`` items (the world's perturbation, ``perturb.field_mm=2``); ``loss``: (drop,
+    duplicate, reorder) probabilities per datagram on the UDP link between the simulator and the bridge, both
+    ways, through the faults experiment's proxy (:class:`._faults_net.Proxy`) when any is > 0."""
     from ..ros.master import private_graph
     from ..ros.mw import bag_format
     from ..ros.mw import name as middleware
@@ -148,7 +153,15 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     wall0 = time.perf_counter()
     graph = private_graph(mw).start()
     procs = Procs(log_dir, watch=("bridge", "localize", "agent", "record"))
+    proxy = None
+    frames_to = bridge_port  # where the simulator sends its frames: the bridge, or the lossy link to it
     try:
+        if any(loss):
+            from ._faults_net import LOCAL, Proxy
+
+            proxy = Proxy((LOCAL, bridge_port), seed=1000 * round_no + seed)
+            proxy.set_faults(*loss)
+            frames_to = proxy.port
         env = graph.env()
         procs.raf("bridge", *field_args, "bridge", "--port", str(bridge_port), "--camera",
                   f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", env=env)
@@ -166,16 +179,16 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         _wait_logged(procs, "agent", "running", 60.0)
         if simtwo:
             procs.raf("sim", *field_args, "simtwo", "run", "--port", str(sim_port), "--bridge",
-                      f"127.0.0.1:{bridge_port}", "--camera-port", str(cam_port), "--round", str(round_no), "--seed",
+                      f"127.0.0.1:{frames_to}", "--camera-port", str(cam_port), "--round", str(round_no), "--seed",
                       str(seed), "--duration", str(FULL_DURATION[round_no] * 1.5 + 60.0), env=env, may_exit=True)
             _wait_logged(procs, "sim", "[simtwo] running", 120.0)
         else:
             procs.raf("sim", *field_args, "sim", "--round", str(round_no), "--seed", str(seed),
                       "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
-                      "--port", str(sim_port), "--bridge", f"127.0.0.1:{bridge_port}", "--camera-bind",
+                      "--port", str(sim_port), "--bridge", f"127.0.0.1:{frames_to}", "--camera-bind",
                       f"tcp://127.0.0.1:{cam_port}", "--server-port", str(server_port), "--no-control",
                       "--trace", str(trace_path), "--end-after-max", str(END_AFTER_MAX), "--status-every", "5",
-                      env=env, may_exit=True)
+                      *[a for x in sim_set for a in ("--set", x)], env=env, may_exit=True)
         ender = "referee" if simtwo else "sim"  # the process that ends the run and writes the final report
         sim = procs.get(ender)
         started = time.monotonic()
@@ -196,8 +209,14 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     finally:
         procs.stop_all()
         graph.cleanup()
-    return analyse(round_no, seed, log_dir, trace_path, bag_path, record_path, field_name,
-                   wall_s=time.perf_counter() - wall0, middleware=mw, report_log=f"{ender}.log")
+        if proxy is not None:
+            proxy.close()
+    out = analyse(round_no, seed, log_dir, trace_path, bag_path, record_path, field_name,
+                  wall_s=time.perf_counter() - wall0, middleware=mw, report_log=f"{ender}.log")
+    if proxy is not None:  # what the lossy link did (both directions)
+        out["link"] = {k: int(proxy.counts.get(k, 0)) for k in ("frames", "replies", "dropped", "duplicated",
+                                                               "reordered")}
+    return out
 
 
 def _read(path: Path) -> str:
@@ -227,6 +246,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     agent_log = _read(log_dir / "agent.log")
     points, max_points, last, found = parse_sim_report(text)
     notes = notes_of(text)
+    world = re.findall(r"raf sim: world perturbed: .*?; offsets (\{.*\})", text)
     events = agent_events(agent_log)
     out = {"round": round_no, "seed": seed, "points": points, "max_points": max_points,
            "max_score": found and points == max_points, "last_score_s": last, "notes": notes,
@@ -239,6 +259,13 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
            "timeouts": sum(e.startswith("timeout: ") for _, e in events), "no_path": 0,
            "agent_done": any(e == "task: done" for _, e in events), "wall_s": wall_s, "logs": str(log_dir),
            "middleware": middleware}
+    if world:  # this run's draw of a world that is not the map (raf sim logs it)
+        import json
+
+        try:
+            out["world"] = json.loads(world[-1])
+        except ValueError:
+            pass
     field, robot = (load_field(field_name) if field_name else load_field()), load_robot()
     try:
         trace = read_trace(trace_path)

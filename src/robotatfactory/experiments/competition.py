@@ -142,6 +142,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
                         help="a SimConfig setting of the bare stand-in (repeatable), e.g. magnet=weld where the "
                              "simulator has that option; the default is the simulator's own default")
+    parser.add_argument("--perturb", action="store_true",
+                        help="a world that is not the map (raf sim's perturb settings, sim/perturb.py), the issue's "
+                             "'a few' of each: " + _perturb_help() + "; --sim perturb.NAME=VALUE changes one; every "
+                             "mode (the whole stack gives them to raf sim); the results name the sizes")
+    parser.add_argument("--loss", default="0", metavar="DROP[,DUP,REORDER]",
+                        help="full_stack: a lossy UDP link between the simulator and the bridge (the faults "
+                             "experiment's proxy, both ways): each datagram dropped with probability DROP, "
+                             "duplicated with DUP, held back behind the next with REORDER (one number: DUP and "
+                             "REORDER are DROP/5 each), e.g. 0.05; default 0 (no proxy)")
     parser.add_argument("--pose-noise", default="0,0", metavar="M,RAD",
                         help="bare_truth: white noise (standard deviations, m and rad) added to the agent's pose "
                              "every cycle, e.g. 0.003,0.02 (default 0,0)")
@@ -162,6 +171,28 @@ def add_arguments(parser) -> None:
                         help="an agent setting (agent/settings.py; config/agent.yaml lists them all), e.g. "
                              "dock.place_speed=0.12, drive.k_heading=8 or legs.smooth=false (repeatable); the bare "
                              "agent and raf agent on the whole stack both take them")
+
+
+def _perturb_help() -> str:
+    from ..sim.perturb import ISSUE_20
+
+    return ISSUE_20.describe()
+
+
+def parse_loss(text) -> tuple[float, float, float]:
+    """``--loss DROP[,DUP,REORDER]`` as (drop, dup, reorder) probabilities; one number: DUP = REORDER = DROP/5."""
+    from ..errors import ConfigError
+
+    try:
+        v = [float(x) for x in str(text).split(",")]
+    except ValueError:
+        v = []
+    if len(v) == 1:
+        v = [v[0], v[0] / 5, v[0] / 5]
+    if len(v) != 3 or not all(0.0 <= x < 1.0 for x in v) or sum(v) >= 1.0:
+        raise ConfigError(f"--loss {text!r}: expected DROP or DROP,DUP,REORDER, probabilities in [0, 1) summing "
+                          "to less than 1, e.g. 0.05")
+    return v[0], v[1], v[2]
 
 
 def parse_agent(items) -> dict:
@@ -251,12 +282,13 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
                     events.extend((round(t, 2), text, round(sim.pose[0], 4), round(sim.pose[1], 4))
                                   for t, text in agent.events[len(events):])
         rep = sim.referee.report(sim.time)
+        world = sim.world.offsets(sim.nominal_field, sim.nominal_robot) if sim.world is not None else {}
         cnt = agent.counters
         out = {
             "round": round_no, "seed": seed, "points": rep.points, "max_points": rep.max_points,
             "max_score": rep.points == rep.max_points,
             "last_score_s": rep.last_score_time if rep.last_score_time is not None else math.nan,
-            "points_lost": rep.lost, "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
+            "points_lost": rep.lost, "world": world, "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
             "picks_attempted": cnt.picks + cnt.pick_failures, "pick_failures": cnt.pick_failures,
             "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
             "no_path": cnt.no_path, "moved_before_start_cycles": moved_early,
@@ -314,14 +346,16 @@ def _job(spec):
 
 
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None,
-              simulator: str = "standin", localize: tuple[str, ...] = (), agent: tuple[str, ...] = ()) -> dict:
+              simulator: str = "standin", localize: tuple[str, ...] = (), agent: tuple[str, ...] = (),
+              sim_set: tuple[str, ...] = (), loss: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict:
     from ._competition_full import SimStartError, play_full_stack
 
     tries = 3
     while True:
         tries -= 1
         try:
-            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent)
+            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set,
+                                   loss)
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
                 return _failed(round_no, seed, e)
@@ -387,6 +421,10 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_max_points"] = r["max_points"]
         out[f"{p}_last_score_s"] = round(r["last_score_s"], 2)
         out[f"{p}_points_lost"] = r.get("points_lost", 0)
+        for k, v in (r.get("world") or {}).items():  # this run's draw of the world (sim/perturb.py)
+            out[f"{p}_world_{k}"] = v
+        for k, v in (r.get("link") or {}).items():  # what the lossy link did to this run's datagrams
+            out[f"{p}_link_{k}"] = v
         out[f"{p}_picks_attempted"] = r["picks_attempted"]
         out[f"{p}_pick_failures"] = r["pick_failures"]
         out[f"{p}_timeouts"] = r["timeouts"]
@@ -543,6 +581,7 @@ def figure(run: dict, path: Path, mode: str, field_name: str | None = None) -> P
 
 
 def run(args, out_dir: Path | None) -> dict:
+    import dataclasses
     import json
     import multiprocessing as mp
 
@@ -575,7 +614,19 @@ def run(args, out_dir: Path | None) -> dict:
         field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
     agent_items = tuple(getattr(args, "agent", None) or ())
     agent_options = parse_agent(agent_items)
-    sim_options = parse_sim(getattr(args, "sim", None))
+    sim_items = list(getattr(args, "sim", None) or ())
+    if getattr(args, "perturb", False):  # the issue's "a few" of each, under any --sim perturb.NAME given
+        from ..sim.perturb import ISSUE_20
+
+        sim_items = [f"perturb.{k}={v}" for k, v in dataclasses.asdict(ISSUE_20).items()] + sim_items
+    sim_options = parse_sim(sim_items)
+    from ..sim.config import sim_config
+
+    perturb = sim_config(sim_options).perturb
+    loss = parse_loss(getattr(args, "loss", "0"))
+    if any(loss) and not mode.endswith("full_stack"):
+        raise ConfigError("--loss: the lossy link is between the simulator and the bridge: the whole stack only "
+                          "(--mode full_stack)")
     try:
         noise = tuple(float(x) for x in str(getattr(args, "pose_noise", "0,0")).split(","))
         assert len(noise) == 2 and min(noise) >= 0.0
@@ -601,9 +652,13 @@ def run(args, out_dir: Path | None) -> dict:
 
         load_config(overrides=parse_set(list(localize)))  # a bad name or value: ConfigError now, not in each run
     if mode.endswith("full_stack"):  # realtime: each run is its own private graph; --jobs of them at once (threads)
-        if sim_options or any(noise) or delay or cmd_delay:
-            raise ConfigError("--sim, --pose-noise, --pose-delay and --cmd-delay are bare_truth's: the whole stack "
-                              "(full_stack) runs raf sim's defaults and the agent on the EKF's pose")
+        if set(sim_options) - {"perturb"} or any(noise) or delay or cmd_delay:
+            raise ConfigError("--sim (but for perturb.NAME), --pose-noise, --pose-delay and --cmd-delay are "
+                              "bare_truth's: the whole stack (full_stack) runs raf sim's defaults and the agent on "
+                              "the EKF's pose")
+        if perturb.any and simulator == "simtwo":
+            raise ConfigError("--perturb / --sim perturb.NAME: the stand-in's world (raf sim); the real SimTwo's "
+                              "scene is its own")
         if getattr(args, "analyse", None):  # the runs kept in a directory, measured again with this code
             runs = [_reanalysed(Path(args.analyse), r, s, rec, field_name, simulator)
                     for r, s, _l, _f, rec, *_ in specs]
@@ -612,7 +667,7 @@ def run(args, out_dir: Path | None) -> dict:
 
             with ThreadPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
                 runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[4], field_name, simulator,
-                                                          localize, agent_items), specs))
+                                                          localize, agent_items, tuple(sim_items), loss), specs))
     elif jobs == 1 or len(specs) == 1:
         runs = [_job(s) for s in specs]
     else:
@@ -620,6 +675,8 @@ def run(args, out_dir: Path | None) -> dict:
             runs = pool.map(_job, specs, chunksize=1)
     wall = time.perf_counter() - t0
     print(table(mode, runs), flush=True)
+    print(f"world: {perturb.describe()}; link: "
+          f"{'lossless loopback' if not any(loss) else 'drop %g, duplicate %g, reorder %g' % loss}", flush=True)
     for r in runs:
         if "error" in r:
             print(f"round {r['round']} seed {r['seed']}: {r['error']}", file=sys.stderr)
@@ -628,6 +685,13 @@ def run(args, out_dir: Path | None) -> dict:
                        else getattr(args, "seed_set", "heldout"))
     out["agent_settings"] = json.dumps(agent_options) if agent_options else "defaults"
     out["sim_settings"] = json.dumps(sim_options) if sim_options else "defaults"
+    # the world and the link, named in every result (issue 20): sizes are standard deviations (sim/perturb.py)
+    out["perturb"] = perturb.describe()
+    for k, v in dataclasses.asdict(perturb).items():
+        out[f"perturb_{k}"] = v
+    out["link_drop"], out["link_dup"], out["link_reorder"] = (round(x, 4) for x in loss)
+    out["link"] = ("lossless loopback" if not any(loss) else
+                   f"lossy UDP proxy sim <-> bridge: drop {loss[0]:g}, duplicate {loss[1]:g}, reorder {loss[2]:g}")
     out["pose_noise_m_rad"] = ",".join(f"{x:g}" for x in noise)
     out["pose_delay_cycles"] = delay
     out["cmd_delay_cycles"] = cmd_delay
