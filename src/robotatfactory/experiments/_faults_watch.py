@@ -1,8 +1,9 @@
 """``raf experiment faults``, the ROS side: this process's node on the rig's graph and what it watches.
 
-:class:`Watch` subscribes to what the bridge publishes (``odom``, ``/clock``, ``joint_states``, the camera's
-images, ``/diagnostics``) and records each message's arrival (wall time) and stamp, for the campaign's
-figures (:mod:`.faults`); it also drives the robot (``cmd_vel`` from a thread: :meth:`Watch.drive`). Through
+:class:`Watch` subscribes to what the bridge publishes (``odom``, ``/clock``, ``joint_states``, TF ``odom ->
+base_link``, ``scan``, the camera's images, ``/diagnostics``) and records each message's arrival (wall time),
+stamp and values, for the campaign's figures (:mod:`.faults`) and its observer (:mod:`._faults_observe`:
+:meth:`Watch.published`); it also drives the robot (``cmd_vel`` from a thread: :meth:`Watch.drive`). Through
 the middleware layer (:mod:`..ros.mw`), never rospy or rclpy directly.
 """
 from __future__ import annotations
@@ -27,15 +28,16 @@ def experiment_node():
 
 
 class Watch:
-    """This process's node (:func:`experiment_node`): odom, /clock, joint_states, camera images, diagnostics
-    in (each with its arrival's wall time and its stamp); ``cmd_vel`` out."""
+    """This process's node (:func:`experiment_node`): odom, /clock, joint_states, /tf (odom -> base_link),
+    scan, camera images, diagnostics in (each with its arrival's wall time and its stamp); ``cmd_vel`` out."""
 
-    def __init__(self):
+    def __init__(self, odom_frame: str = "odom", base_frame: str = "base_link"):
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import Twist
         from nav_msgs.msg import Odometry
         from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import Image, JointState
+        from sensor_msgs.msg import Image, JointState, LaserScan
+        from tf2_msgs.msg import TFMessage
 
         from ..ros.mw import QoS
 
@@ -46,6 +48,9 @@ class Watch:
         self.clock: list[tuple] = []  # (wall, stamp_ms)
         self.joints: list[tuple] = []  # (wall, stamp_ms, left rad, right rad)
         self.images: list[tuple] = []  # (wall, stamp_ms)
+        self.tf: list[tuple] = []  # (wall, stamp_ms, x, y, theta): odom -> base_link
+        self.scans: list[tuple] = []  # (wall, stamp_ms (float: a sweep's stamp is its first ray's time), ranges)
+        self.frames = (odom_frame.lstrip("/"), base_frame.lstrip("/"))
         self.diag: dict[str, dict] = {}
         # ROS 1: queue 1 and TCP_NODELAY out; TCP_NODELAY on odom, /clock and joint_states (SYNCHRONOUS), not on
         # the images (RELIABLE: 2 deep, a large buffer) nor /diagnostics
@@ -53,6 +58,8 @@ class Watch:
         self.subs = [node.subscribe("odom", Odometry, self._odom, QoS.SYNCHRONOUS, 50),
                      node.subscribe("/clock", Clock, self._clock, QoS.SYNCHRONOUS, 50),
                      node.subscribe("joint_states", JointState, self._joints, QoS.SYNCHRONOUS, 50),
+                     node.subscribe("/tf", TFMessage, self._tf, QoS.RELIABLE, 100),
+                     node.subscribe("scan", LaserScan, self._scan, QoS.SENSOR, 20),
                      node.subscribe("camera/image_raw", Image, self._image, QoS.RELIABLE, 2, large=True),
                      node.subscribe("/diagnostics", DiagnosticArray, self._diag, QoS.RELIABLE, 20)]
         self._drive = None
@@ -77,6 +84,31 @@ class Watch:
         if len(m.position) >= 2:
             with self.lock:
                 self.joints.append((time.monotonic(), self._ms(m.header.stamp), m.position[0], m.position[1]))
+
+    def _tf(self, m):
+        from ..ros.messages import quaternion_yaw
+
+        now = time.monotonic()
+        for t in m.transforms:
+            if (t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/")) == self.frames:
+                with self.lock:
+                    self.tf.append((now, self._ms(t.header.stamp), t.transform.translation.x,
+                                    t.transform.translation.y, quaternion_yaw(t.transform.rotation)))
+
+    def _scan(self, m):
+        import numpy as np
+
+        r = np.asarray(m.ranges, dtype=np.float32)
+        with self.lock:
+            self.scans.append((time.monotonic(), stamp_ns(m.header.stamp) / 1e6, r))
+
+    def published(self):
+        """Everything recorded so far, for :class:`._faults_observe.Observer` (copies)."""
+        from ._faults_observe import Published
+
+        with self.lock:
+            return Published(odom=list(self.odom), clock=list(self.clock), joints=list(self.joints),
+                             tf=list(self.tf), scans=list(self.scans))
 
     def _image(self, m):
         with self.lock:

@@ -50,6 +50,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import socket
 import sys
@@ -60,7 +61,8 @@ from pathlib import Path
 import numpy as np
 
 from . import _faults_simtwo as simtwo_side
-from ._faults_net import LOCAL, Proxy, fuzz_pool, fuzzer
+from ._faults_net import FOREIGN_KINDS, INBAND_KINDS, LOCAL, Proxy, fuzz_pool, fuzzer, udp_drops
+from ._faults_observe import POSE_TOL_RAD, Geometry, Observer, chord_bound
 from ._faults_soak import TARGETS as SOAK_TARGETS
 from ._faults_soak import part_soak
 from ._faults_watch import Watch
@@ -70,18 +72,26 @@ HELP = ("fault campaign (issue 10): fuzz, loss, restarts and soak on the real ra
         "(--simulator simtwo: fuzz, loss and restarts on the real SimTwo)")
 TARGETS = {
     "fuzz_crashes": "0",
-    "fuzz_odom_from_forged_or_foreign": "0",
-    "fuzz_clock_from_forged_or_foreign": "0",
-    "fuzz_odometry_error_m": "<= 0.01 m against the fuzz-free odometry",
-    "loss_ticks_lost": "0 against the simulator's totals (the loss-free count)",
-    "loss_speed_error_mps": "<= 0.01 m/s (the robot follows cmd_vel)",
-    "restart_sim_odom_back_s": "<= 1 s",
+    "fuzz_poisoned_messages": "0: every odom, /clock, joint_states, TF and scan message matches genuine frames "
+                              "(the observer, _faults_observe)",
+    **{f"fuzz_{k}_poisoned": "0" for k in (*FOREIGN_KINDS, *INBAND_KINDS, "impossible_ticks")},
+    "fuzz_odometry_error_m": "<= 0.01 m at every odom message against the odometry over every genuine frame",
+    "loss_poisoned_messages": "0",
+    "loss_odometry_error_max_m": "<= loss_odometry_bound_m at every odom message during the loss: the chord "
+                                 "errors of the frames the proxy did not deliver, at the driven speeds",
+    "loss_heading_error_max_rad": "<= 1e-5 rad at every odom message (cumulative totals: no tick lost)",
+    "loss_ticks_off_max": "0 at every joint_states message against the genuine totals",
+    "loss_speed_error_mps": "<= 0.01 m/s (the simulator's poses: the robot follows cmd_vel)",
+    "restart_poisoned_messages": "0",
+    "restart_sim_odom_back_s": "<= 1 s (wall) from the restarted simulator's first frame to a genuine odom",
     "restart_sim_clock_back_s": "<= 1 s",
     "restart_sim_image_back_s": "<= 1 s",
     "restart_sim_odometry_resets": "1",
-    "restart_bridge_stop_s": "<= 0.54 s (simulation) from the last command to V = W = 0 (the simulator's log): "
-                             "the 0.5 s command timeout plus one 40 ms cycle, as control.pas checks it (issue 22)",
-    "restart_bridge_resume_s": "<= 1 s",
+    "restart_bridge_stop_s": "<= 0.54 s (simulation) from the last command to the wheels slowing (ground truth): "
+                             "the 0.5 s command timeout plus one 40 ms cycle",
+    "restart_bridge_at_rest_after_death_s": "<= 0.6 s (wall) from the bridge's death to the robot at rest "
+                                            "(ground truth)",
+    "restart_bridge_resume_s": "<= 1 s (wall) from the restarted bridge's first reply to a genuine odom",
     "restart_roscore_nodes_clear": "every node exits with a clear message (or reconnects)",
 }
 TARGETS.update({f"{simtwo_side.MODE}_{k}": v for k, v in list(TARGETS.items())
@@ -128,33 +138,18 @@ def _wait(pred, timeout: float, what: str, check=None) -> None:
     wait_until(pred, timeout, what, check, period=0.02)
 
 
-def reference_odometry(truth: np.ndarray, robot, start_index: int = 0) -> tuple[float, float, float]:
-    """The bridge's odometry over every frame the simulator sent (in Seq order, from zero): the fuzz-free and
-    loss-free result."""
-    from ..localization.odometry import DiffDriveOdometry
-
-    odo = DiffDriveOdometry(wheel_radius=robot.wheel_radius, track=robot.odometry_track,
-                            ticks_per_rev=robot.ticks_per_rev)
-    odo.reset(baseline=(0, 0), t=0.0)
-    rows = truth[start_index:]
-    rows = rows[np.argsort(rows[:, 1], kind="stable")]
-    s = None
-    for r in rows:
-        s = odo.update(int(r[3]), int(r[4]), r[2] / 1000.0)
-    return (s.x, s.y, s.theta) if s is not None else (0.0, 0.0, 0.0)
-
-
 # ------------------------------------------------------------------------------------------------ the rig
 
 class Rig:
     """roscore + bridge (+ localization) + proxy + raf sim (or SimTwo), started and restarted on demand."""
 
     def __init__(self, args, log_dir: Path, camera: bool = False, localize: bool = False, fast: bool = False,
-                 lockstep: bool = False, start_pose: str = "0.0,0.0,1.5708"):
+                 lockstep: bool = False, start_pose: str = "0.0,0.0,1.5708", lidar: bool = False):
         from ..ros.master import PrivateMaster, free_port
         from ..ros.processes import Procs
 
         self.args, self.camera, self.localize, self.fast, self.lockstep = args, camera, localize, fast, lockstep
+        self.lidar = lidar  # the bridge publishes scan, the proxy records the ranges (the observer checks them)
         self.start_pose = start_pose  # the open middle of the field (rules2026); the loss part drives a corridor
         self.master = PrivateMaster().start()
         self.env = self.master.env(MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
@@ -162,17 +157,24 @@ class Rig:
         self.procs = Procs(log_dir, env=self.env, numbered_logs=True)
         self.bport, self.sport = _free_udp(), _free_udp()
         self.cam = f"tcp://{LOCAL}:{free_port()}"
-        self.proxy = Proxy((LOCAL, self.bport), seed=args.seed)
+        self.proxy = Proxy((LOCAL, self.bport), seed=args.seed, record_ranges=lidar)
+        self.bridge_starts: list[float] = []  # wall (monotonic) of each start of the bridge, for the observer
         self.watch = None
         self.simtwo = getattr(args, "simulator", "standin") == "simtwo"
         self.simtwo_keep: Path | None = None  # SimTwo: the folder of the running one (its log)
         self.sim_start_s = 180.0 if self.simtwo else 90.0  # wall s to the first frame (SimTwo: 5-30 s)
 
     def start_bridge(self):
-        cmd = ["--field", self.args.field, "bridge", "--port", str(self.bport), "--sim-host", LOCAL,
-               "--set", "lidar/enabled=false"]
+        cmd = ["--field", self.args.field, "bridge", "--port", str(self.bport), "--sim-host", LOCAL]
+        cmd += [] if self.lidar else ["--set", "lidar/enabled=false"]
         cmd += ["--camera", self.cam] if self.camera else ["--no-camera"]
+        self.bridge_starts.append(time.monotonic())
         return self.procs.raf("bridge", *cmd)
+
+    def observe(self, robot) -> Observer:
+        """The observer over everything so far: the proxy's record against what the watcher received."""
+        truth, _, ranges = self.proxy.snapshot()
+        return Observer(truth, self.watch.published(), Geometry.of(robot), self.bridge_starts, ranges)
 
     def start_localize(self):
         return self.procs.raf("localize", "--field", self.args.field, "localize")
@@ -238,13 +240,95 @@ def circles(v=0.06, w=0.5):
 
 # ------------------------------------------------------------------------------------------------ the parts
 
+INBAND_RATE = 1000.0  # in-band datagrams a second (each is decoded and answered by the bridge)
+TICKS_MIN_SECONDS = 3.0  # the impossible-ticks segment: one forged copy per real frame for this long at least
+SEGMENT_PAUSE = 0.3  # wall s between two fuzz segments (what a kind did is counted up to the next one's start)
+
+
+def _poison_figures(prefix: str, obs: Observer, log: Path, t0: float = -math.inf, t1: float = math.inf) -> dict:
+    """The observer's verdict over [t0, t1): poisoned messages by topic (each one's reason in ``poisoned.json``
+    beside the part's logs) and how many messages it checked."""
+    bad = obs.poisoned_in(t0, t1)
+    log.write_text(json.dumps([vars(x) for x in bad[:1000]], indent=1) + "\n")
+    out = {f"{prefix}_messages_checked": sum(obs.counts().values()), f"{prefix}_scans_checked": obs.scans_checked,
+           f"{prefix}_poisoned_messages": len(bad)}
+    for topic in ("odom", "clock", "joints", "tf", "scan"):
+        out[f"{prefix}_poisoned_{topic}"] = sum(1 for x in bad if x.topic == topic)
+    if bad:
+        out[f"{prefix}_poisoned_first"] = f"{bad[0].topic} stamp {bad[0].stamp_ms:.0f} ms: {bad[0].why}"
+    out[f"{prefix}_poisoned_messages_target_met"] = not bad
+    return out
+
+
+def _save_bridge_diag(w: Watch, path: Path) -> None:
+    """The bridge's own counters, kept beside the logs for reading; no figure comes from them."""
+    with w.lock:
+        path.write_text(json.dumps(w.diag, indent=1, default=str) + "\n")
+
+
+def _inband_segment(rig: Rig, kind: str, datagrams: list, n: int, seconds: float) -> dict:
+    """``n`` datagrams of one in-band kind from the simulator's own address (the proxy's socket), paced over
+    ``seconds``: the sends that succeeded and the bridge socket's kernel drops meanwhile."""
+    px = rig.proxy
+    d0, inj0, t0 = udp_drops(rig.bport), px.counts["injected"], time.monotonic()
+    i = 0
+    while i < n:
+        due = int(n * min(1.0, (time.monotonic() - t0) / seconds))
+        while i < due:
+            px.inject_queue.append(datagrams[i % len(datagrams)])
+            i += 1
+        rig.check()
+        time.sleep(0.02)
+    _wait(lambda: not px.inject_queue, 30, "the in-band fuzz to be sent")
+    t1 = time.monotonic()
+    time.sleep(0.05)
+    d1 = udp_drops(rig.bport)
+    return {"kind": kind, "where": "inband", "t0": t0, "t1": t1, "sent": px.counts["injected"] - inj0, "errors": 0,
+            "drops": None if d0 is None or d1 is None else d1 - d0}
+
+
+def _ticks_segment(rig: Rig, seconds: float) -> dict:
+    """For ``seconds``, after every real frame a copy of the next one with encoder totals the wheels cannot
+    reach (the proxy's ``forge_ticks_every``)."""
+    px = rig.proxy
+    d0, f0, t0 = udp_drops(rig.bport), px.counts.get("forged_ticks", 0), time.monotonic()
+    px.forge_ticks_every = 1
+    try:
+        while time.monotonic() - t0 < seconds:
+            rig.check()
+            time.sleep(0.1)
+    finally:
+        px.forge_ticks_every = 0
+    t1 = time.monotonic()
+    time.sleep(0.05)
+    d1 = udp_drops(rig.bport)
+    return {"kind": "impossible_ticks", "where": "inband", "t0": t0, "t1": t1,
+            "sent": px.counts.get("forged_ticks", 0) - f0, "errors": 0,
+            "drops": None if d0 is None or d1 is None else d1 - d0}
+
+
+def fuzz_plan(n_out: int, seconds: float) -> list[tuple[str, int, float]]:
+    """The out-of-band kinds in turn: (kind, datagrams, wall seconds), shares by :data:`FOREIGN_KINDS`' weights,
+    each kind's time in proportion to its datagrams."""
+    total_w = sum(FOREIGN_KINDS.values())
+    plan, left = [], n_out
+    kinds = list(FOREIGN_KINDS)
+    for i, k in enumerate(kinds):
+        n = left if i == len(kinds) - 1 else n_out * FOREIGN_KINDS[k] // total_w
+        left -= n
+        plan.append((k, n, seconds * n / max(1, n_out)))
+    return plan
+
+
 def part_fuzz(args, log_dir: Path, robot) -> dict:
     import multiprocessing as mp
+    import queue as queue_mod
 
-    (log_dir / "fuzz").mkdir(parents=True, exist_ok=True)
-    rig = Rig(args, log_dir / "fuzz").up()
+    d = log_dir / "fuzz"
+    d.mkdir(parents=True, exist_ok=True)
+    rig = Rig(args, d, lidar=True).up()
     w, px = rig.watch, rig.proxy
-    out = {}
+    segments: list[dict] = []
     try:
         w.drive(circles())
         time.sleep(2.0)
@@ -252,83 +336,80 @@ def part_fuzz(args, log_dir: Path, robot) -> dict:
         with px.lock:
             template = px.template
         pool = fuzz_pool(template, rng)
-        px.forge_ticks_every = 2
         n_inband = int(args.fuzz_datagrams * args.fuzz_inband)
         n_out = args.fuzz_datagrams - n_inband
         ctx = mp.get_context("spawn")
         q = ctx.Queue()
-        fz = ctx.Process(target=fuzzer, args=(rig.bport, {k: v for k, v in pool.items() if k != "inband"}, n_out,
-                                               args.fuzz_seconds, q), daemon=True)
+        fz = ctx.Process(target=fuzzer, args=(rig.bport, {k: v for k, v in pool.items() if k != "inband"},
+                                               fuzz_plan(n_out, args.fuzz_seconds), q), daemon=True)
         t_fuzz0 = time.monotonic()
         fz.start()
-        inband = pool["inband"]
-        i = 0
-        while i < n_inband:  # paced like the fuzzer, through the proxy's socket (the bound source)
-            due = int(n_inband * min(1.0, (time.monotonic() - t_fuzz0) / args.fuzz_seconds))
-            while i < due:
-                px.inject_queue.append(inband[i % len(inband)])
-                i += 1
-            rig.check()
-            time.sleep(0.02)
-        sent = q.get(timeout=args.fuzz_seconds * 4 + 120)
-        px.forge_ticks_every = 0
+        deadline = t_fuzz0 + 4 * args.fuzz_seconds + 120
+        rep = None
+        while rep is None:
+            try:
+                rep = q.get(timeout=0.5)
+            except queue_mod.Empty:
+                rig.check()
+                if time.monotonic() > deadline or not fz.is_alive() and q.empty():
+                    raise RuntimeError("the fuzzer process did not report") from None
         fz.join(10)
-        _wait(lambda: not px.inject_queue, 30, "the in-band fuzz to be sent")
+        segments += [dict(s, where="foreign") for s in rep["segments"]]
+        for kind in INBAND_KINDS:  # then the in-band kinds, one after the other
+            time.sleep(SEGMENT_PAUSE)
+            n = n_inband // len(INBAND_KINDS)
+            segments.append(_inband_segment(rig, kind, pool["inband"][kind], n, max(1.0, n / INBAND_RATE)))
+        time.sleep(SEGMENT_PAUSE)
+        segments.append(_ticks_segment(rig, max(TICKS_MIN_SECONDS, args.fuzz_seconds / 10)))
         fuzz_wall = time.monotonic() - t_fuzz0
         time.sleep(1.0)
         w.stop_drive()
         time.sleep(1.5)  # the robot stops; the last frames arrive
-        rig.check()
         crashed = sum(1 for n in ("bridge", "sim") if rig.procs.get(n).poll() is not None)
-        truth = px.truth()
-        real_ms = set(truth[:, 2].astype(int).tolist())
-        with w.lock:
-            odom, clock = list(w.odom), list(w.clock)
-        bad_odom = sum(1 for o in odom if o[1] not in real_ms)
-        bad_clock = sum(1 for c in clock if c[1] not in real_ms)
-        ref = reference_odometry(truth, robot)
-        last = odom[-1]
-        err = math.hypot(last[2] - ref[0], last[3] - ref[1])
-        # odom published during the fuzz against the frames the simulator sent then
-        in_fuzz = [o for o in odom if t_fuzz0 <= o[0] <= t_fuzz0 + fuzz_wall]
+        obs = rig.observe(robot)
+        truth = obs.truth
+        in_fuzz = [o for o in obs.pub.odom if t_fuzz0 <= o[0] <= t_fuzz0 + fuzz_wall]
         frames_in_fuzz = int(np.sum((truth[:, 0] >= t_fuzz0) & (truth[:, 0] <= t_fuzz0 + fuzz_wall)))
-        time.sleep(1.2)
-        d = w.stream_diag()
-        out = {
-            "fuzz_datagrams_sent": int(sent["total"]) + px.counts["injected"] + px.counts.get("forged_ticks", 0),
-            "fuzz_inband_sent": px.counts["injected"], "fuzz_impossible_ticks_sent": px.counts.get("forged_ticks", 0),
-            "fuzz_wall_s": round(fuzz_wall, 1),
-            "fuzz_second_sender_frames": sent["second_sender"], "fuzz_send_errors": sent["errors"],
-            "fuzz_crashes": crashed,
-            "fuzz_odom_messages": len(odom), "fuzz_frames_sent_by_sim": len(truth),
-            "fuzz_odom_rate_during_fuzz_hz": round(len(in_fuzz) / fuzz_wall, 2),
-            "fuzz_sim_frame_rate_during_fuzz_hz": round(frames_in_fuzz / fuzz_wall, 2),
-            "fuzz_odom_from_forged_or_foreign": bad_odom, "fuzz_clock_from_forged_or_foreign": bad_clock,
-            "fuzz_odometry_error_m": err,
-            "fuzz_odometry_distance_m": float(np.sum(np.hypot(np.diff(truth[:, 5]), np.diff(truth[:, 6])))),
-        }
-        for k in ("rejected_foreign_source", "rejected_malformed", "rejected_oversized", "rejected_foreign_protocol",
-                  "held", "implausible", "restarts", "stale", "duplicates", "lost", "bound_source",
-                  "source_takeovers"):
-            if k in d:
-                out[f"fuzz_bridge_{k}"] = d[k] if k == "bound_source" else int(float(d[k]))
-        out.update({
-            "fuzz_crashes_target_met": crashed == 0,
-            "fuzz_odom_from_forged_or_foreign_target_met": bad_odom == 0,
-            "fuzz_clock_from_forged_or_foreign_target_met": bad_clock == 0,
-            "fuzz_odometry_error_target_met": err <= 0.01,
-            "fuzz_odometry_reset_target_met": int(float(d.get("restarts", -1))) == 0,
-        })
+        errs = obs.odometry_errors()
+        by_kind = obs.by_segment([(s["kind"], s["t0"], s["t1"]) for s in segments])
+        (d / "segments.json").write_text(json.dumps(segments, indent=1) + "\n")
+        _save_bridge_diag(w, d / "bridge_diagnostics.json")
     finally:
         rig.down()
+    sent = sum(s["sent"] for s in segments)
+    drops = [s["drops"] for s in segments]
+    known = all(x is not None for x in drops)
+    out = {"fuzz_datagrams_sent": sent, "fuzz_send_errors": sum(s["errors"] for s in segments),
+           "fuzz_kernel_drops": sum(drops) if known else "not shown by /proc/net/udp",
+           "fuzz_datagrams_reached_socket": sent - sum(drops) if known else sent,
+           "fuzz_wall_s": round(fuzz_wall, 1), "fuzz_crashes": crashed}
+    for s in segments:
+        k = s["kind"]
+        out[f"fuzz_{k}_sent"] = s["sent"]
+        out[f"fuzz_{k}_reached"] = s["sent"] - (s["drops"] or 0)
+        out[f"fuzz_{k}_poisoned"] = by_kind.get(k, 0)
+        out[f"fuzz_{k}_poisoned_target_met"] = bool(by_kind.get(k, 0) == 0)
+    out["fuzz_poisoned_outside_segments"] = by_kind.get("outside", 0)
+    out.update(_poison_figures("fuzz", obs, d / "poisoned.json"))
+    out.update({
+        "fuzz_odom_messages": len(obs.pub.odom), "fuzz_frames_sent_by_sim": len(truth),
+        "fuzz_odom_rate_during_fuzz_hz": round(len(in_fuzz) / fuzz_wall, 2),
+        "fuzz_sim_frame_rate_during_fuzz_hz": round(frames_in_fuzz / fuzz_wall, 2),
+        "fuzz_odometry_error_m": float(errs[:, 2].max()) if len(errs) else float("nan"),
+        "fuzz_odometry_distance_m": float(np.sum(np.hypot(np.diff(truth[:, 5]), np.diff(truth[:, 6])))),
+        "fuzz_crashes_target_met": bool(crashed == 0),
+    })
+    out["fuzz_odometry_error_target_met"] = bool(len(errs) and out["fuzz_odometry_error_m"] <= 0.01)
     return out
 
 
 def part_loss(args, log_dir: Path, robot) -> dict:
-    (log_dir / "loss").mkdir(parents=True, exist_ok=True)
-    rig = Rig(args, log_dir / "loss", start_pose="-0.45,0.36,0").up()  # the corridor along the north machines
+    d = log_dir / "loss"
+    d.mkdir(parents=True, exist_ok=True)
+    rig = Rig(args, d, start_pose="-0.45,0.36,0", lidar=True).up()  # the corridor along the north machines
     w, px = rig.watch, rig.proxy
     try:
+        t_loss0 = time.monotonic()
         px.set_faults(args.drop, args.dup, args.reorder)
         straight = min(4.5, args.loss_seconds / 2)  # 0.9 m at 0.2 m/s, then turning on the spot
         w.drive(lambda t: (0.2, 0.0) if t < straight else (0.0, 0.8 * math.sin(0.5 * (t - straight))))
@@ -339,57 +420,58 @@ def part_loss(args, log_dir: Path, robot) -> dict:
         w.stop_drive()
         time.sleep(2.0)  # stopped: the totals stop changing, the last ones get through
         px.set_faults()
+        t_loss1 = time.monotonic()
         time.sleep(1.0)
         rig.check()
-        truth = px.truth()
-        np.save(log_dir / "loss" / "truth.npy", truth)
-        with w.lock:
-            joints = list(w.joints)
-        tpr = robot.ticks_per_rev
-        jl, jr = joints[-1][2], joints[-1][3]
-        bl, br = round(jl * tpr / (2 * math.pi)), round(jr * tpr / (2 * math.pi))
-        sl, sr = int(truth[-1, 3]), int(truth[-1, 4])
-        lost = abs(bl - sl) + abs(br - sr)
-        # speed over the straight segment (from the simulator's own poses), after 1.5 s of acceleration
-        tt = truth[:, 0] - t0
-        seg = truth[(tt > 1.0) & (tt < straight - 0.2)]
-        if len(seg) > 10:
-            dist = np.sum(np.hypot(np.diff(seg[:, 5]), np.diff(seg[:, 6])))
-            v = dist / ((seg[-1, 2] - seg[0, 2]) / 1000)
-        else:
-            v = float("nan")
-        ref = reference_odometry(truth, robot)
-        with w.lock:
-            last = w.odom[-1]
-        time.sleep(1.2)
-        d = w.stream_diag()
-        out = {"loss_drop": args.drop, "loss_dup": args.dup, "loss_reorder": args.reorder,
-               "loss_proxy_dropped": px.counts["dropped"], "loss_proxy_duplicated": px.counts["duplicated"],
-               "loss_proxy_reordered": px.counts["reordered"], "loss_frames_sent_by_sim": len(truth),
-               "loss_bridge_ticks": f"{bl},{br}", "loss_sim_ticks": f"{sl},{sr}", "loss_ticks_lost": int(lost),
-               "loss_speed_mps": float(v), "loss_speed_error_mps": float(abs(v - 0.2)),
-               "loss_odometry_vs_lossfree_m": math.hypot(last[2] - ref[0], last[3] - ref[1])}
-        for k in ("lost", "duplicates", "stale", "held", "restarts", "accepted"):
-            if k in d:
-                out[f"loss_bridge_{k}"] = int(float(d[k]))
-        out["loss_ticks_lost_target_met"] = lost == 0
-        out["loss_speed_error_target_met"] = bool(abs(v - 0.2) <= 0.01)
+        truth, fates, _ = px.snapshot()
+        np.save(d / "truth.npy", truth)
+        obs = rig.observe(robot)
+        _save_bridge_diag(w, d / "bridge_diagnostics.json")
     finally:
         rig.down()
+    geo = Geometry.of(robot)
+    rows = np.flatnonzero((truth[:, 0] >= t_loss0) & (truth[:, 0] < t_loss1))
+    bound = chord_bound(truth, fates, geo, rows)
+    errs = obs.odometry_errors(t_loss0, t_loss1)
+    ticks = obs.joint_errors_ticks(t_loss0, t_loss1)
+    # speed over the straight segment (from the simulator's own poses), after 1 s of acceleration
+    tt = truth[:, 0] - t0
+    seg = truth[(tt > 1.0) & (tt < straight - 0.2)]
+    if len(seg) > 10:
+        v = np.sum(np.hypot(np.diff(seg[:, 5]), np.diff(seg[:, 6]))) / ((seg[-1, 2] - seg[0, 2]) / 1000)
+    else:
+        v = float("nan")
+    e_max = float(errs[:, 2].max()) if len(errs) else float("nan")
+    h_max = float(errs[:, 3].max()) if len(errs) else float("nan")
+    out = {"loss_drop": args.drop, "loss_dup": args.dup, "loss_reorder": args.reorder,
+           "loss_proxy_dropped": px.counts["dropped"], "loss_proxy_duplicated": px.counts["duplicated"],
+           "loss_proxy_reordered": px.counts["reordered"], "loss_frames_sent_by_sim": len(truth),
+           "loss_frames_missing_runs": bound["runs"], "loss_frames_missing_longest_run": bound["longest"],
+           "loss_chord_error_worst_m": bound["worst_m"], "loss_odometry_bound_m": bound["bound_m"],
+           "loss_odom_messages_checked": len(errs), "loss_odometry_error_max_m": e_max,
+           "loss_heading_error_max_rad": h_max,
+           "loss_joint_messages_checked": len(ticks),
+           "loss_ticks_off_max": int(ticks.max()) if len(ticks) else -1,
+           "loss_speed_mps": float(v), "loss_speed_error_mps": float(abs(v - 0.2))}
+    out.update(_poison_figures("loss", obs, d / "poisoned.json"))
+    out["loss_odometry_error_max_target_met"] = bool(len(errs) > 10 and e_max <= bound["bound_m"])
+    out["loss_heading_error_max_target_met"] = bool(len(errs) > 10 and h_max <= POSE_TOL_RAD)
+    out["loss_ticks_off_max_target_met"] = bool(len(ticks) > 10 and ticks.max() == 0)
+    out["loss_speed_error_target_met"] = bool(abs(v - 0.2) <= 0.01)
     return out
 
 
 def part_restarts(args, log_dir: Path, robot) -> dict:
-    (log_dir / "restarts").mkdir(parents=True, exist_ok=True)
+    d = log_dir / "restarts"
+    d.mkdir(parents=True, exist_ok=True)
     camera = not args.no_camera_restart
-    rig = Rig(args, log_dir / "restarts", camera=camera).up()
+    rig = Rig(args, d, camera=camera, lidar=True).up()
     w, px, out = rig.watch, rig.proxy, {}
     try:
         w.drive(circles())
         if camera:
             _wait(lambda: len(w.images) > 3, 60, "camera images", rig.check)
         time.sleep(2.0)
-        d0 = _wait_diag(w)
         # -- the simulator (and its camera publisher) killed and restarted
         rig.kill_sim()
         n_frames = len(px.frames)
@@ -400,114 +482,112 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
               rig.check)
         with px.lock:
             t_first = px.frames[n_frames][0]
-
-        def back(lst, what):
-            _wait(lambda: any(x[0] > t_first for x in lst), 10, what, rig.check)
-            return min(x[0] for x in lst if x[0] > t_first) - t_first
-
-        out["restart_sim_odom_back_s"] = back(w.odom, "odom after the restart")
-        out["restart_sim_clock_back_s"] = back(w.clock, "/clock after the restart")
+        _wait(lambda: any(x[0] > t_first for x in w.odom), 10, "odom after the restart", rig.check)
         if camera:
-            out["restart_sim_image_back_s"] = back(w.images, "images after the restart")
+            _wait(lambda: any(x[0] > t_first for x in w.images), 10, "images after the restart", rig.check)
+            out["restart_sim_image_back_s"] = min(x[0] for x in w.images if x[0] > t_first) - t_first
         out["restart_sim_process_start_to_first_frame_s"] = t_first - t_kill - 1.0
         time.sleep(2.5)
-        d1 = _wait_diag(w, after=time.monotonic())
-        out["restart_sim_odometry_resets"] = int(float(d1.get("restarts", -1))) - int(float(d0.get("restarts", 0)))
-        with w.lock:
-            first_after = [o for o in w.odom if o[0] > t_first][:1]
-        out["restart_sim_first_odom_stamp_s"] = first_after[0][1] / 1000 if first_after else -1.0
         if rig.simtwo:
             rig.place()  # the restarted SimTwo put the robot back at its scene's start
         # -- the bridge killed and restarted
         time.sleep(1.0)
-        n_rep = len(px.replies)
         n_timeouts = len(simtwo_side.timeout_ages_s(rig.simtwo_keep))
+        n_sim_log = len(rig.procs.log("sim"))
         rig.procs.kill("bridge")
-        t_kill = time.monotonic()
-        with px.lock:
-            last_rep = px.replies[-1] if px.replies else None
+        t_bkill = time.monotonic()
         time.sleep(2.0)
-        truth = px.truth()
-        # SimTwo's script applies a reply in the cycle after the frame it answers
-        out.update(_stop_after_last_command(truth, px, t_kill, applied_after=1 if rig.simtwo else 0))
-        import re
-
         if rig.simtwo:  # control.pas's line, in ms, once per timeout; the first after the kill
             ages = simtwo_side.timeout_ages_s(rig.simtwo_keep)[n_timeouts:][:1]
         else:
-            ages = [float(a) for a in re.findall(r"no valid command for ([0-9.]+) s", rig.procs.log("sim"))]
-        # the simulator's own record: the age of its last command when its timeout replaced it by V = W = 0
-        out["restart_bridge_stop_s"] = float(ages[-1]) if ages else float("nan")
+            ages = [float(a) for a in re.findall(r"no valid command for ([0-9.]+) s", rig.procs.log("sim")[n_sim_log:])]
         rig.start_bridge()
+        t_bstart = rig.bridge_starts[-1]
         n_rep = len(px.replies)
         _wait(lambda: len(px.replies) > n_rep, 90, "the restarted bridge's first reply", rig.check)
         with px.lock:
             t_rep = px.replies[n_rep][0]
         _wait(lambda: any(o[0] > t_rep for o in w.odom), 15, "odom from the restarted bridge", rig.check)
-        out["restart_bridge_resume_s"] = min(o[0] for o in w.odom if o[0] > t_rep) - t_rep
-        out["restart_bridge_process_start_to_first_reply_s"] = t_rep - t_kill - 2.0
-        del last_rep
+        time.sleep(1.0)
+        obs = rig.observe(robot)
+        with px.lock:
+            replies = list(px.replies)
+        np.save(d / "truth.npy", obs.truth)
+        (d / "events.json").write_text(json.dumps({"bridge_killed": t_bkill, "bridge_started": t_bstart,
+                                                   "replies": replies[-200:]}) + "\n")
+        _save_bridge_diag(w, d / "bridge_diagnostics.json")
         # -- roscore killed and restarted on the same port
         out.update(_roscore_restart(rig))
-        out.update({
-            "restart_sim_odom_back_target_met": out["restart_sim_odom_back_s"] <= 1.0,
-            "restart_sim_clock_back_target_met": out["restart_sim_clock_back_s"] <= 1.0,
-            "restart_sim_odometry_resets_target_met": out["restart_sim_odometry_resets"] == 1,
-            "restart_bridge_stop_target_met": out["restart_bridge_stop_s"] <= 0.54 + 1e-6,
-            "restart_bridge_resume_target_met": out["restart_bridge_resume_s"] <= 1.0,
-        })
-        if camera:
-            out["restart_sim_image_back_target_met"] = out["restart_sim_image_back_s"] <= 1.0
     finally:
         rig.down()
+    truth = obs.truth
+    new_run = int(obs.epoch[n_frames]) if n_frames < len(truth) else -1
+
+    def back(topic, after, epoch=None):
+        t = obs.first_valid(topic, after, epoch)
+        return float("inf") if t is None else t - after
+
+    out["restart_sim_odom_back_s"] = back("odom", t_first, new_run)
+    out["restart_sim_clock_back_s"] = back("clock", t_first, new_run)
+    out["restart_sim_odometry_resets"] = obs.resets()
+    out.update(at_rest(truth, replies, t_bkill, t_bstart, track=robot.odometry_track))
+    # the simulator's own record (informational): the age of its last command when its timeout fired
+    out["restart_bridge_timeout_age_logged_s"] = float(ages[0]) if ages else float("nan")
+    out["restart_bridge_resume_s"] = back("odom", t_rep)
+    out["restart_bridge_process_start_to_first_reply_s"] = t_rep - t_bstart
+    out.update(_poison_figures("restart", obs, d / "poisoned.json"))
+    out.update({k: bool(v) for k, v in {
+        "restart_sim_odom_back_target_met": out["restart_sim_odom_back_s"] <= 1.0,
+        "restart_sim_clock_back_target_met": out["restart_sim_clock_back_s"] <= 1.0,
+        "restart_sim_odometry_resets_target_met": out["restart_sim_odometry_resets"] == 1,
+        "restart_bridge_stop_target_met": out["restart_bridge_stop_s"] <= 0.54 + 1e-6,
+        "restart_bridge_at_rest_after_death_target_met": out["restart_bridge_at_rest_after_death_s"] <= 0.6,
+        "restart_bridge_resume_target_met": out["restart_bridge_resume_s"] <= 1.0,
+    }.items()})
+    if camera:
+        out["restart_sim_image_back_target_met"] = out["restart_sim_image_back_s"] <= 1.0
     return out
 
 
-def _wait_diag(w: Watch, after: float | None = None, timeout: float = 10.0) -> dict:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout:
-        d = w.stream_diag()
-        if d and (after is None or time.monotonic() - after > 1.2):
-            return d
-        time.sleep(0.1)
-    return w.stream_diag()
+def at_rest(truth: np.ndarray, replies: list, t_kill: float, until: float, applied_after: int = 1,
+            still_m: float = 2e-4, still_rad: float = 2e-3, track: float = 0.2) -> dict:
+    """From the simulator's frames (ground truth) after the bridge died at ``t_kill`` (wall) and before it was
+    started again at ``until``, in simulation seconds after the last command the simulator applied (the
+    cycle after the frame its last reply answered: ``applied_after``; control.pas reads a reply in its next
+    cycle, and raf sim's logged age puts it there too):
 
-
-def _stop_after_last_command(truth: np.ndarray, px: Proxy, t_kill: float, applied_after: int = 0) -> dict:
-    """From the frames the simulator sent after the bridge died: when (simulation time, after the last command
-    it got) its command timeout stopped the wheels (the first cycle whose encoder counts do not move), and
-    when the robot was at rest. ``applied_after``: frames after the last reply's arrival the simulator applies
-    it from (``raf sim``: 0, from the last frame before it; SimTwo: 1, from the next frame's cycle)."""
-    with px.lock:
-        reps = [r for r in px.replies if r[0] <= t_kill]
-    if not reps:
-        return {"restart_bridge_stop_s": float("nan")}
-    t_last_rep = reps[-1][0]
-    n_before = int(np.sum(truth[:, 0] <= t_last_rep)) + applied_after
-    before, after = truth[:n_before], truth[n_before:]
-    t_cmd = before[-1, 2] / 1000  # the simulator applied the last command from this frame's time on
-    rest_t = float("nan")
-    prev = before[-1]
-    for r in after:
-        dl, dr = r[3] - prev[3], r[4] - prev[4]
-        moving = math.hypot(r[5] - prev[5], r[6] - prev[6]) > 2e-4
-        if math.isnan(rest_t) and dl == 0 and dr == 0 and not moving:
-            rest_t = r[2] / 1000 - t_cmd
-        prev = r
-    # the policy's decision is the first cycle the wheels decelerate to rest from: at rest minus the ramp
-    return {"restart_bridge_at_rest_s": rest_t, "restart_bridge_wheels_slowing_s": _policy_stop(after, before, t_cmd)}
-
-
-def _policy_stop(after, before, t_cmd) -> float:
-    """Simulation seconds from the last command to the first cycle whose encoder speed drops (the timeout
-    replacing it by V = W = 0)."""
-    rows = np.vstack([before[-3:], after])
-    ticks = np.abs(np.diff(rows[:, 3])) + np.abs(np.diff(rows[:, 4]))
-    base = ticks[:2].mean() if len(ticks) >= 2 else 0.0
-    for i in range(2, len(ticks)):
-        if ticks[i] < 0.7 * base:
-            return rows[i, 2] / 1000 - t_cmd  # the cycle ending at rows[i + 1] started at rows[i]
-    return float("nan")
+    * ``restart_bridge_stop_s``: the start of the first cycle whose motion (ground-truth path plus half the
+      track times the turn) drops below 70 % of the steady motion before (the timeout's V = W = 0);
+    * ``restart_bridge_at_rest_s``: the robot at rest for good: from this frame on its encoder totals stay
+      within one tick of their final values and every cycle moves it less than ``still_m`` and ``still_rad``
+      (5 mm/s, 0.05 rad/s); ``restart_bridge_at_rest_after_death_s``: the same moment in wall seconds after
+      the bridge's death (the arrival of that frame, which carries the pose at its Tms)."""
+    nan = float("nan")
+    none = {"restart_bridge_at_rest_s": nan, "restart_bridge_at_rest_after_death_s": nan,
+            "restart_bridge_stop_s": nan}
+    reps = [r for r in replies if r[0] <= t_kill]
+    if not reps or not len(truth):
+        return none
+    k = int(np.sum(truth[:, 0] <= reps[-1][0])) - 1 + applied_after
+    end = int(np.sum(truth[:, 0] < until))
+    win = truth[k:end]
+    if k < 0 or len(win) < 5:
+        return none
+    t_cmd = win[0, 2] / 1000
+    step = np.hypot(np.diff(win[:, 5]), np.diff(win[:, 6]))
+    turn = np.abs(np.remainder(np.diff(win[:, 7]) + math.pi, 2 * math.pi) - math.pi)
+    j = len(win) - 1
+    while j > 0 and (abs(win[j - 1, 3] - win[-1, 3]) <= 1 and abs(win[j - 1, 4] - win[-1, 4]) <= 1
+                     and step[j - 1] <= still_m and turn[j - 1] <= still_rad):
+        j -= 1
+    if j >= len(win) - 1:  # still moving at the end of the window
+        return none
+    motion = step + track / 2 * turn
+    steady = float(np.median(motion[: max(1, int(np.sum(win[:, 2] / 1000 - t_cmd < 0.4)))]))
+    stop = next((float(win[i, 2] / 1000 - t_cmd) for i in range(len(motion)) if motion[i] < 0.7 * steady), nan)
+    return {"restart_bridge_at_rest_s": float(win[j, 2] / 1000 - t_cmd),
+            "restart_bridge_at_rest_after_death_s": float(win[j, 0] - t_kill),
+            "restart_bridge_stop_s": stop}
 
 
 def _roscore_restart(rig: Rig) -> dict:
