@@ -272,7 +272,7 @@ class Session:
 
     def __init__(self, args, plan: Plan, graph: Graph, log_dir: Path, name: str, route, robot_file: Path | None,
                  calibration_file: Path | None, localize: bool = True, bag: Path | None = None,
-                 speed: float | None = None):
+                 speed: float | None = None, sim_extra: tuple[str, ...] = ()):
         from ..ros.processes import Procs
 
         self.args, self.plan, self.graph, self.name, self.route = args, plan, graph, name, route
@@ -281,6 +281,7 @@ class Session:
         self.procs = Procs(self.log_dir, watch=("sim", "bridge", "localize"))
         self.robot_file, self.calibration_file, self.localize, self.bag = robot_file, calibration_file, localize, bag
         self.speed = speed if speed is not None else plan.speed
+        self.sim_extra = tuple(sim_extra)  # more raf sim options (the competition's world: --round, --set perturb.*)
         self.rec = None
         self.notes: list[str] = []
         self.applied: list[str] = []  # simulator and bridge options applied for the mode
@@ -341,6 +342,7 @@ class Session:
         if not args.no_beacons:
             sim_args.append("--beacons")
         sim_args.append("--no-control")  # SimTwo has no control channel; nor a port clash here
+        sim_args += self.sim_extra
         if self.robot_file is not None:
             sim_args += ["--robot", str(self.robot_file)]
         self.procs.start("sim", _raf(*sim_args), env)
@@ -427,10 +429,12 @@ def experiment_graph(node_name: str, work: Path, log_dir: Path):
 
 
 def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, robot_file: Path | None, robot,
-                      out_dir: Path | None, notes: list) -> tuple[Path | None, dict]:
+                      out_dir: Path | None, notes: list, sim_extra: tuple[str, ...] = ()) -> tuple[Path | None, dict]:
     """``--calibration auto``: drive the calibration route recording a bag of camera/image_raw (every 3rd
     frame), camera_info and odom (``--save-bag FILE`` keeps it), then ``raf calibrate --bag`` on it; with
-    ``--bag FILE``, no drive: ``raf calibrate`` on that recording. Returns the calibration file and result keys."""
+    ``--bag FILE``, no drive: ``raf calibrate`` on that recording. Returns the calibration file and result keys.
+    ``sim_extra``: more ``raf sim`` options for the drive (the competition experiment's world: ``--round R
+    --set perturb.NAME=VALUE``, so that the stand-in renders with the round's drawn camera)."""
     from ..localization.route import make_route
     from ..ros.mw import bag_format
 
@@ -445,7 +449,7 @@ def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path,
         bag = Path(args.save_bag) if args.save_bag else work / bag_name
         route = make_route("calibration", 1)
         with Session(args, plan, graph, log_dir, "calibration", route, robot_file, None, localize=False, bag=bag,
-                     speed=args.calibration_speed) as ses:
+                     speed=args.calibration_speed, sim_extra=sim_extra) as ses:
             ses.start()
             ses.drive(robot)
             counts = dict(ses.rec.bag_counts)
