@@ -53,30 +53,35 @@ def test_fuzz_loss_and_restarts_on_the_real_simtwo(tmp_path):
     assert r["simulator"] == "simtwo" and args.field == "simtwo2022"
     # what SimTwo cannot do: absent, and said so
     assert not any(k.startswith(f"{p}soak") for k in r), [k for k in r if "soak" in k]
-    assert "lockstep" in r[f"{p}not_applicable"]
-    # fuzz: nothing forged or foreign reaches odom or /clock, the odometry is the fuzz-free one
+    assert "control channel" in r[f"{p}not_applicable"]
+    assert all(r[f"{p}{part}_mode"].startswith("the real SimTwo") for part in ("fuzz", "loss", "restarts"))
+    # every figure below is the observer's: SimTwo's frames against what the bridge published
+    for part in ("fuzz", "loss", "restart"):
+        assert r[f"{p}{part}_poisoned_messages"] == 0, r.get(f"{p}{part}_poisoned_first")
+        assert r[f"{p}{part}_scans_checked"] > 5  # SimTwo's LIDAR rays checked too
+    # fuzz: every kind reached the bridge's socket and poisoned nothing; the odometry is the fuzz-free one
     assert r[f"{p}fuzz_crashes"] == 0
-    assert r[f"{p}fuzz_odom_from_forged_or_foreign"] == 0 and r[f"{p}fuzz_clock_from_forged_or_foreign"] == 0
+    kinds = [k for k in faults.TARGETS if k.startswith(f"{p}fuzz_") and k.endswith("_poisoned")]
+    assert len(kinds) == 14
+    for k in kinds:
+        assert r[k] == 0 and r[k.replace("_poisoned", "_reached")] > 0, k
     assert r[f"{p}fuzz_odometry_error_m"] <= 0.01
     assert r[f"{p}fuzz_odometry_distance_m"] > 0.3  # SimTwo's robot drove its loops
-    assert r[f"{p}fuzz_bridge_rejected_foreign_source"] > 10000
-    assert r[f"{p}fuzz_bridge_held"] > 0 and r[f"{p}fuzz_bridge_implausible"] > 0
-    assert r[f"{p}fuzz_bridge_restarts"] == 0 and r[f"{p}fuzz_bridge_source_takeovers"] == 0
     assert r[f"{p}fuzz_sim_frame_rate_during_fuzz_hz"] > 20  # SimTwo kept its 25 Hz under the fuzz
-    # loss: 20 % dropped, 5 % duplicated, 5 % reordered both ways; no encoder tick lost
-    assert r[f"{p}loss_proxy_dropped"] > 10 and r[f"{p}loss_bridge_lost"] > 10
-    assert r[f"{p}loss_ticks_lost"] == 0, (r[f"{p}loss_bridge_ticks"], r[f"{p}loss_sim_ticks"])
+    # loss: 20 % dropped, 5 % duplicated, 5 % reordered both ways; at every message within the chord bound
+    assert r[f"{p}loss_frames_missing_runs"] > 10
+    assert r[f"{p}loss_odometry_error_max_m"] <= r[f"{p}loss_odometry_bound_m"]
+    assert r[f"{p}loss_heading_error_max_rad"] <= 1e-5 and r[f"{p}loss_ticks_off_max"] == 0
     assert r[f"{p}loss_speed_error_mps"] <= 0.01
     # restarts: SimTwo killed and restarted, the bridge killed and restarted, roscore restarted
     assert r[f"{p}restart_sim_process_start_to_first_frame_s"] <= 60
     assert r[f"{p}restart_sim_odom_back_s"] <= 1.0 and r[f"{p}restart_sim_clock_back_s"] <= 1.0
     assert r[f"{p}restart_sim_image_back_s"] <= 5.0  # raf simtwo run opens SimTwo's Cameras window first
     assert r[f"{p}restart_sim_odometry_resets"] == 1
-    # control.pas: TimeMs - LastValidMs > 500 ms, checked each 40 ms cycle: the first stop 0.52 s after the last
-    # valid command (its own log line); at most one cycle beyond its 0.5 s timeout
+    # control.pas: TimeMs - LastValidMs > 500 ms, checked each 40 ms cycle: in SimTwo's ground truth the wheels
+    # slow down in the first cycle more than 0.5 s after the last command, never before
     stop = r[f"{p}restart_bridge_stop_s"]
     assert math.isfinite(stop) and 0.5 <= stop <= 0.54 + 1e-9, stop
-    assert r[f"{p}restart_bridge_stop_target_met"] == (stop <= 0.54 + 1e-6)
-    assert r[f"{p}restart_bridge_at_rest_s"] <= 1.0
+    assert stop < r[f"{p}restart_bridge_at_rest_s"] <= 1.0
     assert r[f"{p}restart_bridge_resume_s"] <= 1.0
     assert r[f"{p}restart_roscore_nodes_clear"], r[f"{p}restart_roscore_exit_codes"]

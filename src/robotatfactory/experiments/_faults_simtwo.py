@@ -16,9 +16,11 @@ What the real SimTwo cannot do, and how the result says so (:data:`NOT_APPLICABL
 * no seed: ``--seed`` seeds the fuzz and the proxy only;
 * its command timeout is control.pas's (``COMMAND_TIMEOUT_MS``, checked at the start of each 40 ms script
   cycle: ``TimeMs - LastValidMs > 500`` stops the wheels, so 520 ms after the last valid command, as ``raf
-  sim`` does since 2026-11-26); ``restart_bridge_stop_s`` is read from the line the script writes then
-  (``raf: no valid command for N ms: wheels stopped``, SimTwo's log in the kept folder) and its target (the
-  timeout plus one cycle, 0.54 s) is judged as on the stand-in;
+  sim`` does since 2026-11-26); the figures (``restart_bridge_stop_s``, ``restart_bridge_at_rest_s``) come
+  from SimTwo's ground truth in its frames, as on the stand-in, and its target (the timeout plus one cycle,
+  0.54 s) is judged the same; the line the script writes then (``raf: no valid command for N ms: wheels
+  stopped``, SimTwo's log in the kept folder) is kept as ``restart_bridge_timeout_age_logged_s``, with no
+  target;
 * its camera publishes only while its Cameras window is open: after a restart the images come back once
   ``raf simtwo run`` has reopened it (``restart_sim_image_back_s``);
 * the fuzz, loss and restart parts use no control channel on either simulator (``raf sim --no-server``).
@@ -43,14 +45,14 @@ NOT_APPLICABLE = {
 #: the targets of the parts SimTwo cannot run (reported as not applicable, never as met)
 TARGETS_NOT_APPLICABLE = tuple(SOAK_TARGETS)
 DIFFERENCES = ("start poses by teleport (sim/set_robot_pose); no simulator seed (--seed: the fuzz and the proxy "
-               "only); restart_bridge_stop_s from control.pas's own log line: its timeout stops the wheels in the "
-               "first 40 ms cycle more than 500 ms after the last valid command (TimeMs - LastValidMs > 500: 520 "
-               "ms, as raf sim); images come back once raf simtwo run has reopened SimTwo's "
+               "only); control.pas's timeout stops the wheels in the first 40 ms cycle more than 500 ms after the "
+               "last valid command (TimeMs - LastValidMs > 500: 520 ms, as raf sim; its log line is "
+               "restart_bridge_timeout_age_logged_s, the figures come from the ground truth); images come back once raf simtwo run has reopened SimTwo's "
                "Cameras window; a SimTwo restart takes seconds (restart_sim_process_start_to_first_frame_s)")
 HELP = ("standin: raf sim (default); simtwo: the real SimTwo (raf simtwo run, field simtwo2022, the robot "
         "teleported to each part's start; keys start with " + MODE + "). SimTwo has no control channel to "
-        "reset rounds, so the soak is not run (its targets are reported as not applicable); the command timeout is read "
-        "from control.pas's own log line")
+        "reset rounds, so the soak is not run (its targets are reported as not applicable); every figure comes from "
+        "the observer (SimTwo's ground truth in its frames against what the bridge published)")
 TIMEOUT_RE = re.compile(r"raf: no valid command for (\d+) ms: wheels stopped")
 
 

@@ -97,6 +97,10 @@ TARGETS = {
 TARGETS.update({f"{simtwo_side.MODE}_{k}": v for k, v in list(TARGETS.items())
                 if k not in simtwo_side.TARGETS_NOT_APPLICABLE})
 TARGETS.update(SOAK_TARGETS)  # the stand-in only (the soak resets rounds through raf sim's control channel)
+#: the simulator and mode each observed part runs in (the result's ``<part>_mode``)
+OBSERVED_MODES = {p: {"standin": "raf sim --realtime: free-running in real time as SimTwo, no lockstep",
+                      "simtwo": "the real SimTwo (Linux build), free-running in real time"}
+                  for p in ("fuzz", "loss", "restarts")}
 EXIT_STATUS_FROM_TARGETS = True  # raf experiment faults exits 1 when a target is missed
 PERIOD = 0.04
 
@@ -494,8 +498,8 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
         time.sleep(1.0)
         n_timeouts = len(simtwo_side.timeout_ages_s(rig.simtwo_keep))
         n_sim_log = len(rig.procs.log("sim"))
+        t_bkill = time.monotonic()  # the signal: the bridge dies after it (a reply may still be on its way)
         rig.procs.kill("bridge")
-        t_bkill = time.monotonic()
         time.sleep(2.0)
         if rig.simtwo:  # control.pas's line, in ms, once per timeout; the first after the kill
             ages = simtwo_side.timeout_ages_s(rig.simtwo_keep)[n_timeouts:][:1]
@@ -551,10 +555,11 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
 
 def at_rest(truth: np.ndarray, replies: list, t_kill: float, until: float, applied_after: int = 1,
             still_m: float = 2e-4, still_rad: float = 2e-3, track: float = 0.2) -> dict:
-    """From the simulator's frames (ground truth) after the bridge died at ``t_kill`` (wall) and before it was
-    started again at ``until``, in simulation seconds after the last command the simulator applied (the
-    cycle after the frame its last reply answered: ``applied_after``; control.pas reads a reply in its next
-    cycle, and raf sim's logged age puts it there too):
+    """From the simulator's frames (ground truth) after the bridge was killed at ``t_kill`` (wall: the signal)
+    and before it was started again at ``until``, in simulation seconds after the last command the simulator
+    applied (the dead bridge's last reply, which may reach the proxy just after the signal; applied from the
+    cycle after the frame it answered: ``applied_after``; control.pas reads a reply in its next cycle, and
+    raf sim's logged age puts it there too):
 
     * ``restart_bridge_stop_s``: the start of the first cycle whose motion (ground-truth path plus half the
       track times the turn) drops below 70 % of the steady motion before (the timeout's V = W = 0);
@@ -565,7 +570,7 @@ def at_rest(truth: np.ndarray, replies: list, t_kill: float, until: float, appli
     nan = float("nan")
     none = {"restart_bridge_at_rest_s": nan, "restart_bridge_at_rest_after_death_s": nan,
             "restart_bridge_stop_s": nan}
-    reps = [r for r in replies if r[0] <= t_kill]
+    reps = [r for r in replies if r[0] < until]  # the dead bridge's: its last may arrive just after the kill
     if not reps or not len(truth):
         return none
     k = int(np.sum(truth[:, 0] <= reps[-1][0])) - 1 + applied_after
@@ -585,9 +590,9 @@ def at_rest(truth: np.ndarray, replies: list, t_kill: float, until: float, appli
     motion = step + track / 2 * turn
     steady = float(np.median(motion[: max(1, int(np.sum(win[:, 2] / 1000 - t_cmd < 0.4)))]))
     stop = next((float(win[i, 2] / 1000 - t_cmd) for i in range(len(motion)) if motion[i] < 0.7 * steady), nan)
-    return {"restart_bridge_at_rest_s": float(win[j, 2] / 1000 - t_cmd),
-            "restart_bridge_at_rest_after_death_s": float(win[j, 0] - t_kill),
-            "restart_bridge_stop_s": stop}
+    return {"restart_bridge_at_rest_s": round(float(win[j, 2] / 1000 - t_cmd), 3),
+            "restart_bridge_at_rest_after_death_s": round(float(win[j, 0] - t_kill), 3),
+            "restart_bridge_stop_s": round(stop, 3)}
 
 
 def _roscore_restart(rig: Rig) -> dict:
@@ -726,6 +731,8 @@ def run(args, out_dir: Path | None) -> dict:
         # the part's whole wall time (setup included); not {p}_wall_s, which a part may report itself (the fuzz's
         # own phase: fuzz_wall_s)
         res[f"{p}_part_wall_s"] = round(time.monotonic() - t0, 1)
+        if p in OBSERVED_MODES:  # which simulator and mode produced the part's figures
+            res[f"{p}_mode"] = OBSERVED_MODES[p]["simtwo" if simtwo else "standin"]
     if simtwo:
         res = simtwo_side.result(res)
     print(table(res))
