@@ -5,7 +5,8 @@ interpreter, ``raf --middleware ros2 experiment competition`` for ROS 2) and its
 ``raf sim`` (realtime, SimTwo-like defaults, camera and LIDAR, ``--trace`` and ``--end-after-max``),
 ``raf bridge``, ``raf localize``, ``raf agent`` (the EKF's ``pose`` only) and ``raf record`` (the ``pose``
 topic the agent gets, for measuring). Nothing of the robot's side sees the ground truth: the experiment
-reads the simulator's trace after the run.
+reads the simulator's trace after the run. The bridge and the localizer get the run's camera calibration
+(``--calibration FILE``) when the experiment made or was given one (:mod:`._competition_calibration`).
 
 Measured per run: the score, maximum and last-delivery time (``raf sim``'s final report), rule notes,
 picks and places from the agent's log, collisions, pushes and odometry slip from the trace
@@ -117,7 +118,8 @@ def _udp_port() -> int:
 def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path: bool = False,
                     field_name: str | None = None, simulator: str = "standin", localize: tuple[str, ...] = (),
                     agent: tuple[str, ...] = (), sim_set: tuple[str, ...] = (),
-                    loss: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict:
+                    loss: tuple[float, float, float] = (0.0, 0.0, 0.0), calibration: str | None = None,
+                    log_dir: Path | None = None) -> dict:
     """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
     :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``).
 
@@ -127,7 +129,10 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
 
     ``sim_set``: raf sim ``--set`` items (the world's perturbation, ``perturb.field_mm=2``); ``loss``: (drop,
     duplicate, reorder) probabilities per datagram on the UDP link between the simulator and the bridge, both
-    ways, through the faults experiment's proxy (:class:`._faults_net.Proxy`) when any is > 0."""
+    ways, through the faults experiment's proxy (:class:`._faults_net.Proxy`) when any is > 0; ``calibration``: a
+    camera calibration YAML given to ``raf bridge --calibration`` and ``raf localize --calibration`` (None: the
+    robot file's nominal camera; :mod:`._competition_calibration` makes it); ``log_dir``: the run's directory
+    (default :func:`run_dir`)."""
     from ..ros.master import private_graph
     from ..ros.mw import bag_format
     from ..ros.mw import name as middleware
@@ -142,14 +147,13 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         from ..simtwo_linux.scene import field_for_simtwo
 
         field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
-    tag = "simtwo" if simtwo else "full"
-    log_dir = Path(out_dir) / f"{tag}_r{round_no}_s{seed}" if out_dir else Path(tempfile.mkdtemp(prefix="raf-comp-"))
-    log_dir.mkdir(parents=True, exist_ok=True)
+    log_dir = Path(log_dir) if log_dir is not None else run_dir(out_dir, round_no, seed, simulator)
     trace_path = log_dir / "trace.jsonl"
     bag_path = log_dir / ("pose.bag" if fmt == "bag" else "pose_bag")
     # (each run's own; a port another run took meanwhile makes raf sim exit at once: SimStartError, retried)
     sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()  # (TCP)
     field_args = ["--field", field_name] if field_name else []
+    calib_args = ["--calibration", str(calibration)] if calibration else []
     wall0 = time.perf_counter()
     graph = private_graph(mw).start()
     procs = Procs(log_dir, watch=("bridge", "localize", "agent", "record"))
@@ -164,8 +168,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             frames_to = proxy.port
         env = graph.env()
         procs.raf("bridge", *field_args, "bridge", "--port", str(bridge_port), "--camera",
-                  f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", env=env)
-        procs.raf("localize", *field_args, "localize", *[a for s in localize for a in ("--set", s)], env=env)
+                  f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", *calib_args, env=env)
+        procs.raf("localize", *field_args, "localize", *calib_args, *[a for s in localize for a in ("--set", s)],
+                  env=env)
         procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
                   "--format", fmt, env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
@@ -217,6 +222,15 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         out["link"] = {k: int(proxy.counts.get(k, 0)) for k in ("frames", "replies", "dropped", "duplicated",
                                                                "reordered")}
     return out
+
+
+def run_dir(out_dir: Path | None, round_no: int, seed: int, simulator: str = "standin") -> Path:
+    """The run's log directory (made): ``{out_dir}/full_r{round}_s{seed}`` (``simtwo_...`` on the real SimTwo),
+    or a temporary one without ``out_dir``."""
+    tag = "simtwo" if simulator == "simtwo" else "full"
+    d = Path(out_dir) / f"{tag}_r{round_no}_s{seed}" if out_dir else Path(tempfile.mkdtemp(prefix="raf-comp-"))
+    d.mkdir(parents=True, exist_ok=True)
+    return d
 
 
 def _read(path: Path) -> str:

@@ -16,6 +16,15 @@ Mode (every key and the table carry it, ``mode`` key):
   late and noisy like the whole stack's. Faster than real time (about 1.5 s of wall time per run); the
   pose-error target is not measurable here and reported as such.
 
+Camera calibration (``--calibration auto|none|FILE``, full_stack; :mod:`._competition_calibration`): the world's
+camera may depart from the robot file's (``--perturb``); the robot side gets only what a team would have. ``auto``
+(the default when the camera is perturbed): before each run whose rendered camera differs from the nominal one,
+a calibration drive in that run's world (same round and seed: the same camera draw) and ``raf calibrate`` on it,
+the YAML given to ``raf bridge`` and ``raf localize``; ``none`` (the default otherwise): the nominal camera;
+``FILE``: that calibration. Per run ``..._calibration`` says which and ``..._calibration_{fx,fy}_error_pct``,
+``_{cx,cy}_error_px``, ``_{pitch,roll}_error_deg``, ``_{height,forward}_error_mm`` how far the camera used is
+from the rendered one; per round the largest (``..._calibration_fx_error_max_abs_pct``, ...).
+
 Seeds (``--seed-set``): ``heldout`` (the default, seeds 100-119: never used while the agent was tuned),
 ``tuned`` (0-9, the seeds it was tuned on through issues 11-19: in-sample figures) or ``both``, reported
 separately: every key carries the set, ``{mode}_{set}_r{round}_...`` (``other`` for a seed in neither, with
@@ -151,6 +160,15 @@ def add_arguments(parser) -> None:
                              "experiment's proxy, both ways): each datagram dropped with probability DROP, "
                              "duplicated with DUP, held back behind the next with REORDER (one number: DUP and "
                              "REORDER are DROP/5 each), e.g. 0.05; default 0 (no proxy)")
+    parser.add_argument("--calibration", default=None, metavar="auto|none|FILE",
+                        help="full_stack: the camera calibration raf bridge and raf localize get (the world's camera "
+                             "may be perturbed; the robot side knows only the robot file's): auto = before each run "
+                             "whose simulated camera differs from the robot file's, the localization experiment's "
+                             "calibration drive in that run's world (same round and seed: the same camera draw) and "
+                             "raf calibrate on it (about 2 min of wall time more per run); none = the robot file's "
+                             "nominal camera; or a calibration YAML for every run. Default: auto when the camera is "
+                             "perturbed (--perturb, --sim perturb.camera_*), else none. Every run reports how, and "
+                             "the used camera's errors against the rendered one (calibration_*_error_*)")
     parser.add_argument("--pose-noise", default="0,0", metavar="M,RAD",
                         help="bare_truth: white noise (standard deviations, m and rad) added to the agent's pose "
                              "every cycle, e.g. 0.003,0.02 (default 0,0)")
@@ -347,20 +365,36 @@ def _job(spec):
 
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None,
               simulator: str = "standin", localize: tuple[str, ...] = (), agent: tuple[str, ...] = (),
-              sim_set: tuple[str, ...] = (), loss: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict:
-    from ._competition_full import SimStartError, play_full_stack
+              sim_set: tuple[str, ...] = (), loss: tuple[float, float, float] = (0.0, 0.0, 0.0),
+              calibration: str = "none") -> dict:
+    """One whole-stack run: its camera calibration first (``calibration``: what
+    :func:`._competition_calibration.resolve` gave; a drive with ``auto``), then the round on it."""
+    from ._competition_calibration import prepare
+    from ._competition_full import SimStartError, play_full_stack, run_dir
 
+    log_dir = run_dir(out_dir, round_no, seed, simulator)
+    try:
+        calib, cal_keys = prepare(calibration, round_no, seed, sim_set, field_name, log_dir, simulator)
+    except Exception as e:  # noqa: BLE001 - no calibration, no run: reported as a failed run
+        return _failed(round_no, seed, RuntimeError(f"camera calibration ({calibration}): {type(e).__name__}: {e}"))
     tries = 3
     while True:
         tries -= 1
         try:
-            return play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set,
-                                   loss)
+            out = play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set,
+                                  loss, calibration=calib, log_dir=log_dir)
+            break
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
                 return _failed(round_no, seed, e)
         except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
             return _failed(round_no, seed, e)
+    drive_cam = cal_keys.pop("calibration_drive_camera", None)
+    if drive_cam is not None:  # the drive's raf sim must have rendered the round's camera (same draw)
+        round_cam = {k: v for k, v in (out.get("world") or {}).items() if k.startswith("camera_")}
+        cal_keys["calibration_drive_same_camera"] = bool(drive_cam) and drive_cam == round_cam
+    out.update(cal_keys)
+    return out
 
 
 def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: str | None,
@@ -397,6 +431,24 @@ def _failed(round_no: int, seed: int, e: Exception) -> dict:
             "parts_pushed": 0, "parts_knocked_out": 0}
 
 
+#: per-run keys of the camera the robot side used against the one raf sim rendered (_competition_calibration)
+CALIBRATION_ERROR_KEYS = tuple(f"calibration_{k}" for k in ("fx_error_pct", "fy_error_pct", "cx_error_px",
+                                                            "cy_error_px", "pitch_error_deg", "roll_error_deg",
+                                                            "height_error_mm", "forward_error_mm"))
+
+
+def _calibration_text(calibration: str, mode: str) -> str:
+    """The ``calibration`` result key: how the robot side's camera was calibrated."""
+    if mode == "bare_truth":
+        return "not used: the agent's pose is the ground truth"
+    if calibration == "auto":
+        return ("auto: raf calibrate on a calibration drive in each run's world before the round (runs whose camera "
+                "is the robot file's: the nominal camera)")
+    if calibration == "none":
+        return "none: the robot file's nominal camera"
+    return f"file {calibration}"
+
+
 def _nan_last(x: float) -> float:
     """Sort key for max(): a nan (not measured) counts as infinitely bad."""
     return math.inf if not math.isfinite(x) else x
@@ -425,6 +477,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_world_{k}"] = v
         for k, v in (r.get("link") or {}).items():  # what the lossy link did to this run's datagrams
             out[f"{p}_link_{k}"] = v
+        for k, v in r.items():  # how the camera was calibrated, and the used camera against the rendered one
+            if k.startswith("calibration"):
+                out[f"{p}_{k}"] = v
         out[f"{p}_picks_attempted"] = r["picks_attempted"]
         out[f"{p}_pick_failures"] = r["pick_failures"]
         out[f"{p}_timeouts"] = r["timeouts"]
@@ -486,6 +541,10 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_pose_error_docking_max_target_met"] = bool(dock) and len(dock) == n and max(dock) <= POSE_TARGET
             med = [r["pose_error_median_m"] for r in rs if math.isfinite(r.get("pose_error_median_m", math.nan))]
             out[f"{p}_pose_error_median_m"] = round(statistics.median(med), 4) if med else None
+        for k in CALIBRATION_ERROR_KEYS:  # the largest error of the used camera against the rendered one
+            vals = [r[k] for r in rs if k in r]
+            if vals:
+                out[f"{p}_{k.replace('_error_', '_error_max_abs_')}"] = round(max(abs(v) for v in vals), 4)
         out[f"{p}_errors"] = sum("error" in r for r in rs)
         splits = [r["time_split"] for r in rs if r.get("time_split")]
         for act in sorted({a for sp in splits for a in sp}):  # where the time went (RoundAgent.activity)
@@ -624,6 +683,9 @@ def run(args, out_dir: Path | None) -> dict:
 
     perturb = sim_config(sim_options).perturb
     loss = parse_loss(getattr(args, "loss", "0"))
+    from ._competition_calibration import resolve as resolve_calibration
+
+    calibration = resolve_calibration(getattr(args, "calibration", None), perturb, mode, simulator)
     if any(loss) and not mode.endswith("full_stack"):
         raise ConfigError("--loss: the lossy link is between the simulator and the bridge: the whole stack only "
                           "(--mode full_stack)")
@@ -659,6 +721,8 @@ def run(args, out_dir: Path | None) -> dict:
         if perturb.any and simulator == "simtwo":
             raise ConfigError("--perturb / --sim perturb.NAME: the stand-in's world (raf sim); the real SimTwo's "
                               "scene is its own")
+        if getattr(args, "analyse", None) and getattr(args, "calibration", None) not in (None, "none"):
+            raise ConfigError("--analyse measures kept runs again: --calibration does not apply")
         if getattr(args, "analyse", None):  # the runs kept in a directory, measured again with this code
             runs = [_reanalysed(Path(args.analyse), r, s, rec, field_name, simulator)
                     for r, s, _l, _f, rec, *_ in specs]
@@ -667,7 +731,8 @@ def run(args, out_dir: Path | None) -> dict:
 
             with ThreadPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
                 runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[4], field_name, simulator,
-                                                          localize, agent_items, tuple(sim_items), loss), specs))
+                                                          localize, agent_items, tuple(sim_items), loss,
+                                                          calibration), specs))
     elif jobs == 1 or len(specs) == 1:
         runs = [_job(s) for s in specs]
     else:
@@ -676,7 +741,12 @@ def run(args, out_dir: Path | None) -> dict:
     wall = time.perf_counter() - t0
     print(table(mode, runs), flush=True)
     print(f"world: {perturb.describe()}; link: "
-          f"{'lossless loopback' if not any(loss) else 'drop %g, duplicate %g, reorder %g' % loss}", flush=True)
+          f"{'lossless loopback' if not any(loss) else 'drop %g, duplicate %g, reorder %g' % loss}; camera "
+          f"calibration: {_calibration_text(calibration, mode)}", flush=True)
+    for r in runs:
+        if "calibration_fx_error_pct" in r:
+            print(f"round {r['round']} seed {r['seed']}: camera used vs rendered: " + ", ".join(
+                f"{k[len('calibration_'):]} {r[k]:+.3g}" for k in CALIBRATION_ERROR_KEYS if k in r), flush=True)
     for r in runs:
         if "error" in r:
             print(f"round {r['round']} seed {r['seed']}: {r['error']}", file=sys.stderr)
@@ -689,6 +759,7 @@ def run(args, out_dir: Path | None) -> dict:
     out["perturb"] = perturb.describe()
     for k, v in dataclasses.asdict(perturb).items():
         out[f"perturb_{k}"] = v
+    out["calibration"] = _calibration_text(calibration, mode)
     out["link_drop"], out["link_dup"], out["link_reorder"] = (round(x, 4) for x in loss)
     out["link"] = ("lossless loopback" if not any(loss) else
                    f"lossy UDP proxy sim <-> bridge: drop {loss[0]:g}, duplicate {loss[1]:g}, reorder {loss[2]:g}")
