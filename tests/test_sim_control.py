@@ -280,3 +280,29 @@ def test_raf_simctl_sends_requests_and_reports_refusals(field, robot, raf_cmd):
         peer.close()
     code, out = simctl("get_state")  # nobody there any more
     assert code == 2 and "no answer" in out
+
+
+def test_a_reset_frees_the_old_scene(field, robot):
+    """A reset's old scene is held only by its own reference cycles: the runner collects it once its loop has
+    let go of it, instead of leaving it (about 16 MB each) to Python's rare full collections; the realtime soak
+    (issue 22) saw raf sim grow by that much at every round."""
+    import gc
+    import weakref
+
+    peer = Controller(lambda seq: (0.0, 0.0))
+    runner, t, _ = start(field, robot, peer.sock.getsockname())
+    try:
+        gc.disable()  # only the runner's own collection may free them
+        olds = []
+        for seed in (1, 2, 3):
+            olds.append(weakref.ref(runner.sim))
+            r = request(runner.control_address, {"op": "reset", "seed": seed})
+            assert r["ok"] and r["seed"] == seed
+        end = time.monotonic() + 5.0
+        while any(o() is not None for o in olds) and time.monotonic() < end:
+            time.sleep(0.02)
+        assert [o() is None for o in olds] == [True, True, True]
+    finally:
+        gc.enable()
+        stop(runner, t)
+        peer.close()
