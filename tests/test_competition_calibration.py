@@ -183,3 +183,11 @@ def test_the_calibration_drive_passes_the_worlds_options_to_raf_sim(tmp_path, mo
     sim = started["sim"]
     assert sim[-len(extra):] == list(extra) and "--seed" in sim and sim[sim.index("--seed") + 1] == "100"
     assert "--calibration" not in started["bridge"] and "localize" not in started
+
+
+def test_the_help_prints():
+    """argparse formats help with %: the --perturb help names "camera 2 %" (it raised ValueError)."""
+    p = argparse.ArgumentParser()
+    competition.add_arguments(p)
+    text = p.format_help()
+    assert "--calibration auto|none|FILE" in text and "camera 2 % 3 px" in text

@@ -165,7 +165,7 @@ def add_arguments(parser) -> None:
                              "may be perturbed; the robot side knows only the robot file's): auto = before each run "
                              "whose simulated camera differs from the robot file's, the localization experiment's "
                              "calibration drive in that run's world (same round and seed: the same camera draw) and "
-                             "raf calibrate on it (about 2 min of wall time more per run); none = the robot file's "
+                             "raf calibrate on it (about 1 min of wall time more per run); none = the robot file's "
                              "nominal camera; or a calibration YAML for every run. Default: auto when the camera is "
                              "perturbed (--perturb, --sim perturb.camera_*), else none. Every run reports how, and "
                              "the used camera's errors against the rendered one (calibration_*_error_*)")
@@ -194,7 +194,7 @@ def add_arguments(parser) -> None:
 def _perturb_help() -> str:
     from ..sim.perturb import ISSUE_20
 
-    return ISSUE_20.describe()
+    return ISSUE_20.describe().replace("%", "%%")  # argparse formats help strings with %
 
 
 def parse_loss(text) -> tuple[float, float, float]:
