@@ -191,3 +191,15 @@ def test_the_help_prints():
     competition.add_arguments(p)
     text = p.format_help()
     assert "--calibration auto|none|FILE" in text and "camera 2 % 3 px" in text
+
+
+def test_a_kept_run_measured_again_keeps_how_its_camera_was_calibrated(tmp_path):
+    """--analyse DIR re-measures a kept run from its logs; the calibration keys come from its runs.json."""
+    import json
+
+    (tmp_path / "full_r1_s100").mkdir()
+    (tmp_path / "full_r1_s100" / "sim.log").write_text("nothing\n")
+    (tmp_path / "runs.json").write_text(json.dumps([{"round": 1, "seed": 100, "wall_s": 200.0,
+                                                      "calibration": "auto: ...", "calibration_cy_error_px": -2.1}]))
+    r = competition._reanalysed(tmp_path, 1, 100, False, None)
+    assert r["calibration"] == "auto: ..." and r["calibration_cy_error_px"] == -2.1 and r["wall_s"] == 200.0

@@ -420,9 +420,11 @@ def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: 
     except (OSError, ValueError, StopIteration):
         pass
     bag = d / "pose.bag" if (d / "pose.bag").exists() else d / "pose_bag"
-    return analyse(round_no, seed, d, d / "trace.jsonl", bag, record, field_name,
-                   wall_s=float(before.get("wall_s", math.nan)), middleware=before.get("middleware", "unknown"),
-                   report_log="referee.log" if simtwo else "sim.log")
+    out = analyse(round_no, seed, d, d / "trace.jsonl", bag, record, field_name,
+                  wall_s=float(before.get("wall_s", math.nan)), middleware=before.get("middleware", "unknown"),
+                  report_log="referee.log" if simtwo else "sim.log")
+    out.update({k: v for k, v in before.items() if k.startswith("calibration")})  # how its camera was calibrated
+    return out
 
 
 def _failed(round_no: int, seed: int, e: Exception) -> dict:
