@@ -7,24 +7,29 @@ is bound to the proxy's address (its only legitimate sender).
 
 Parts (``--parts``, all by default):
 
-* **fuzz**: while the robot drives, ``--fuzz-datagrams`` datagrams (default 1,000,000) go to the bridge's port:
-  from other source addresses (a fuzzer process: random bytes, mutated copies of a real SensorFrame, frames
-  with forged far-future Seq/Tms, oversized, non-ASCII, and a second sender streaming valid frames), and a
-  share (``--fuzz-inband``) from the simulator's own source address through the proxy (far-future Seq, far-
-  future Tms, clock going back, lone restart-like frames, impossible encoder totals, undecodable mutations,
-  oversized and non-ASCII datagrams). Figures: the bridge still runs (0 crashes); odom and /clock messages
-  whose stamp is not the Tms of a frame the simulator sent (0: forged and foreign frames never reach them);
-  the bridge's final odometry against the same odometry integrated over every frame the simulator sent
-  (the fuzz-free result), target 1 cm.
+Every figure of the fuzz, loss and restart parts is the observer's (:mod:`._faults_observe`): the proxy's record
+of the genuine frames against every ``odom``, ``/clock``, ``joint_states``, TF and ``scan`` message this
+process's node received; a message is *poisoned* when no genuine frame supports one of its values. No figure
+comes from the bridge's counters (kept beside the logs, ``bridge_diagnostics.json``) or the simulator's log.
+
+* **fuzz**: while the robot drives (the LIDAR on), ``--fuzz-datagrams`` datagrams (default 1,000,000) go to the
+  bridge's port one kind after the other, each in its own time segment: from other source addresses (a
+  fuzzer process, :data:`._faults_net.FOREIGN_KINDS`, over ``--fuzz-seconds``), then a share
+  (``--fuzz-inband``) from the simulator's own address through the proxy (:data:`._faults_net.INBAND_KINDS`,
+  :data:`INBAND_RATE` a second), then copies of every next real frame with impossible encoder totals. Per
+  kind: the sends that succeeded, those that reached the socket (minus the bridge socket's kernel drops,
+  ``/proc/net/udp``) and the messages poisoned, target 0 each; 0 crashes; the odometry at every ``odom``
+  message within 1 cm of the odometry over every genuine frame.
 * **loss**: the proxy drops ``--drop`` (20 %), duplicates ``--dup`` (5 %) and reorders ``--reorder`` (5 %) of
-  the SensorFrames and of the Commands. Figures: encoder ticks the bridge lost (its wheel angles at the end
-  against the simulator's cumulative totals, which are what a loss-free run counts), target 0; the robot
-  still follows cmd_vel (mean speed over a straight segment against the command, target 1 cm/s).
-* **restarts**: the simulator (with its camera publisher) killed and restarted (odom, /clock and images back
-  within 1 s of its first frame; odometry reset once); the bridge killed and restarted (the simulator's
-  command timeout stops the robot within 0.5 s of its last command; the new bridge's odom within 1 s of its
-  first reply); roscore killed and restarted on the same port (every node exits with a clear message, or
-  keeps going: reported).
+  the SensorFrames and of the Commands. At every message during the loss: 0 poisoned, the heading exact, every
+  ``joint_states`` on the genuine totals, the position within the chord errors of the frames the proxy did not
+  deliver (:func:`._faults_observe.chord_bound`); the robot still follows cmd_vel (1 cm/s).
+* **restarts**: the simulator (with its camera publisher) killed and restarted (a genuine odom and /clock of
+  the new run, and images, within 1 s of its first frame; odometry on in the new run once); the bridge killed
+  and restarted (from the ground truth: the wheels slowing within 0.54 s of the last command, the robot at
+  rest within 0.54 s of it and 0.6 s of the kill: :func:`at_rest`; the new bridge's genuine odom within 1 s
+  of its first reply); roscore killed and restarted on the same port (every node exits with a clear
+  message, or keeps going: reported). 0 poisoned messages throughout.
 * **soak** (:mod:`._faults_soak`, issue 22): ``--soak-minutes`` (default 60) of the whole stack as SimTwo runs
   it: ``raf sim`` free-running in real time (camera, LIDAR, factory server), the bridge, the localization and
   ``raf agent`` playing rounds one after another; memory, CPU, message rates and the loop latency in control
