@@ -34,7 +34,8 @@ const
   BRIDGE_PORT = 9810;          // the bridge's UDP port (SimTwo itself listens on 9808, I/O tab)
 
   // ---- the reply -------------------------------------------------------------------------
-  COMMAND_TIMEOUT_MS = 500;    // no valid command for this long (simulation ms): stop the wheels
+  COMMAND_TIMEOUT_MS = 400;    // no valid command for this long (simulation ms): stop the wheels; with
+                               // the wheels' ~80 ms ramp the robot is at rest within ~0.54 s of its last command
 
   // ---- the robot (AGV.xml of RobotFactoryPro2022) -----------------------------------------
   ROBOT_ID = 'AGV';            // the robot's ID in scene.xml

@@ -58,12 +58,13 @@ def test_restarts_of_simulator_bridge_camera_and_roscore(tmp_path):
     assert r["restart_sim_image_back_s"] <= 1.0
     assert r["restart_sim_odometry_resets"] == 1
     # the ground truth (the simulator's frames), not the simulator's own log line: the wheels slow down in the
-    # first cycle more than 0.5 s after the last command (never before), and the robot is at rest soon after
-    assert 0.5 <= r["restart_bridge_stop_s"] <= 0.54 + 1e-9
-    assert r["restart_bridge_stop_s"] < r["restart_bridge_at_rest_s"] <= 0.7
-    # the target is 0.6 s; the timeout (0.52 s after the command applied, up to a cycle after the death) and the
-    # wheels' 0.08 s ramp put the robot at rest 0.60-0.66 s after it (docs/reliability.md): a bound, not the target
-    assert r["restart_bridge_at_rest_after_death_s"] <= 0.7
+    # first cycle more than the command timeout after the last command (never before), and the robot is at rest
+    # soon after: issue 22's 0.54 s after the last command and 0.6 s after the bridge's death (with a cycle of
+    # slack for a loaded machine; the campaign judges the targets themselves)
+    timeout = faults.STOP_S - faults.PERIOD
+    assert timeout <= r["restart_bridge_stop_s"] <= faults.STOP_S + 1e-9
+    assert r["restart_bridge_stop_s"] < r["restart_bridge_at_rest_s"] <= 0.54 + 0.04
+    assert r["restart_bridge_at_rest_after_death_s"] <= 0.6 + 0.04
     assert r["restart_bridge_resume_s"] <= 1.0
     assert r["restart_roscore_nodes_clear"], r["restart_roscore_exit_codes"]
 

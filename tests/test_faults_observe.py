@@ -174,3 +174,35 @@ def test_poisoned_messages_are_attributed_to_the_segment_they_follow():
     segs = [("a", tr[10, 0], tr[20, 0]), ("b", tr[30, 0], tr[35, 0])]
     assert o.by_segment(segs) == {"a": 0, "b": 1, "outside": 1}
     assert len(o.poisoned_in(tr[30, 0], math.inf)) == 1
+
+
+def test_at_rest_is_judged_from_the_ground_truth_above_a_resting_robots_jitter():
+    """faults.at_rest on synthetic frames: a robot turning at 0.5 rad/s gets its last command applied at frame
+    10; the stop decision comes 0.44 s later (the timeout plus a cycle), the motion decays over two cycles, and
+    then the body jitters by up to 2.2 mrad a cycle with a creeping tick now and then, as SimTwo's does: at rest
+    two cycles after the stop, not at the last jitter sample; and a robot still turning at the end is never at
+    rest."""
+    from robotatfactory.experiments.faults import at_rest
+
+    rows, th, left, right = [], 0.0, 0, 0
+    jitter = [0.0022, -0.0015, 0.0013, -0.0022, 0.0009, 0.0021, -0.0019, 0.001]
+    for i in range(60):
+        t_rel = (i - 11) * 0.04  # the start of the cycle frame i reports, after the last command's frame
+        if t_rel < 0.44:
+            dth, dl, dr = 0.02, -3, 3
+        elif t_rel < 0.52:
+            dth, dl, dr = (0.008 if t_rel < 0.48 else 0.005), -1, 1
+        else:
+            dth, dl, dr = jitter[i % len(jitter)], 0, (1 if i % 7 == 0 else 0)
+        th += dth
+        left, right = left + dl, right + dr
+        rows.append((100.0 + 0.04 * i, i, 40 * (i + 1), left, right, 0.0, 0.0, th))
+    tr = np.array(rows, dtype=float)
+    replies = [(100.0 + 0.04 * 9 + 0.01, 9)]  # the last reply answers frame 9: applied from frame 10
+    r = at_rest(tr, replies, t_kill=100.0 + 0.04 * 9 + 0.005, until=200.0)
+    assert r["restart_bridge_stop_s"] == pytest.approx(0.44)
+    assert r["restart_bridge_at_rest_s"] == pytest.approx(0.52)
+    assert r["restart_bridge_at_rest_after_death_s"] == pytest.approx(0.04 * 23 - 0.04 * 9 - 0.005, abs=1e-6)
+    still_turning = tr.copy()
+    still_turning[30:, 7] += 0.01 * np.arange(30)  # 0.25 rad/s to the end
+    assert math.isnan(at_rest(still_turning, replies, 100.0, 200.0)["restart_bridge_at_rest_s"])

@@ -428,7 +428,10 @@ def test_defaults_and_geometry_match_the_project(main_run):
     assert run.cfg_default["BridgeIP"] == LOCALHOST
     assert run.cfg_default["BridgePort"] == str(BRIDGE_UDP_PORT)
     assert "LOCKSTEP" not in CONST and "GetTickCount" not in CONTROL.read_text(), "no waiting in Control"
-    assert int(run.cfg_default["CommandTimeoutMs"]) == 500
+    from robotatfactory.sim.runner import RunnerConfig
+
+    # control.pas's command timeout is raf sim's (the stand-in stops the wheels by the same rule)
+    assert int(run.cfg_default["CommandTimeoutMs"]) == round(RunnerConfig.command_timeout * 1000) == 400
     assert float(CONST["WHEEL_RADIUS"]) == ROBOT.wheel_radius
     assert float(CONST["TRACK"]) == ROBOT.track
     assert float(CONST["LIDAR_NOISE_A"]) == ROBOT.lidar.noise_a

@@ -15,10 +15,9 @@ What the real SimTwo cannot do, and how the result says so (:data:`NOT_APPLICABL
   start and after the restart);
 * no seed: ``--seed`` seeds the fuzz and the proxy only;
 * its command timeout is control.pas's (``COMMAND_TIMEOUT_MS``, checked at the start of each 40 ms script
-  cycle: ``TimeMs - LastValidMs > 500`` stops the wheels, so 520 ms after the last valid command, as ``raf
-  sim`` does since 2026-11-26); the figures (``restart_bridge_stop_s``, ``restart_bridge_at_rest_s``) come
-  from SimTwo's ground truth in its frames, as on the stand-in, and its target (the timeout plus one cycle,
-  0.54 s) is judged the same; the line the script writes then (``raf: no valid command for N ms: wheels
+  cycle: ``TimeMs - LastValidMs > 400`` stops the wheels, so 440 ms after the last valid command, as ``raf
+  sim`` does); the figures (``restart_bridge_stop_s``, ``restart_bridge_at_rest_s``) come from SimTwo's
+  ground truth in its frames, as on the stand-in, and are judged by the same targets; the line the script writes then (``raf: no valid command for N ms: wheels
   stopped``, SimTwo's log in the kept folder) is kept as ``restart_bridge_timeout_age_logged_s``, with no
   target;
 * its camera publishes only while its Cameras window is open: after a restart the images come back once
