@@ -566,7 +566,7 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
 
 
 def at_rest(truth: np.ndarray, replies: list, t_kill: float, until: float, applied_after: int = 1,
-            still_m: float = 2e-4, still_rad: float = 4e-3, track: float = 0.2) -> dict:
+            still_m: float = 2e-4, still_rad: float = 2e-3, track: float = 0.2, window: int = 5) -> dict:
     """From the simulator's frames (ground truth) after the bridge was killed at ``t_kill`` (wall: the signal)
     and before it was started again at ``until``, in simulation seconds after the last command the simulator
     applied (the dead bridge's last reply, which may reach the proxy just after the signal; applied from the
@@ -575,13 +575,14 @@ def at_rest(truth: np.ndarray, replies: list, t_kill: float, until: float, appli
 
     * ``restart_bridge_stop_s``: the start of the first cycle whose motion (ground-truth path plus half the
       track times the turn) drops below 70 % of the steady motion before (the timeout's V = W = 0);
-    * ``restart_bridge_at_rest_s``: the robot at rest for good: from this frame on every cycle turns each wheel
-      by at most one encoder tick and moves the robot less than ``still_m`` and ``still_rad`` (5 mm/s, 0.1
-      rad/s: about twice what SimTwo's resting robot shows, whose ground truth jitters by up to 0.2 mm and
-      2.2 mrad a cycle (0.055 rad/s) for seconds after a stop while its wheels creep a tick in a few
-      cycles: a threshold at that level, 0.05 rad/s until 2026-11-27, put the moment of rest wherever a
-      jitter sample happened to exceed it); ``restart_bridge_at_rest_after_death_s``: the same moment in wall seconds after
-      the bridge's death (the arrival of that frame, which carries the pose at its Tms)."""
+    * ``restart_bridge_at_rest_s``: the robot at rest for good: from this frame on no wheel turns more than one
+      encoder tick in a cycle, the robot's mean speed over every later ``window`` cycles (0.2 s) stays under
+      ``still_m`` and ``still_rad`` a cycle (5 mm/s, 0.05 rad/s), and no single cycle moves it more than twice
+      that. A speed is judged over 0.2 s, not a cycle, because SimTwo's resting robot jitters: its ground truth
+      moves by up to 0.22 mm and 2.2 mrad in a cycle for seconds after a stop, back and forth (a per-cycle
+      threshold at 5 mm/s and 0.05 rad/s, the first criterion, put the moment of rest wherever a jitter
+      sample happened to exceed it); ``restart_bridge_at_rest_after_death_s``: the same moment in wall
+      seconds after the bridge's death (the arrival of that frame, which carries the pose at its Tms)."""
     nan = float("nan")
     none = {"restart_bridge_at_rest_s": nan, "restart_bridge_at_rest_after_death_s": nan,
             "restart_bridge_stop_s": nan}
@@ -591,16 +592,22 @@ def at_rest(truth: np.ndarray, replies: list, t_kill: float, until: float, appli
     k = int(np.sum(truth[:, 0] <= reps[-1][0])) - 1 + applied_after
     end = int(np.sum(truth[:, 0] < until))
     win = truth[k:end]
-    if k < 0 or len(win) < 5:
+    if k < 0 or len(win) < window + 2:
         return none
     t_cmd = win[0, 2] / 1000
     step = np.hypot(np.diff(win[:, 5]), np.diff(win[:, 6]))
     turn = np.abs(np.remainder(np.diff(win[:, 7]) + math.pi, 2 * math.pi) - math.pi)
     ticks = np.maximum(np.abs(np.diff(win[:, 3])), np.abs(np.diff(win[:, 4])))
+    # the mean speed over the window starting at each frame: net displacement and turn over ``window`` cycles
+    n = len(win) - window
+    net_m = np.hypot(win[window:, 5] - win[:n, 5], win[window:, 6] - win[:n, 6]) / window
+    net_rad = np.abs(np.remainder(win[window:, 7] - win[:n, 7] + math.pi, 2 * math.pi) - math.pi) / window
+    still_cycle = (ticks <= 1) & (step <= 2 * still_m) & (turn <= 2 * still_rad)
+    still_mean = (net_m <= still_m) & (net_rad <= still_rad)
     j = len(win) - 1
-    while j > 0 and ticks[j - 1] <= 1 and step[j - 1] <= still_m and turn[j - 1] <= still_rad:
+    while j > 0 and still_cycle[j - 1] and (j - 1 >= n or still_mean[j - 1]):
         j -= 1
-    if j >= len(win) - 1:  # still moving at the end of the window
+    if j >= n:  # not at rest over a whole window before the end
         return none
     motion = step + track / 2 * turn
     steady = float(np.median(motion[: max(1, int(np.sum(win[:, 2] / 1000 - t_cmd < 0.4)))]))
