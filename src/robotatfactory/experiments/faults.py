@@ -27,8 +27,8 @@ comes from the bridge's counters (kept beside the logs, ``bridge_diagnostics.jso
 * **restarts**: the simulator (with its camera publisher) killed and restarted (a genuine odom and /clock of
   the new run, and images, within 1 s of its first frame; odometry on in the new run once); the bridge killed
   and restarted (from the ground truth: the wheels slowing within the command timeout (0.4 s) plus one cycle
-  of the last command, the robot at rest within 0.54 s of it and 0.6 s of the kill: :func:`at_rest`; the new bridge's genuine odom within 1 s
-  of its first reply); roscore killed and restarted on the same port (every node exits with a clear
+  of the last command, the robot at rest within 0.54 s of it and 0.6 s of the kill: :func:`at_rest`; the new
+  bridge's genuine odom within 1 s of its first reply); roscore killed and restarted on the same port (every node exits with a clear
   message, or keeps going: reported). 0 poisoned messages throughout.
 * **soak** (:mod:`._faults_soak`, issue 22): ``--soak-minutes`` (default 60) of the whole stack as SimTwo runs
   it: ``raf sim`` free-running in real time (camera, LIDAR, factory server), the bridge, the localization and
