@@ -40,7 +40,7 @@ when one is missed, see commands/experiment.py).
 
 Simulator. ``--simulator standin`` (the default) runs ``raf sim``; ``--simulator simtwo`` runs the real SimTwo
 (``raf simtwo run``, field ``simtwo2022``) behind the same proxy: fuzz, loss and restarts, with the keys
-prefixed ``real_simtwo_``. What SimTwo cannot do (no ``--fast``, no lockstep: no soak; no start pose option:
+prefixed ``real_simtwo_``. What SimTwo cannot do (no control channel: no soak; no start pose option:
 teleports; its own command timeout and log line) is in :mod:`._faults_simtwo` and in the result.
 
 Code. This module is the campaign: the parts (:data:`PARTS`, each run in an interpreter of its own by
