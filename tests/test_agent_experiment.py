@@ -1,23 +1,17 @@
 """``raf experiment competition`` on the smallest set: round 1, one seed, the bare stand-in (ground truth as
 the agent's pose; the mode says so in every key)."""
-import argparse
 import json
 
 import pytest
+from expargs import options
 
 from robotatfactory.errors import ConfigError
-from robotatfactory.experiments import competition
 from robotatfactory.experiments import _competition_log as complog
+from robotatfactory.experiments import competition
 
 
 def args(**kw):
-    p = argparse.ArgumentParser()
-    competition.add_arguments(p)
-    a = p.parse_args([])
-    a.field = None
-    for k, v in kw.items():
-        setattr(a, k, v)
-    return a
+    return options(competition, field=None, **kw)
 
 
 def test_round_1_one_seed_scores_the_maximum_and_writes_its_figure(tmp_path):

@@ -4,6 +4,7 @@ import argparse
 import dataclasses
 
 import pytest
+from expargs import options
 
 from robotatfactory.errors import ConfigError
 from robotatfactory.experiments import _competition_calibration as cc
@@ -15,13 +16,7 @@ PERTURB_ITEMS = tuple(f"perturb.{k}={v}" for k, v in dataclasses.asdict(ISSUE_20
 
 
 def args(**kw):
-    p = argparse.ArgumentParser()
-    competition.add_arguments(p)
-    a = p.parse_args([])
-    a.field = None
-    for k, v in kw.items():
-        setattr(a, k, v)
-    return a
+    return options(competition, field=None, **kw)
 
 
 def test_the_default_is_auto_only_when_the_whole_stack_renders_a_perturbed_camera(tmp_path):

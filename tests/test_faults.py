@@ -3,9 +3,8 @@
 observer (experiments/_faults_observe.py) measures from the simulator's frames and the published messages."""
 from __future__ import annotations
 
-import argparse
-
 import pytest
+from expargs import options
 
 from robotatfactory.experiments import faults
 
@@ -13,13 +12,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def make_args(**kw):
-    p = argparse.ArgumentParser()
-    faults.add_arguments(p)
-    a = p.parse_args([])
-    a.field = "rules2026"
-    for k, v in kw.items():
-        setattr(a, k, v)
-    return a
+    return options(faults, field="rules2026", **kw)
 
 
 def test_loss_odometry_stays_within_the_chord_bound_at_every_message(tmp_path):

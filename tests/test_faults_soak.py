@@ -4,11 +4,11 @@ agent playing a round and starting the next, on a private roscore. Asserts the s
 figures behind them (the one-hour run is in docs/reliability.md)."""
 from __future__ import annotations
 
-import argparse
 import json
 import math
 
 import pytest
+from expargs import options
 
 from robotatfactory.experiments import _faults_soak as soak
 from robotatfactory.experiments import faults
@@ -17,13 +17,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def make_args(**kw):
-    p = argparse.ArgumentParser()
-    faults.add_arguments(p)
-    a = p.parse_args([])
-    a.field = "rules2026"
-    for k, v in kw.items():
-        setattr(a, k, v)
-    return a
+    return options(faults, field="rules2026", **kw)
 
 
 def test_loop_latency_pairs_each_new_command_with_its_input_frame():
