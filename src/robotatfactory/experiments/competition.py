@@ -707,6 +707,9 @@ def run(args, out_dir: Path | None) -> dict:
     jobs = max(1, int(args.jobs))
     if simulator == "simtwo":
         jobs = 1  # the real SimTwo needs about a core: one run at a time on a 2-core machine
+    from ._progress import BatchProgress
+
+    progress = BatchProgress(len(specs), jobs)  # a line on a terminal (runs done, running, failed, time left)
     localize = tuple(getattr(args, "localize", None) or ())
     if localize:
         if not mode.endswith("full_stack"):
@@ -731,15 +734,29 @@ def run(args, out_dir: Path | None) -> dict:
         else:
             from concurrent.futures import ThreadPoolExecutor
 
+            def full(sp):
+                progress.start()
+                r = _full_job(sp[0], sp[1], out_dir, sp[4], field_name, simulator, localize, agent_items,
+                              tuple(sim_items), loss, calibration)
+                progress.finish("error" not in r)
+                return r
+
             with ThreadPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
-                runs = list(pool.map(lambda sp: _full_job(sp[0], sp[1], out_dir, sp[4], field_name, simulator,
-                                                          localize, agent_items, tuple(sim_items), loss,
-                                                          calibration), specs))
+                runs = list(pool.map(full, specs))
     elif jobs == 1 or len(specs) == 1:
-        runs = [_job(s) for s in specs]
+        runs = []
+        for sp in specs:
+            progress.start()
+            runs.append(_job(sp))
+            progress.finish("error" not in runs[-1])
     else:
         with mp.get_context("spawn").Pool(min(jobs, len(specs))) as pool:
-            runs = pool.map(_job, specs, chunksize=1)
+            runs = []
+            progress.finish(None, running=min(jobs, len(specs)))  # the pool's workers start at once
+            for r in pool.imap(_job, specs, chunksize=1):  # in order, each as it ends
+                runs.append(r)
+                progress.finish("error" not in r, running=min(jobs, len(specs) - len(runs)))
+    progress.close()
     wall = time.perf_counter() - t0
     print(table(mode, runs), flush=True)
     print(f"world: {perturb.describe()}; link: "
