@@ -762,8 +762,8 @@ def run(args, out_dir: Path | None) -> dict:
     print(f"world: {perturb.describe()}; link: "
           f"{'lossless loopback' if not any(loss) else 'drop %g, duplicate %g, reorder %g' % loss}; camera "
           f"calibration: {_calibration_text(calibration, mode)}", flush=True)
-    for r in runs:
-        if "calibration_fx_error_pct" in r:
+    for r in runs:  # the camera the stack used against the one rendered, where they differ at all
+        if any(r.get(k) for k in CALIBRATION_ERROR_KEYS):
             print(f"round {r['round']} seed {r['seed']}: camera used vs rendered: " + ", ".join(
                 f"{k[len('calibration_'):]} {r[k]:+.3g}" for k in CALIBRATION_ERROR_KEYS if k in r), flush=True)
     for r in runs:
