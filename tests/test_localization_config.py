@@ -109,7 +109,6 @@ def test_a_missing_file_is_a_user_error(tmp_path):
 
 
 def test_the_node_declares_every_setting_with_its_description_and_range():
-    pytest.importorskip("diagnostic_msgs")
     from robotatfactory.ros.localization_node import default_params, describe_param
 
     params = default_params()
