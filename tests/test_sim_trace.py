@@ -12,7 +12,7 @@ from test_sim_control import Controller, request, start
 def test_trace_follows_the_run_and_the_run_ends_after_the_maximum(field, robot, tmp_path):
     path = tmp_path / "trace.jsonl"
     peer = Controller(lambda seq: (0.1, 0.5))
-    runner, t, box = start(field, robot, peer.sock.getsockname(), start_paused=True, trace=str(path),
+    runner, t, box = start(field, robot, peer.sock.getsockname(), start_paused=True, trace=str(path), lockstep=True,
                            end_after_max=0.4, sim={"round_no": 1, "parts": "BXXX", "start_after": 0.0})
     try:
         addr = runner.control_address
