@@ -24,6 +24,7 @@ examples:
   raf sim                                  # real time, round 1, camera and server on
   raf sim --fast --no-camera --duration 60 # as fast as possible, one simulated minute
   raf sim --lockstep --on-timeout stop     # wait for the controller's reply every cycle
+  raf sim --paced                          # wait for each reply, apply it a cycle later (real time's latency)
   raf sim --round 3 --parts RGBX --seed 4  # round 3 with a given layout
   raf sim --snapshot field.png             # an overview picture, then exit
   raf sim --robots 2                       # two robots: robot 2 on ports {_ROBOT2} (+{PORT_STRIDE} per robot)
@@ -74,13 +75,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
                       help="pace simulation time to the wall clock (default)")
     mode.add_argument("--fast", dest="mode", action="store_const", const="fast", help="run as fast as possible")
+    mode.add_argument("--paced", dest="mode", action="store_const", const="paced",
+                      help="as fast as the controller answers: wait for the reply to each frame (up to "
+                           "--lockstep-timeout, then --on-timeout) and apply it in the next cycle, where a "
+                           "free-running run reads it: real time's loop latency without the wall clock")
     p.set_defaults(mode="realtime")
     g.add_argument("--paused", action="store_true",
                    help="start paused: the control channel's step and resume requests run it")
     g.add_argument("--lockstep", action="store_true",
                    help="wait each cycle for the controller's reply to the frame just sent")
     g.add_argument("--lockstep-timeout", type=float, default=RunnerConfig.lockstep_timeout, metavar="S",
-                   help=f"wall seconds to wait for a reply in lockstep (default {RunnerConfig.lockstep_timeout:g})")
+                   help=f"wall seconds to wait for a reply in lockstep or --paced (default "
+                        f"{RunnerConfig.lockstep_timeout:g})")
     g.add_argument("--on-timeout", choices=("stop", "hold", "exit"), default=RunnerConfig.on_timeout,
                    help="when no reply comes in time: stop the robot (V=W=0, magnet kept), hold the last "
                         "command, or exit (code 3); always with a warning (default stop)")

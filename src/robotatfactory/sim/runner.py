@@ -24,6 +24,14 @@ Each control cycle (40 ms of simulation time):
 6. pace: ``realtime`` sleeps (in steps 3 and 4) so simulation time follows the wall clock, ``fast`` does
    not.
 
+``paced`` (issue 23): as fast as the controller answers, with the free-running loop's timing. After sending
+frame k the runner waits (up to ``lockstep_timeout``, then the timeout policy) for the reply to frame k, but
+holds it back and applies it in the next cycle's script call (step 1 of cycle k + 1, where a free-running
+run reads it), so the command answering frame k acts during (t(k+1), t(k+2)] exactly as in real time:
+the loop keeps its latency in control cycles and no reply is ever late. The reply-reading model
+(``replies_readable``, SimTwo's GUI loop) still applies: a held reply waits for a cycle that reads
+replies. With ``lockstep`` by contrast the reply to frame k acts during (t(k), t(k+1)], a cycle earlier.
+
 SIGINT/SIGTERM (through :meth:`request_stop`) end the run after the current cycle; ``run`` returns a
 :class:`RunResult` with the counters and the referee's report.
 """
@@ -51,7 +59,7 @@ from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_U
 log = logging.getLogger(__name__)
 
 TIMEOUT_POLICIES = ("stop", "hold", "exit")
-MODES = ("realtime", "fast")
+MODES = ("realtime", "fast", "paced")
 RECV_BUFFER = 65535
 MAX_BEHIND = 0.25  # s: a realtime run further behind the wall clock than this stops trying to catch up
 
@@ -88,6 +96,9 @@ class RunnerConfig:
     def __post_init__(self):
         if self.mode not in MODES:
             raise ConfigError(f"mode {self.mode!r}: choose one of {', '.join(MODES)}")
+        if self.mode == "paced" and self.lockstep:
+            raise ConfigError("--paced waits for every reply and applies it a cycle later, as free-running; "
+                              "--lockstep applies it at once: choose one")
         if self.on_timeout not in TIMEOUT_POLICIES:
             raise ConfigError(f"--on-timeout {self.on_timeout!r}: choose one of {', '.join(TIMEOUT_POLICIES)}")
         if not (self.lockstep_timeout > 0 and math.isfinite(self.lockstep_timeout)):
@@ -232,6 +243,8 @@ class SimRunner:
         self.server = None
         self.command = Command.stop()
         self._first_wins = self._applied_here = False  # _drain's state (one script call's reading)
+        #: paced: the replies received since the last script call, applied in the next one (None: not paced)
+        self._held: list[Command] | None = [] if self.config.mode == "paced" else None
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), 0.0)  # (wall, simulation) times pacing counts from; set by run()
         self._opened = False
@@ -454,14 +467,17 @@ class SimRunner:
             self.controller = src
         self._controller_seen = now
         c.commands += 1
-        if self._first_wins and self._applied_here:
+        if self._held is not None:  # paced: applied in the next script call (_apply_held)
+            self._held.append(cmd)
+        elif self._first_wins and self._applied_here:
             c.superseded += 1
             return False
-        self._command_sim_time = self.sim.time
-        if not self._applied_here:
-            c.applied += 1
-        self._applied_here = True
-        self.command = cmd
+        else:
+            self._command_sim_time = self.sim.time
+            if not self._applied_here:
+                c.applied += 1
+            self._applied_here = True
+            self.command = cmd
         if expect_seq is not None and cmd.seq >= 0 and cmd.seq < expect_seq:
             c.stale += 1
         if expect_seq is not None and cmd.seq == expect_seq:
@@ -505,6 +521,20 @@ class SimRunner:
                 return got
             if self._accept(data, addr, expect_seq):
                 got = True
+
+    def _apply_held(self, first_wins: bool) -> None:
+        """Paced: the script call reads the replies received since the last one (held back by ``_accept``):
+        the first of them with SimTwo's reply timing (``first_wins``), else the newest."""
+        held = self._held
+        self._drain()  # anything else queued (held as well)
+        if not held:
+            return
+        cmd = held[0] if first_wins else held[-1]
+        self.counters.applied += 1
+        self.counters.superseded += len(held) - 1
+        held.clear()
+        self._command_sim_time = self.sim.time
+        self.command = cmd
 
     def _wait_reply(self, seq: int) -> bool:
         """Lockstep: wait up to the timeout for the Command answering frame ``seq``."""
@@ -647,13 +677,16 @@ class SimRunner:
                 self._publish(sim.take_frames())
                 self._pace(sim.time)  # realtime: the SensorFrame at its own time, after the cycle's frames
                 if not c.lockstep:  # the script call, in control.pas's order: the replies so far, then the frame
-                    if sim.replies_readable():  # (so a reply to this frame is applied in the next cycle but one)
-                        self._drain(first_wins=sim.config.reply_timing == "simtwo")
-                    else:
+                    first_wins = sim.config.reply_timing == "simtwo"
+                    if not sim.replies_readable():  # (so a reply to this frame is applied in the next cycle but one)
                         self.counters.replies_deferred += 1
+                    elif self._held is not None:  # paced: the replies received while waiting, now
+                        self._apply_held(first_wins)
+                    else:
+                        self._drain(first_wins=first_wins)
                 self._send(frame)
                 done = self.control.cycle_done()
-                if c.lockstep and not self._wait_reply(frame.seq):
+                if (c.lockstep or self._held is not None) and not self._wait_reply(frame.seq):
                     if self._stop.is_set():
                         break
                     if not self._on_timeout(frame.seq):

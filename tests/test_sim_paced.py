@@ -1,0 +1,70 @@
+"""``raf sim --paced`` (sim/runner.py): the runner waits for the reply to every frame and applies it in the next
+cycle's script call, where a free-running run reads it, so the loop keeps real time's latency in control cycles
+without the wall clock (issue 23)."""
+import pytest
+
+from robotatfactory.errors import ConfigError
+from robotatfactory.sim.runner import RunnerConfig
+from robotatfactory.sim.trace import read_trace
+from test_sim_control import Controller, start
+
+
+def drive(seq: int) -> tuple[float, float]:
+    """A command that names the frame it answers: V = 1 mm/s per Seq (bounded), W = 0."""
+    return (0.001 * (seq % 200), 0.0)
+
+
+def run_paced(field, robot, path, cycles: int = 60, reply_timing: str = "every_cycle", camera: bool = False):
+    peer = Controller(drive)
+    runner, t, box = start(field, robot, peer.sock.getsockname(), mode="paced", trace=str(path),
+                           duration=cycles * robot.control_period, lockstep_timeout=5.0,
+                           sim={"reply_timing": reply_timing, "camera": camera})
+    try:
+        t.join(60)
+        assert not t.is_alive(), "the paced run did not end"
+    finally:
+        peer.close()
+    return box["result"], read_trace(path)
+
+
+def test_paced_applies_the_reply_to_frame_k_during_cycle_k_plus_2(field, robot, tmp_path):
+    result, trace = run_paced(field, robot, tmp_path / "a.jsonl")
+    rec = trace.records
+    assert len(rec) == 60 and result.counters["timeouts"] == 0
+    # every reply came (the runner waited for each) and each was applied once
+    assert result.counters["replies"] == 60 and result.counters["applied"] == 59
+    # the record of frame k ran the command applied during (t(k-1), t(k)]: the reply to frame k - 2
+    for r in rec[2:]:
+        assert r.cmd[0] == pytest.approx(drive(r.seq - 2)[0], abs=1e-9), r.seq
+    assert rec[0].cmd[:2] == rec[1].cmd[:2] == (0.0, 0.0)  # nothing answered yet
+
+
+def test_two_paced_runs_are_identical(field, robot, tmp_path):
+    """The same seed, paced: the same trace, cycle by cycle (camera on: SimTwo's GUI-turn model decides which
+    script calls read replies, from the seed)."""
+    _, a = run_paced(field, robot, tmp_path / "a.jsonl", 100, "simtwo", camera=True)
+    _, b = run_paced(field, robot, tmp_path / "b.jsonl", 100, "simtwo", camera=True)
+    assert len(a.records) == 100
+    assert [(r.seq, r.pose, r.cmd) for r in a.records] == [(r.seq, r.pose, r.cmd) for r in b.records]
+
+
+def test_a_script_call_that_reads_nothing_keeps_the_replies_for_the_next(field, robot, tmp_path, monkeypatch):
+    """SimTwo's reply reading (``replies_readable``) still applies paced: a call that cannot read leaves the
+    command as it was, and the next call applies the first of the replies held (SimTwo's first-wins)."""
+    from robotatfactory.sim import Simulator
+
+    monkeypatch.setattr(Simulator, "replies_readable", lambda self: self.seq % 10 != 5)
+    res, tr = run_paced(field, robot, tmp_path / "a.jsonl", 60, "simtwo")
+    by_seq = {r.seq: round(r.cmd[0] / 0.001) for r in tr.records}  # the frame each cycle's command answered
+    assert res.counters["replies_deferred"] == 6 and res.counters["superseded"] == 6
+    for k in range(2, 60):
+        # the script call after frame k runs at the simulator's seq k + 1: it reads nothing when (k + 1) % 10 == 5,
+        # so cycle k + 1 keeps the reply to k - 2 and the next call applies the reply to k - 1 (the first held;
+        # the reply to k is superseded): the records of frames 5, 6, 15, 16, ... one reply late, then in step
+        late = k % 10 in (5, 6)
+        assert by_seq[k] == k - 2 - late, (k, by_seq[k])
+
+
+def test_paced_and_lockstep_exclude_each_other():
+    with pytest.raises(ConfigError, match="paced"):
+        RunnerConfig(mode="paced", lockstep=True)
