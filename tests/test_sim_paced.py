@@ -14,10 +14,11 @@ def drive(seq: int) -> tuple[float, float]:
     return (0.001 * (seq % 200), 0.0)
 
 
-def run_paced(field, robot, path, cycles: int = 60, reply_timing: str = "every_cycle", camera: bool = False):
+def run_paced(field, robot, path, cycles: int = 60, reply_timing: str = "every_cycle", camera: bool = False,
+               hold: int = 1):
     peer = Controller(drive)
     runner, t, box = start(field, robot, peer.sock.getsockname(), mode="paced", trace=str(path),
-                           duration=cycles * robot.control_period, lockstep_timeout=5.0,
+                           duration=cycles * robot.control_period, lockstep_timeout=5.0, pace_hold=hold,
                            sim={"reply_timing": reply_timing, "camera": camera})
     try:
         t.join(60)
@@ -37,6 +38,62 @@ def test_paced_applies_the_reply_to_frame_k_during_cycle_k_plus_2(field, robot, 
     for r in rec[2:]:
         assert r.cmd[0] == pytest.approx(drive(r.seq - 2)[0], abs=1e-9), r.seq
     assert rec[0].cmd[:2] == rec[1].cmd[:2] == (0.0, 0.0)  # nothing answered yet
+
+
+def test_pace_hold_2_applies_the_reply_to_frame_k_a_cycle_later(field, robot, tmp_path):
+    """``pace_hold=2``, for a controller that answers frame k with its decision on frame k (the paced whole
+    stack): the reply to frame k acts during (t(k+2), t(k+3)], as the answer to frame k does in real time."""
+    result, trace = run_paced(field, robot, tmp_path / "a.jsonl", hold=2)
+    rec = trace.records
+    assert result.counters["replies"] == 60 and result.counters["applied"] == 58
+    for r in rec[3:]:
+        assert r.cmd[0] == pytest.approx(drive(r.seq - 3)[0], abs=1e-9), r.seq
+    assert all(r.cmd[:2] == (0.0, 0.0) for r in rec[:3])
+
+
+def test_paced_frames_count_the_camera_frames_and_stamp_them(field, robot):
+    """Paced, each SensorFrame says how many camera frames came before it (CamN) and each camera frame
+    travels with its simulation time (a two-part ZMQ message)."""
+    import zmq
+
+    from robotatfactory.simtwo import SensorFrame
+    from robotatfactory.sim.runner import parse_camera_header
+
+    import time
+
+    from robotatfactory.proc import free_port
+    from test_sim_control import request
+
+    port = free_port()
+    peer = Controller(drive)
+    sub = zmq.Context.instance().socket(zmq.SUB)
+    sub.setsockopt(zmq.SUBSCRIBE, b"")
+    try:
+        runner, t, box = start(field, robot, peer.sock.getsockname(), mode="paced", duration=2.0,
+                               lockstep_timeout=5.0, camera_bind=f"tcp://127.0.0.1:{port}",
+                               start_paused=True, sim={"camera": True})
+        sub.connect(f"tcp://127.0.0.1:{port}")
+        time.sleep(0.5)  # the subscription reaches the publisher before the first frame
+        assert request(runner.control_address, {"op": "resume"})["ok"]
+        t.join(60)
+        assert not t.is_alive()
+        frames = []
+        while sub.poll(200):
+            frames.append(sub.recv_multipart())
+    finally:
+        peer.close()
+        sub.close(0)
+    heads = [parse_camera_header(f[0]) for f in frames]
+    assert frames and all(len(f) == 2 for f in frames) and None not in heads
+    cam = robot.camera
+    assert all(len(f[1]) == cam.width * cam.height * 4 for f in frames)
+    assert [i for _, i in heads] == list(range(len(heads)))
+    counts = [SensorFrame.decode(d).camera_frames for d in peer.frames]
+    assert counts[-1] == len(frames) and counts == sorted(counts)
+    # a frame's stamp is at or before the SensorFrame that first counts it
+    for d in peer.frames:
+        f = SensorFrame.decode(d)
+        assert all(heads[j][0] <= f.time + 1e-9 for j in range(f.camera_frames))
 
 
 def test_two_paced_runs_are_identical(field, robot, tmp_path):

@@ -229,6 +229,11 @@ def test_cached_frame_encoder_gives_the_codecs_bytes(field, robot):
     f.ranges[[0, 5, 359]] = [-1.0, 1e-5, 123456.7]  # no return, exponent and rounding formats
     assert enc.encode(f) == f.encode()
     assert len(f.parts) == 4 and b"PartsN\r\n4\r\n" in enc.encode(f)  # the round's parts, as control.pas sends
+    f.camera_frames = 7  # a paced run's optional CamN label
+    assert enc.encode(f) == f.encode() and b"CamN\r\n7\r\n" in f.encode()
+    assert SensorFrame.decode(f.encode()).camera_frames == 7
+    f.camera_frames = None
+    assert b"CamN" not in enc.encode(f) and SensorFrame.decode(f.encode()).camera_frames is None
     sim.close()
 
 

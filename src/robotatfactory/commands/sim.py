@@ -84,6 +84,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="start paused: the control channel's step and resume requests run it")
     g.add_argument("--lockstep", action="store_true",
                    help="wait each cycle for the controller's reply to the frame just sent")
+    g.add_argument("--pace-hold", type=int, default=RunnerConfig.pace_hold, metavar="N",
+                   help="--paced: script calls a reply waits before it is applied (default "
+                        f"{RunnerConfig.pace_hold}: as free-running, for a controller that replies at once; 2 for "
+                        "one that answers each frame with its decision on that frame, as the paced whole stack)")
     g.add_argument("--lockstep-timeout", type=float, default=RunnerConfig.lockstep_timeout, metavar="S",
                    help=f"wall seconds to wait for a reply in lockstep or --paced (default "
                         f"{RunnerConfig.lockstep_timeout:g})")
@@ -220,7 +224,7 @@ def run(args) -> int:
         host=args.host, port=args.port, bridge=parse_address(args.bridge),
         camera_bind=None if args.no_camera else args.camera_bind,
         server_host=args.host, server_port=None if args.no_server else args.server_port,
-        mode=args.mode, lockstep=args.lockstep, lockstep_timeout=args.lockstep_timeout,
+        mode=args.mode, lockstep=args.lockstep, lockstep_timeout=args.lockstep_timeout, pace_hold=args.pace_hold,
         on_timeout=args.on_timeout, duration=args.duration, status_every=args.status_every, quiet=args.quiet,
         controller=parse_address(args.controller) if args.controller else None, takeover_after=args.takeover_after,
         command_timeout=args.command_timeout or None,

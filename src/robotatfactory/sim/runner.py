@@ -92,10 +92,16 @@ class RunnerConfig:
     control_optional: bool = False  # True: a control port that cannot be bound is a warning, not an error
     trace: str | None = None  # write the ground-truth trace here (sim/trace.py); None: none
     end_after_max: float | None = None  # simulation s after the maximum score was reached: end the run
+    #: paced: script calls a reply waits before it is applied: 1, as free-running (a controller that answers
+    #: frame n with what it decided earlier, e.g. a bridge replying at once); 2 for a controller that answers
+    #: frame n with its decision on frame n (the paced whole stack: then the loop is real time's)
+    pace_hold: int = 1
 
     def __post_init__(self):
         if self.mode not in MODES:
             raise ConfigError(f"mode {self.mode!r}: choose one of {', '.join(MODES)}")
+        if not (isinstance(self.pace_hold, int) and 1 <= self.pace_hold <= 10):
+            raise ConfigError(f"--pace-hold {self.pace_hold!r}: expected a whole number of cycles, 1..10")
         if self.mode == "paced" and self.lockstep:
             raise ConfigError("--paced waits for every reply and applies it a cycle later, as free-running; "
                               "--lockstep applies it at once: choose one")
@@ -171,8 +177,31 @@ class CachedFrameEncoder:
             format_real(frame.theta), int(frame.contact), int(frame.magnet), len(ranges), self._ranges(ranges))
         if frame.parts:  # the optional labels, after the LIDAR as SensorFrame.encode writes them
             text += f"PartsN\r\n{len(frame.parts)}\r\n\r\nParts\r\n{encode_parts(frame.parts)}\r\n\r\n"
+        if frame.camera_frames is not None:
+            text += f"CamN\r\n{int(frame.camera_frames)}\r\n\r\n"
         return text.encode("ascii")
 
+
+
+#: paced runs send each camera frame as two ZMQ parts: this header, then SimTwo's payload
+CAMERA_HEADER = b"raf-camera-frame"
+
+
+def camera_header(t: float, index: int) -> bytes:
+    """A paced camera frame's first part: ``raf-camera-frame <simulation time s> <index>``."""
+    return b"%s %.6f %d" % (CAMERA_HEADER, t, index)
+
+
+def parse_camera_header(data: bytes) -> tuple[float, int] | None:
+    """(time s, index) of a paced camera frame's header, or None if ``data`` is not one."""
+    parts = bytes(data).split()
+    if len(parts) != 3 or parts[0] != CAMERA_HEADER:
+        return None
+    try:
+        t, i = float(parts[1]), int(parts[2])
+    except ValueError:
+        return None
+    return (t, i) if math.isfinite(t) and i >= 0 else None
 
 
 def _malloc_trim() -> None:
@@ -243,8 +272,10 @@ class SimRunner:
         self.server = None
         self.command = Command.stop()
         self._first_wins = self._applied_here = False  # _drain's state (one script call's reading)
-        #: paced: the replies received since the last script call, applied in the next one (None: not paced)
-        self._held: list[Command] | None = [] if self.config.mode == "paced" else None
+        #: paced: the replies received, each with the Seq of the last frame sent before it came; the script call
+        #: before frame n applies those of frames <= n - pace_hold (None: not paced)
+        self._held: list[tuple[int, Command]] | None = [] if self.config.mode == "paced" else None
+        self._last_sent = -1
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), 0.0)  # (wall, simulation) times pacing counts from; set by run()
         self._opened = False
@@ -287,7 +318,8 @@ class SimRunner:
 
                 self._zmq_ctx = zmq.Context()
                 pub = self._zmq_ctx.socket(zmq.PUB)
-                pub.setsockopt(zmq.SNDHWM, 2)
+                # paced: the loop waits for the camera side, so a deeper queue never fills; it must not drop
+                pub.setsockopt(zmq.SNDHWM, 2 if c.mode != "paced" else 32)
                 pub.setsockopt(zmq.LINGER, 0)
                 try:
                     pub.bind(c.camera_bind)
@@ -467,8 +499,8 @@ class SimRunner:
             self.controller = src
         self._controller_seen = now
         c.commands += 1
-        if self._held is not None:  # paced: applied in the next script call (_apply_held)
-            self._held.append(cmd)
+        if self._held is not None:  # paced: applied in a later script call (_apply_held)
+            self._held.append((self._last_sent, cmd))
         elif self._first_wins and self._applied_here:
             c.superseded += 1
             return False
@@ -522,17 +554,19 @@ class SimRunner:
             if self._accept(data, addr, expect_seq):
                 got = True
 
-    def _apply_held(self, first_wins: bool) -> None:
-        """Paced: the script call reads the replies received since the last one (held back by ``_accept``):
-        the first of them with SimTwo's reply timing (``first_wins``), else the newest."""
-        held = self._held
+    def _apply_held(self, seq: int, first_wins: bool) -> None:
+        """Paced: the script call before frame ``seq`` reads the replies held back by ``_accept`` that came
+        before frame ``seq - pace_hold + 1`` was sent: the first of them with SimTwo's reply timing
+        (``first_wins``), else the newest."""
         self._drain()  # anything else queued (held as well)
-        if not held:
+        limit = seq - self.config.pace_hold
+        due = [c for n, c in self._held if n <= limit]
+        if not due:
             return
-        cmd = held[0] if first_wins else held[-1]
+        self._held[:] = [(n, c) for n, c in self._held if n > limit]
+        cmd = due[0] if first_wins else due[-1]
         self.counters.applied += 1
-        self.counters.superseded += len(held) - 1
-        held.clear()
+        self.counters.superseded += len(due) - 1
         self._command_sim_time = self.sim.time
         self.command = cmd
 
@@ -600,7 +634,11 @@ class SimRunner:
             try:
                 import zmq
 
-                self._pub.send(f.wire(bottom_up), copy=False, flags=zmq.NOBLOCK)
+                if self._held is not None:  # paced: the frame's simulation time and index go with it
+                    self._pub.send_multipart([camera_header(f.time, f.index), f.wire(bottom_up)], copy=False,
+                                             flags=zmq.NOBLOCK)
+                else:
+                    self._pub.send(f.wire(bottom_up), copy=False, flags=zmq.NOBLOCK)
                 self.counters.camera_frames += 1
             except Exception as e:  # noqa: BLE001 - a camera hiccup must not stop the simulation
                 self.counters.camera_errors += 1
@@ -610,6 +648,7 @@ class SimRunner:
         try:
             self._sock.sendto(self._encoder.encode(frame), self.config.bridge)
             self.counters.frames_sent += 1
+            self._last_sent = frame.seq
         except OSError as e:
             self.counters.send_errors += 1
             self._rlog.warn("tx", f"sensor frame {frame.seq} not sent to {self.config.bridge[0]}:"
@@ -680,10 +719,12 @@ class SimRunner:
                     first_wins = sim.config.reply_timing == "simtwo"
                     if not sim.replies_readable():  # (so a reply to this frame is applied in the next cycle but one)
                         self.counters.replies_deferred += 1
-                    elif self._held is not None:  # paced: the replies received while waiting, now
-                        self._apply_held(first_wins)
+                    elif self._held is not None:  # paced: the replies held back for this call
+                        self._apply_held(frame.seq, first_wins)
                     else:
                         self._drain(first_wins=first_wins)
+                if self._held is not None:  # paced: the camera side waits for the frames published so far
+                    frame.camera_frames = self.counters.camera_frames
                 self._send(frame)
                 done = self.control.cycle_done()
                 if (c.lockstep or self._held is not None) and not self._wait_reply(frame.seq):

@@ -78,6 +78,16 @@ def encode_parts(parts) -> str:
     return LIDAR_SEPARATOR.join("%.6g" % float(v) for pose in parts for v in pose)
 
 
+def _decode_camera_frames(v: LabelledValues) -> int | None:
+    """The optional ``CamN`` label (camera frames published before this frame): None when absent."""
+    if "CamN" not in v:
+        return None
+    n = v.get_int("CamN")
+    if n < 0:
+        raise ProtocolError(f"label 'CamN' (line {v.line_of('CamN')}): {n} camera frames")
+    return n
+
+
 def _decode_parts(v: LabelledValues) -> tuple[tuple[float, float, float], ...]:
     """The optional ``PartsN``/``Parts`` labels: () when the frame has none."""
     if "PartsN" not in v:
@@ -121,6 +131,9 @@ class SensorFrame:
     #: ground truth of the scene's parts, (x, y, theta) of part 1..N (SimTwo: robots Part1..PartN; theta is the
     #: simulator's heading of the part body); optional labels ``PartsN``/``Parts``, empty when not sent
     parts: tuple[tuple[float, float, float], ...] = ()
+    #: camera frames the simulator has published before this frame, since it started (optional label ``CamN``:
+    #: ``raf sim --paced`` sends it, so the bridge's camera side knows which frames to wait for; None: not sent)
+    camera_frames: int | None = None
 
     @property
     def time(self) -> float:
@@ -145,6 +158,8 @@ class SensorFrame:
         ]
         if self.parts:
             items += [("PartsN", format_int(len(self.parts))), ("Parts", encode_parts(self.parts))]
+        if self.camera_frames is not None:
+            items.append(("CamN", format_int(self.camera_frames)))
         return encode_labels(items)
 
     @classmethod
@@ -164,7 +179,7 @@ class SensorFrame:
             enc_total=(v.get_int("Odo1"), v.get_int("Odo2")),
             x=v.get_real("X"), y=v.get_real("Y"), theta=v.get_real("Theta"),
             contact=v.get_bool("Contact"), magnet=v.get_bool("Magnet"),
-            ranges=ranges, parts=_decode_parts(v),
+            ranges=ranges, parts=_decode_parts(v), camera_frames=_decode_camera_frames(v),
         )
 
     def __eq__(self, other):  # ndarray field: compare explicitly
@@ -173,7 +188,8 @@ class SensorFrame:
         return (self.seq, self.time_ms, self.enc_delta, self.enc_total, self.x, self.y, self.theta,
                 self.contact, self.magnet) == (other.seq, other.time_ms, other.enc_delta, other.enc_total,
                                                other.x, other.y, other.theta, other.contact, other.magnet) \
-            and np.array_equal(self.ranges, other.ranges) and tuple(self.parts) == tuple(other.parts)
+            and np.array_equal(self.ranges, other.ranges) and tuple(self.parts) == tuple(other.parts) \
+            and self.camera_frames == other.camera_frames
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,155 @@
+"""Pacing the whole stack by simulation time (issue 23): the bookkeeping, with no middleware.
+
+In a paced run (``raf sim --paced``) the simulator waits for the reply to every frame, and the bridge
+replies to frame k only once the agent has decided on it. Every node of the loop works cycle by cycle and,
+when it has finished cycle k (stamp t_k), publishes a *pace* message: its name, the stamp, and how many
+messages it has published so far on each of its outputs (``odom``, ``scan``, ``image``, ``pose``, ...). A node
+downstream starts cycle k only when each node it depends on has paced t_k and it has received at least that
+many messages on each input it takes from that node. Topics of one publisher are separate connections (their
+messages may arrive in any order), so a stamp alone could not say that nothing is still on its way; the counts
+can. The result does not depend on how the messages were scheduled: a paced run is reproducible.
+
+The loop, per cycle k: raf sim -> bridge (odom, scan, contact, ...; pace) and camera (images; pace) ->
+localization (pose; pace) -> agent (cmd_vel, electromagnet; pace) -> the bridge's reply to frame k.
+
+:class:`PaceBook` is what one node knows: the counts it has received and the paces of the nodes it needs.
+:class:`PaceCounts` is what it has published. ``ros/pace.py`` carries both over the middleware.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+#: stamps of one cycle agree to this (s): they are all the SensorFrame's Tms, in ms
+STAMP_TOLERANCE = 5e-4
+
+
+@dataclass
+class Pace:
+    """One pace message: ``name`` finished the cycle stamped ``t`` (s) having published ``counts``."""
+
+    name: str
+    t: float
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+class PaceCounts:
+    """The messages a node has published, per output key (thread-safe)."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self._counts: Counter = Counter()
+        self._lock = threading.Lock()
+
+    def sent(self, key: str, n: int = 1) -> None:
+        with self._lock:
+            self._counts[key] += n
+
+    def pace(self, t: float) -> Pace:
+        with self._lock:
+            return Pace(self.name, float(t), dict(self._counts))
+
+
+class PaceBook:
+    """What one paced node has received and what the nodes it depends on have paced.
+
+    ``needs`` maps each upstream node's name to the keys this node takes from it (e.g. ``{"bridge": ("odom",
+    "scan"), "camera": ("image",)}``); the first upstream node's paces define the cycles. Thread-safe: input
+    callbacks call :meth:`got`, the pace subscription :meth:`paced`; :meth:`next_ready` says which cycle may
+    run now, :meth:`wait` blocks for one (with a wall-clock limit, a safety net: a paced run never hangs)."""
+
+    def __init__(self, needs: dict[str, tuple[str, ...]]):
+        if not needs:
+            raise ValueError("a paced node needs at least one upstream node")
+        self.needs = {k: tuple(v) for k, v in needs.items()}
+        self.clock = next(iter(self.needs))
+        self.received: Counter = Counter()
+        self._paces: dict[str, list[Pace]] = {k: [] for k in self.needs}
+        self.done_t = -math.inf  # the latest cycle this node has run
+        self.timeouts = 0
+        self._cv = threading.Condition()
+
+    # ---- inputs ----------------------------------------------------------------------------------------
+    def got(self, key: str, n: int = 1) -> None:
+        """``n`` messages on input ``key`` received (call after the message is stored where the cycle reads it)."""
+        with self._cv:
+            self.received[key] += n
+            self._cv.notify_all()
+
+    def paced(self, p: Pace) -> None:
+        """A pace message (those of nodes this one does not need are ignored)."""
+        if p.name not in self._paces or not math.isfinite(p.t):
+            return
+        with self._cv:
+            self._paces[p.name].append(p)
+            self._cv.notify_all()
+
+    # ---- cycles ----------------------------------------------------------------------------------------
+    def _of(self, name: str, t: float) -> Pace | None:
+        return next((p for p in self._paces[name] if abs(p.t - t) <= STAMP_TOLERANCE), None)
+
+    def _ready(self, t: float) -> bool:
+        for name, keys in self.needs.items():
+            p = self._of(name, t)
+            if p is None or any(self.received[k] < p.counts.get(k, 0) for k in keys):
+                return False
+        return True
+
+    def _next_t(self) -> float | None:
+        later = [p.t for p in self._paces[self.clock] if p.t > self.done_t + STAMP_TOLERANCE]
+        return min(later) if later else None
+
+    def pending(self) -> float | None:
+        """The next cycle's stamp (ready or not), or None while no upstream pace has announced one."""
+        with self._cv:
+            return self._next_t()
+
+    def next_ready(self) -> float | None:
+        """The next cycle's stamp if everything it needs is in, else None."""
+        with self._cv:
+            t = self._next_t()
+            return t if t is not None and self._ready(t) else None
+
+    def wait(self, t: float, timeout: float) -> bool:
+        """Block until cycle ``t`` is ready (True) or ``timeout`` wall seconds passed (False, counted)."""
+        end = time.monotonic() + timeout
+        with self._cv:
+            while not self._ready(t):
+                left = end - time.monotonic()
+                if left <= 0:
+                    self.timeouts += 1
+                    return False
+                self._cv.wait(min(left, 0.1))
+            return True
+
+    def done(self, t: float) -> None:
+        """Cycle ``t`` has run: forget the paces up to it."""
+        with self._cv:
+            self.done_t = max(self.done_t, t)
+            for name in self._paces:
+                self._paces[name] = [p for p in self._paces[name] if p.t > t + STAMP_TOLERANCE]
+
+    def missing(self, t: float) -> str:
+        """What cycle ``t`` still waits for, in words (for a timeout's warning)."""
+        with self._cv:
+            out = []
+            for name, keys in self.needs.items():
+                p = self._of(name, t)
+                if p is None:
+                    out.append(f"{name}'s pace")
+                    continue
+                out += [f"{k} {self.received[k]}/{p.counts.get(k, 0)}" for k in keys
+                        if self.received[k] < p.counts.get(k, 0)]
+            return ", ".join(out) or "nothing"
+
+    def give_up(self, t: float) -> None:
+        """After a timeout: take what was received as complete, so the counts match again from here."""
+        with self._cv:
+            for name, keys in self.needs.items():
+                p = self._of(name, t)
+                if p is not None:
+                    for k in keys:
+                        self.received[k] = max(self.received[k], p.counts.get(k, 0))
