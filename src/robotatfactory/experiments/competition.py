@@ -49,7 +49,10 @@ bare_truth: ``--sim NAME=VALUE`` (a SimConfig field, e.g. ``magnet=weld``), ``--
 ``--pose-delay CYCLES`` and ``--cmd-delay CYCLES`` (the agent's pose noisy and late, its commands late);
 per run also the time split per ``RoundAgent.activity``.
 
-Runs go in parallel over ``--jobs`` (default 2: the machine's cores). With ``--out DIR``: a
+Runs go in parallel over ``--jobs`` (default 2: the machine's cores), or with ``--ray ADDRESS`` as tasks on a Ray
+cluster of several machines (:mod:`._batch`, docs/batch.md): the same results, plus ``executor`` (``local`` or
+``ray``), ``runs_retried`` and on Ray ``ray_workers`` (runs at once), ``ray_nodes_used``, ...; a run lost with its
+worker runs again and says so (``..._attempts``). With ``--out DIR``: a
 top-view figure of the first seed's run per round (path, pick and place events), an animated top view
 (``round3_seed{S}_{mode}.gif``, _competition_gif.py) of the first round-3 seed's run and ``runs.json`` with
 every run's events.
@@ -146,7 +149,21 @@ def add_arguments(parser) -> None:
     parser.add_argument("--first-seed", type=int, default=None,
                         help="run seeds FIRST..FIRST+N-1 instead of a set (N = --seeds, default 10); each is "
                              "labelled tuned, heldout or other")
-    parser.add_argument("--jobs", type=int, default=2, help="runs at once (default 2: the machine's cores)")
+    parser.add_argument("--jobs", type=int, default=2, help="runs at once (default 2: the machine's cores); with "
+                                                                 "--ray the cluster's CPUs decide")
+    parser.add_argument("--ray", metavar="ADDRESS", default=None,
+                        help="run each run as a task on a Ray cluster (docs/batch.md) and gather the results here: "
+                             "HOST:PORT of its head (ray start --head), auto (the cluster this machine is a node "
+                             "of), ray://HOST:10001 (Ray Client) or local (a private one-machine instance of --jobs "
+                             "CPUs); each machine needs the same checkout and bootstrap; --out's per-run files come "
+                             "back with the results (no shared filesystem); a run lost with its worker or node is "
+                             "run again (--ray-retries)")
+    parser.add_argument("--ray-cpus", type=float, default=None, metavar="N",
+                        help="--ray: CPUs a run reserves on its node (default 1; 2 with --simulator simtwo): a node "
+                             "started with ray start --num-cpus C runs C/N at once")
+    parser.add_argument("--ray-retries", type=int, default=2, metavar="N",
+                        help="--ray: a run whose worker process or node is lost is submitted again up to N times "
+                             "(default 2); a run that raised in Python is a failed run, not retried")
     parser.add_argument("--limit", type=float, default=300.0, help="simulated seconds per run (default 300)")
     parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
                         help="a SimConfig setting of the bare stand-in (repeatable), e.g. magnet=weld where the "
@@ -355,7 +372,8 @@ class _PoseChannel:
         return self.in_flight.ahead(q, now)
 
 
-def _job(spec):
+def _job(spec, out_dir: Path | None = None):
+    """One bare run (``spec`` as :func:`run` builds it); ``out_dir`` is unused: the driver draws its figures."""
     round_no, seed, limit, field_name, record, agent, sim_options, noise, delay, *rest = spec
     try:
         return play_round(round_no, seed, limit, field_name, record, agent, sim_options, noise, delay, *rest)
@@ -397,6 +415,21 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
     return out
 
 
+def _full_item(item: tuple, out_dir: Path | None = None, **kw) -> dict:
+    """:func:`_full_job` for a batch item ``(round, seed, record path)`` (_batch.py: ``job(item, out_dir)``)."""
+    round_no, seed, record = item
+    return _full_job(round_no, seed, out_dir, record, **kw)
+
+
+def _failed_item(item: tuple, e: BaseException) -> dict:
+    """A batch item (bare spec or whole-stack item, both ``(round, seed, ...)``) that failed: :func:`_failed`."""
+    return _failed(item[0], item[1], e)
+
+
+def _label(item: tuple) -> str:
+    return f"round {item[0]} seed {item[1]}"
+
+
 def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: str | None,
                 simulator: str = "standin") -> dict:
     """A whole-stack run kept by ``--out`` (logs, trace, bag), measured again (``--analyse DIR``)."""
@@ -427,7 +460,7 @@ def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: 
     return out
 
 
-def _failed(round_no: int, seed: int, e: Exception) -> dict:
+def _failed(round_no: int, seed: int, e: BaseException) -> dict:
     return {"round": round_no, "seed": seed, "error": f"{type(e).__name__}: {e}", "max_score": False,
             "points": 0, "max_points": -1, "last_score_s": math.nan, "notes": [], "false_start": False,
             "parts_pushed": 0, "parts_knocked_out": 0}
@@ -468,6 +501,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                         f"{_span(HELDOUT_SEEDS)} (never used while tuning); other: any other seed")
     for r in sorted(runs, key=lambda r: (r["round"], r["seed"])):
         p = f"{mode}_{seed_set_of(r['seed'])}_r{r['round']}_s{r['seed']}"
+        if r.get("attempts", 1) > 1:  # --ray: its worker or node was lost and it ran again
+            out[f"{p}_attempts"] = r["attempts"]
+            out[f"{p}_lost_attempts"] = "; ".join(r.get("lost_attempts", ()))
         if "error" in r:
             out[f"{p}_error"] = r["error"]
             continue
@@ -643,10 +679,11 @@ def figure(run: dict, path: Path, mode: str, field_name: str | None = None) -> P
 
 def run(args, out_dir: Path | None) -> dict:
     import dataclasses
+    import functools
     import json
-    import multiprocessing as mp
 
     from ..errors import ConfigError
+    from ._batch import RAY_RETRIES, execute
 
     mode = getattr(args, "mode", "full_stack")
     if getattr(args, "stack", None):
@@ -707,9 +744,6 @@ def run(args, out_dir: Path | None) -> dict:
     jobs = max(1, int(args.jobs))
     if simulator == "simtwo":
         jobs = 1  # the real SimTwo needs about a core: one run at a time on a 2-core machine
-    from ._progress import BatchProgress
-
-    progress = BatchProgress(len(specs), jobs)  # a line on a terminal (runs done, running, failed, time left)
     localize = tuple(getattr(args, "localize", None) or ())
     if localize:
         if not mode.endswith("full_stack"):
@@ -718,6 +752,18 @@ def run(args, out_dir: Path | None) -> dict:
         from ..settings import parse_set
 
         load_config(overrides=parse_set(list(localize)))  # a bad name or value: ConfigError now, not in each run
+    ray = getattr(args, "ray", None)
+    inputs = []  # files a run reads, shipped to Ray workers (_batch.py): a --field file, a --calibration YAML
+    if ray and field_name and Path(field_name).is_file():
+        field_name = str(Path(field_name).resolve())
+        specs = [(*sp[:3], field_name, *sp[4:]) for sp in specs]
+        inputs.append(field_name)
+    if ray and calibration not in ("auto", "none"):
+        inputs.append(calibration)
+    batch = {"executor": "local", "runs_retried": 0}
+    run_batch = functools.partial(execute, jobs=jobs, out_dir=out_dir, failed=_failed_item, label=_label, ray=ray,
+                                  ray_cpus=getattr(args, "ray_cpus", None) or (2 if simulator == "simtwo" else 1),
+                                  ray_retries=int(getattr(args, "ray_retries", RAY_RETRIES)), inputs=inputs)
     if mode.endswith("full_stack"):  # realtime: each run is its own private graph; --jobs of them at once (threads)
         if set(sim_options) - {"perturb"} or any(noise) or delay or cmd_delay:
             raise ConfigError("--sim (but for perturb.NAME), --pose-noise, --pose-delay and --cmd-delay are "
@@ -729,39 +775,25 @@ def run(args, out_dir: Path | None) -> dict:
         if getattr(args, "analyse", None) and getattr(args, "calibration", None) not in (None, "none"):
             raise ConfigError("--analyse measures kept runs again: --calibration does not apply")
         if getattr(args, "analyse", None):  # the runs kept in a directory, measured again with this code
+            if ray:
+                raise ConfigError("--analyse measures kept runs again here: --ray does not apply")
             runs = [_reanalysed(Path(args.analyse), r, s, rec, field_name, simulator)
                     for r, s, _l, _f, rec, *_ in specs]
-        else:
-            from concurrent.futures import ThreadPoolExecutor
-
-            def full(sp):
-                progress.start()
-                r = _full_job(sp[0], sp[1], out_dir, sp[4], field_name, simulator, localize, agent_items,
-                              tuple(sim_items), loss, calibration)
-                progress.finish("error" not in r)
-                return r
-
-            with ThreadPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
-                runs = list(pool.map(full, specs))
-    elif jobs == 1 or len(specs) == 1:
-        runs = []
-        for sp in specs:
-            progress.start()
-            runs.append(_job(sp))
-            progress.finish("error" not in runs[-1])
-    else:
-        with mp.get_context("spawn").Pool(min(jobs, len(specs))) as pool:
-            runs = []
-            progress.finish(None, running=min(jobs, len(specs)))  # the pool's workers start at once
-            for r in pool.imap(_job, specs, chunksize=1):  # in order, each as it ends
-                runs.append(r)
-                progress.finish("error" not in r, running=min(jobs, len(specs) - len(runs)))
-    progress.close()
+        else:  # a thread per run locally (each run is its own processes), or a Ray task per run
+            job = functools.partial(_full_item, field_name=field_name, simulator=simulator, localize=localize,
+                                    agent=agent_items, sim_set=tuple(sim_items), loss=loss, calibration=calibration)
+            runs, batch = run_batch(job, [(sp[0], sp[1], sp[4]) for sp in specs], local="threads")
+    else:  # the bare stand-in in a process: spawned processes (serially with one job), or a Ray task per run
+        runs, batch = run_batch(_job, specs, local="processes")
     wall = time.perf_counter() - t0
     print(table(mode, runs), flush=True)
     print(f"world: {perturb.describe()}; link: "
           f"{'lossless loopback' if not any(loss) else 'drop %g, duplicate %g, reorder %g' % loss}; camera "
           f"calibration: {_calibration_text(calibration, mode)}", flush=True)
+    if batch["executor"] == "ray":
+        print(f"executor: ray at {batch['ray_address']}: {batch['ray_nodes']} node(s), {batch['ray_cpus']:g} CPUs, "
+              f"{batch['ray_workers']} runs at once; runs per node: {batch['ray_runs_per_node']}; "
+              f"{batch['runs_retried']} run(s) retried", flush=True)
     for r in runs:  # the camera the stack used against the one rendered, where they differ at all
         if any(r.get(k) for k in CALIBRATION_ERROR_KEYS):
             print(f"round {r['round']} seed {r['seed']}: camera used vs rendered: " + ", ".join(
@@ -787,7 +819,8 @@ def run(args, out_dir: Path | None) -> dict:
     out["cmd_delay_cycles"] = cmd_delay
     out["pose_predicted"] = bool(getattr(args, "pose_predict", False)) and (delay > 0 or cmd_delay > 0)
     out["wall_s"] = round(wall, 1)
-    out["jobs"] = jobs
+    out["jobs"] = batch.get("ray_workers", jobs)  # runs at once: --jobs here, the cluster's slots on Ray
+    out.update(batch)  # which executor ran the runs (local, ray: nodes, workers, runs retried)
     if out_dir is not None:
         for r in runs:
             if r.get("path"):
