@@ -23,8 +23,21 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 
+from .settings import setting
+
 #: stamps of one cycle agree to this (s): they are all the SensorFrame's Tms, in ms
 STAMP_TOLERANCE = 5e-4
+
+
+@dataclass(frozen=True)
+class PaceSettings:
+    """``pace.*``: the same section in each paced node's settings (bridge, camera, localization, agent)."""
+
+    enabled: bool = setting(False, "paced by simulation time (raf sim --paced --pace-hold 2): work cycle by "
+                                   "cycle, wait for the inputs each upstream node paced, then pace the cycle "
+                                   "(docs/pacing.md)")
+    timeout: float = setting(5.0, "wall s a cycle waits for its inputs before it runs without them (warned and "
+                                  "counted: a safety net, never reached in a sound run)", lo=0.0, lo_open=True)
 
 
 @dataclass

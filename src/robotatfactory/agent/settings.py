@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 from ..field import DEFAULT_FIELD
+from ..pace import PaceSettings
 from ..settings import build, section, setting
 from ..simtwo.ports import LOCALHOST, SERVER_UDP_PORT
 
@@ -168,6 +169,10 @@ class AgentSettings:
     tasks: Tasks = section(Tasks, "choosing the next task")
     recovery: Recovery = section(Recovery, "getting out of trouble")
     drive: Drive = section(Drive, "the base's limits and the follower's gains (unset: from the robot file)")
+    pace: PaceSettings = section(PaceSettings, "pacing by simulation time: one control cycle per paced frame, "
+                                               "once the bridge's and the localization's paces are in, the "
+                                               "factory-state server asked within the cycle (no timer, no "
+                                               "polling thread)")
 
 
 HEADER = """The agent's settings (raf agent --config FILE; the node's ROS parameters), every one with its default.

@@ -31,6 +31,8 @@ FULL_DURATION = {1: 130.0, 2: 190.0, 3: 230.0}  # simulated s of one run at most
 START_AFTER = 3.0  # simulated s before the run starts (the agent's nodes are up by then)
 END_AFTER_MAX = 1.0  # simulated s the maximum score must stand before raf sim ends the run
 DONE_GRACE = 3.0  # wall s after the agent logged "task: done" before raf sim is stopped
+#: paced: wall s raf sim waits for a reply (then --on-timeout stop): above the nodes' own safety net (5 s)
+PACED_REPLY_TIMEOUT = 15.0
 
 _EVENT = re.compile(r"raf agent: t = ([\d.]+) s: (.*)$", re.M)
 _DOCK_END = re.compile(r"^(picked |placed |pick at |place at |timeout: )")
@@ -119,7 +121,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                     field_name: str | None = None, simulator: str = "standin", localize: tuple[str, ...] = (),
                     agent: tuple[str, ...] = (), sim_set: tuple[str, ...] = (),
                     loss: tuple[float, float, float] = (0.0, 0.0, 0.0), calibration: str | None = None,
-                    log_dir: Path | None = None) -> dict:
+                    log_dir: Path | None = None, paced: bool = False) -> dict:
     """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
     :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``).
 
@@ -132,7 +134,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     ways, through the faults experiment's proxy (:class:`._faults_net.Proxy`) when any is > 0; ``calibration``: a
     camera calibration YAML given to ``raf bridge --calibration`` and ``raf localize --calibration`` (None: the
     robot file's nominal camera; :mod:`._competition_calibration` makes it); ``log_dir``: the run's directory
-    (default :func:`run_dir`)."""
+    (default :func:`run_dir`); ``paced``: the whole loop paced by simulation time instead of the wall clock
+    (``raf sim --paced --pace-hold 2`` and every node's ``pace.enabled``: docs/pacing.md), the stand-in only."""
     from ..ros.master import private_graph
     from ..ros.mw import bag_format
     from ..ros.mw import name as middleware
@@ -154,6 +157,10 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()  # (TCP)
     field_args = ["--field", field_name] if field_name else []
     calib_args = ["--calibration", str(calibration)] if calibration else []
+    if paced and simtwo:
+        raise ValueError("paced: the stand-in only (SimTwo runs in real time)")
+    pace = ["--set", "pace.enabled=true"] if paced else []
+    sim_pace = ["--paced", "--pace-hold", "2", "--lockstep-timeout", str(PACED_REPLY_TIMEOUT)] if paced else []
     wall0 = time.perf_counter()
     graph = private_graph(mw).start()
     procs = Procs(log_dir, watch=("bridge", "localize", "agent", "record"))
@@ -168,9 +175,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             frames_to = proxy.port
         env = graph.env()
         procs.raf("bridge", *field_args, "bridge", "--port", str(bridge_port), "--camera",
-                  f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", *calib_args, env=env)
-        procs.raf("localize", *field_args, "localize", *calib_args, *[a for s in localize for a in ("--set", s)],
-                  env=env)
+                  f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", *calib_args, *pace, env=env)
+        procs.raf("localize", *field_args, "localize", *calib_args, *pace,
+                  *[a for s in localize for a in ("--set", s)], env=env)
         procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
                   "--format", fmt, env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
@@ -179,7 +186,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                       "--server-port", str(server_port), "--trace", str(trace_path), "--end-after-max",
                       str(END_AFTER_MAX), "--status-every", "5", env=env, may_exit=True)
             _wait_logged(procs, "referee", "running", 60.0)
-        procs.raf("agent", *field_args, "agent", "--set", f"server.port={server_port}",
+        procs.raf("agent", *field_args, "agent", "--set", f"server.port={server_port}", *pace,
                   *[a for s in agent for a in ("--set", s)], env=env)
         _wait_logged(procs, "agent", "running", 60.0)
         if simtwo:
@@ -193,7 +200,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                       "--port", str(sim_port), "--bridge", f"127.0.0.1:{frames_to}", "--camera-bind",
                       f"tcp://127.0.0.1:{cam_port}", "--server-port", str(server_port), "--no-control",
                       "--trace", str(trace_path), "--end-after-max", str(END_AFTER_MAX), "--status-every", "5",
-                      *[a for x in sim_set for a in ("--set", x)], env=env, may_exit=True)
+                      *sim_pace, *[a for x in sim_set for a in ("--set", x)], env=env, may_exit=True)
         ender = "referee" if simtwo else "sim"  # the process that ends the run and writes the final report
         sim = procs.get(ender)
         started = time.monotonic()

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from ..errors import ConfigError
 from ..field import DEFAULT_FIELD
+from ..pace import PaceSettings
 from ..settings import build, deep_update, section, setting
 from ..settings import read_yaml as _read_yaml
 from .detect import DetectorConfig
@@ -127,6 +128,9 @@ class LocalizationConfig:
     scan_match: ScanMatchConfig = section(ScanMatchConfig, "the LIDAR scan matched to the field's walls and ribs: "
                                                            "a pose fix for the EKF")
     node: NodeConfig = section(NodeConfig, "the ROS node's behaviour")
+    pace: PaceSettings = section(PaceSettings, "pacing by simulation time: the inputs of each paced frame (odom, "
+                                               "scans, images) run in stamp order once the bridge's and the "
+                                               "camera's paces are in, then the pose and the pace")
     topics: Topics = section(Topics, "the node's topics")
     frames: Frames = section(Frames, "the node's frames")
 

@@ -74,11 +74,14 @@ class AgentNode:
         self._running = False
         self.subscribers: list = []
         self.timer = None
+        self.pacer = None  # paced (pace.enabled): cycles come from the paces, not from a timer
 
     def start(self) -> AgentNode:
         node = self.node
-        self.pub_cmd = node.publisher("cmd_vel", Twist, QoS.CONTROL, 1)
-        self.pub_magnet = node.publisher("electromagnet", Bool, QoS.CONTROL, 1)
+        paced = self.cfg.pace.enabled
+        depth = 10 if paced else 1  # paced: every command counts (pace.py), none may be replaced in a queue
+        self.pub_cmd = node.publisher("cmd_vel", Twist, QoS.CONTROL, depth)
+        self.pub_magnet = node.publisher("electromagnet", Bool, QoS.CONTROL, depth)
         self.pub_path = node.publisher("agent/path", Path, QoS.LATCHED, 1)
         self.pub_markers = node.publisher("agent/markers", MarkerArray, QoS.LATCHED, 1)
         self.pub_diag = node.publisher("/diagnostics", DiagnosticArray, QoS.RELIABLE, 5)
@@ -89,6 +92,12 @@ class AgentNode:
         ]
         self.client = FactoryClient(self.cfg.server.host, self.cfg.server.port, timeout=0.2, retries=2)
         self._running = True
+        if paced:  # one cycle per paced frame, on the bridge's and the localization's paces (docs/pacing.md)
+            from .pace import Pacer
+
+            self.pacer = Pacer(node, "agent", {"bridge": ("odom", "contact"), "localization": ("pose",)},
+                               on_cycle=self._paced_tick, timeout=self.cfg.pace.timeout)
+            return self
         self._poller = threading.Thread(target=self._poll_loop, name="raf-agent-server", daemon=True)
         self._poller.start()
         self.timer = node.timer(self.robot.control_period, self._tick)
@@ -111,20 +120,28 @@ class AgentNode:
         x, y, th = p.position.x, p.position.y, rm.quaternion_yaw(p.orientation)
         if not all(math.isfinite(v) for v in (x, y, th)):
             self.counts["bad_pose"] += 1
+            self._got("pose")
             return
         c = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)[np.ix_((0, 1, 5), (0, 1, 5))]
         with self.lock:
             self.pose, self.pose_stamp = (x, y, th), rm.stamp_to_s(msg.header.stamp)
             self.pose_cov = c if np.all(np.isfinite(c)) else None
+        self._got("pose")
 
     def on_odom(self, msg: Odometry) -> None:
         with self.lock:
             self.odom_stamp = rm.stamp_to_s(msg.header.stamp)
             self.twist = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
+        self._got("odom")
 
     def on_contact(self, msg: Bool) -> None:
         with self.lock:
             self.contact = bool(msg.data)
+        self._got("contact")
+
+    def _got(self, key: str) -> None:
+        if self.pacer is not None:
+            self.pacer.got(key)
 
     # ------------------------------------------------------------------ server
     def _poll_loop(self) -> None:
@@ -142,10 +159,30 @@ class AgentNode:
             time.sleep(0.02)
 
     # ------------------------------------------------------------------ control
-    def _tick(self, _event=None) -> None:
+    def _paced_tick(self, t: float) -> None:
+        """Paced: the cycle of the frame stamped ``t``. The simulator waits for this cycle's command, so the
+        factory-state server answers with its state at ``t``."""
         if not self._running:
             return
-        now = self.node.now_s()
+        if self.agent.wants_state:
+            try:
+                st = self.client.poll_state()
+            except (ServerTimeout, ServerReplyError, OSError) as e:
+                self.counts["server_errors"] += 1
+                self.node.warn(f"raf agent: factory-state server: {e}", throttle=5.0)
+                st = None
+            if st is not None:
+                with self.lock:
+                    self.agent.on_state(st, t)
+        self._tick(now=t)
+        self.pacer.sent("cmd_vel")
+        self.pacer.sent("electromagnet")
+        self.pacer.done(t)
+
+    def _tick(self, _event=None, now: float | None = None) -> None:
+        if not self._running:
+            return
+        now = self.node.now_s() if now is None else now
         with self.lock:
             age = self.cfg.max_input_age
             fresh = now - self.pose_stamp <= age and now - self.odom_stamp <= age

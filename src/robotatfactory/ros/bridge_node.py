@@ -95,6 +95,7 @@ class Bridge:
         self.gate = SourceGate(cfg.source, st.takeover_after, st.restart_confirm, cfg.control_period_ms,
                                st.reorder_window)
         self.camera = None  # CameraLink: the camera half runs in its own process (camera_node)
+        self.pacer = None  # paced (~pace/enabled): ros/pace.py's Pacer; replies wait for the agent's pace
         self.clock = SimClock()
         self.odo = DiffDriveOdometry(wheel_radius=cfg.robot.wheel_radius, track=cfg.odometry.track,
                                      ticks_per_rev=cfg.robot.ticks_per_rev,
@@ -150,8 +151,13 @@ class Bridge:
         self.pub_contact = node.publisher(t["contact"], Bool, QoS.RELIABLE, 10)
         self.pub_magnet = node.publisher(t["magnet_state"], Bool, QoS.RELIABLE, 10)
         self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, QoS.RELIABLE, 10)
-        self._subs = [node.subscribe(t["cmd_vel"], Twist, self._on_cmd_vel, QoS.CONTROL, 1),
-                      node.subscribe(t["magnet"], Bool, self._on_magnet, QoS.CONTROL, 1)]
+        if cfg.pace.enabled:  # the agent's commands are counted: none may be lost (deeper queues)
+            from .pace import Pacer
+
+            self.pacer = Pacer(node, "bridge", {"agent": ("cmd_vel", "electromagnet")}, timeout=cfg.pace.timeout)
+        depth = 1 if self.pacer is None else 10
+        self._subs = [node.subscribe(t["cmd_vel"], Twist, self._on_cmd_vel, QoS.CONTROL, depth),
+                      node.subscribe(t["magnet"], Bool, self._on_magnet, QoS.CONTROL, depth)]
         self._send_static()
         if cfg.tf.publish_field:
             from .field_markers import field_marker_array
@@ -251,15 +257,19 @@ class Bridge:
         if not (math.isfinite(v) and math.isfinite(w)):
             self.counts["cmd_vel_rejected"] += 1
             self._warn("cmd_vel", f"bridge: ignoring cmd_vel with a non-finite value (v={v}, w={w})")
-            return
-        with self._cmd_lock:
-            self.watchdog.set_velocity(v, w, self.tracker.last_time_ms)
-            self.counts["cmd_vel"] += 1
+        else:
+            with self._cmd_lock:
+                self.watchdog.set_velocity(v, w, self.tracker.last_time_ms)
+                self.counts["cmd_vel"] += 1
+        if self.pacer is not None:
+            self.pacer.got("cmd_vel")
 
     def _on_magnet(self, msg: Bool) -> None:
         with self._cmd_lock:
             self.watchdog.magnet = bool(msg.data)
             self.counts["magnet_cmds"] += 1
+        if self.pacer is not None:
+            self.pacer.got("electromagnet")
 
     def command_for(self, seq: int, time_ms: int) -> Command:
         """The reply to a frame: the latest cmd_vel unless older than the watchdog timeout (simulation time)."""
@@ -399,7 +409,8 @@ class Bridge:
         if ev.verdict is Verdict.RESTART:
             self._reset_commands()
         t_eval = frame.time_ms if ev.accepted else (tr.last_time_ms if tr.last_time_ms is not None else frame.time_ms)
-        if reply:
+        paced = self.pacer is not None and ev.accepted
+        if reply and not paced:  # at once; paced: once the agent has paced this frame (below)
             self._reply(self.command_for(frame.seq, t_eval), addr, arrival)
         self.datagram_rate.tick(arrival)
         if not ev.accepted:
@@ -421,13 +432,19 @@ class Bridge:
                               "odometry uses the cumulative totals)")
         self.clock.on_sensor_frame(frame.time_ms, arrival)
         if self.camera is not None:  # its stamping may be waiting for this SensorFrame (non-blocking send)
-            self.camera.frame(frame.time_ms, arrival)
+            self.camera.frame(frame.time_ms, arrival, frame.camera_frames)
         try:
             self.publish_frame(frame, arrival)
             self._published += 1
         except Exception as e:  # noqa: BLE001 - a middleware's publish error (ROSException, ...) or a bad value
             self.counts["publish_errors"] += 1
             self._warn("publish", f"bridge: publishing frame Seq {frame.seq} failed: {e}")
+        if paced:  # this frame's outputs are out: pace it, wait for the agent's decision on it, reply with that
+            t = frame.time_ms / 1000.0
+            self.pacer.done(t)
+            self.pacer.wait(t)
+            if reply:
+                self._reply(self.command_for(frame.seq, t_eval), addr, arrival)
 
     def _start_stream(self, ev, frame: SensorFrame) -> None:
         if ev.verdict is Verdict.RESTART:
@@ -453,6 +470,7 @@ class Bridge:
         s = self.odo.update(f.enc_total[0], f.enc_total[1], t)
         self.pub_odom.publish(rm.odometry(stamp, fr["odom"], fr["base_link"], s.x, s.y, s.theta, s.v, s.w,
                                           s.pose_cov, s.twist_cov))
+        self._sent("odom")
         if arrival is not None:
             self.odom_delay.append(time.monotonic() - arrival)
         self.pub_clock.publish(Clock(clock=stamp))
@@ -479,6 +497,7 @@ class Bridge:
         self.pub_joints.publish(rm.joint_states(stamp, JOINT_NAMES, (s.left_angle, s.right_angle),
                                                 (s.left_rate, s.right_rate)))
         self.pub_contact.publish(Bool(data=bool(f.contact)))
+        self._sent("contact")
         self.pub_magnet.publish(Bool(data=bool(f.magnet)))
         if f.parts:  # last: a referee reading it has this frame's ground truth, contact and magnet already
             self.pub_parts.publish(rm.planar_poses(stamp, fr["map"], f.parts))
@@ -493,6 +512,7 @@ class Bridge:
                                                 cfg.lidar.fov_deg, cfg.lidar.range_min, cfg.lidar.range_max,
                                                 cfg.robot.control_period, 0.0))
             self.counts["scans"] += 1
+            self._sent("scan")
             return
         if self.sweeps is None or self.sweeps.n != n:
             self.sweeps = make_assembler(cfg.lidar.update, n, cfg.lidar.period, cfg.robot.control_period,
@@ -503,6 +523,12 @@ class Bridge:
                                                 cfg.lidar.fov_deg, cfg.lidar.range_min, cfg.lidar.range_max,
                                                 cfg.lidar.period, sw.time_increment))
             self.counts["scans"] += 1
+            self._sent("scan")
+
+    def _sent(self, key: str) -> None:
+        """Paced: one more message on output ``key`` (the pace of the frame says how many)."""
+        if self.pacer is not None:
+            self.pacer.sent(key)
 
     def _self_filtered(self, ranges):
         """The ranges with the rays that end on the robot itself as NaN (REP 117: invalid), if enabled."""

@@ -26,7 +26,7 @@ import sys
 import threading
 import time
 
-TIMING = struct.Struct("<qd")  # Tms (or -1: reset), arrival (monotonic seconds)
+TIMING = struct.Struct("<qdq")  # Tms (or -1: reset), arrival (monotonic seconds), CamN (-1: not sent)
 RESET = -1
 RCVHWM = 64  # camera frames queued in ZMQ before it drops any (77 MB at 640x480 BGRA)
 
@@ -62,6 +62,8 @@ class CameraBridge:
         self._timing_cv = threading.Condition()  # notified on every SensorFrame timing message
         self._drain_lock = threading.Lock()  # one reader of the timing socket at a time, in order
         self._running = False
+        self.paced = None  # camera_paced.PacedCamera when ~pace/enabled
+        self._info = None  # the camera_info published with each image (its stamp set each time)
         self._threads: list[threading.Thread] = []
         self.parent_gone = threading.Event()
 
@@ -76,7 +78,13 @@ class CameraBridge:
         self.pub_info = node.publisher(t["camera_info"], CameraInfo, QoS.SENSOR, 2)
         self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, QoS.RELIABLE, 10)
         self._running = True
-        for fn in (self._rx, self._publish, self._diag_loop) + ((self._timing,) if self.timing_sock else ()):
+        loops = (self._rx, self._publish)
+        if self.cfg.pace.enabled:  # every frame, stamped with the simulation time it carries (camera_paced.py)
+            from .camera_paced import PacedCamera
+
+            self.paced = PacedCamera(self)
+            loops = (self.paced.rx, self.paced.publish)
+        for fn in loops + (self._diag_loop,) + ((self._timing,) if self.timing_sock else ()):
             th = threading.Thread(target=self._guard, args=(fn,), daemon=True, name=f"raf-camera-{fn.__name__}")
             th.start()
             self._threads.append(th)
@@ -130,9 +138,11 @@ class CameraBridge:
                 if not data:  # the bridge went away
                     self.parent_gone.set()
                     return
-                tms, arrival = TIMING.unpack(data[:TIMING.size])
+                tms, arrival, camera_frames = TIMING.unpack(data[:TIMING.size])
                 self.counts["timing_messages"] += 1
-                if tms == RESET:
+                if self.paced is not None and tms != RESET:
+                    self.paced.on_timing(tms, camera_frames)
+                elif tms == RESET:
                     self.stamper.reset()
                 else:
                     self.stamper.on_sensor_frame(tms, arrival)
@@ -207,15 +217,6 @@ class CameraBridge:
         return connected
 
     def _publish(self) -> None:
-        import numpy as np
-
-        from . import messages as rm
-
-        cfg, cam = self.cfg, self.cfg.robot.camera
-        w, h = cam.width, cam.height
-        expected = w * h * 4
-        frame_id = cfg.frames["camera_optical"]
-        info = rm.camera_info(rm.zero_stamp(), frame_id, w, h, cam.fx, cam.fy, cam.cx, cam.cy, cam.distortion)
         carried = 0  # skipped frames counted with a wrong-sized message, passed on to the next frame
         while self._running:
             with self._cv:
@@ -227,27 +228,50 @@ class CameraBridge:
                 self._mail = None
             skipped += carried
             carried = 0
-            buf = msg.buffer
-            if buf.nbytes != expected:
+            if not self._size_ok(msg.buffer):
                 carried = skipped  # not a frame of this camera: the frames skipped before it still count
-                self.counts["wrong_size"] += 1
-                self._warn("size", f"camera: ignoring a frame of {buf.nbytes} bytes (expected {w}x{h}x4 = "
-                                   f"{expected}; ~camera/width, ~camera/height)")
                 continue
             est = self._stamp(arrival, skipped)
             if est is None:
                 self._warn("clock", "camera: frame before any SensorFrame: no simulation time to stamp it with, "
                                     "dropped")
                 continue
-            # B G R A (bottom row first) to top-row-first bgr8 bytes in ONE strided copy
-            bgra = np.frombuffer(buf, dtype=np.uint8).reshape(h, w, 4)
-            data = (bgra[::-1, :, :3] if cam.bottom_up else bgra[:, :, :3]).tobytes()
-            stamp = rm.stamp_s(est.stamp)
-            self.pub_image.publish(rm.image_bgr8(stamp, frame_id, data, w, h))
-            info.header.stamp = stamp
-            self.pub_info.publish(info)
-            self.counts["published"] += 1
-            self.rate.tick(arrival)
+            self.publish_frame(msg.buffer, est.stamp, arrival)
+
+    def _size_ok(self, buf) -> bool:
+        cam = self.cfg.robot.camera
+        expected = cam.width * cam.height * 4
+        if memoryview(buf).nbytes == expected:
+            return True
+        self.counts["wrong_size"] += 1
+        self._warn("size", f"camera: ignoring a frame of {memoryview(buf).nbytes} bytes (expected {cam.width}x"
+                           f"{cam.height}x4 = {expected}; ~camera/width, ~camera/height)")
+        return False
+
+    def publish_frame(self, buf, stamp_s: float, arrival: float | None = None) -> bool:
+        """Publish one SimTwo frame (B G R A, bottom row first unless the camera says otherwise) as bgr8 with
+        its camera_info, stamped ``stamp_s``; False (counted, warned) if it is not this camera's size."""
+        import numpy as np
+
+        from . import messages as rm
+
+        if not self._size_ok(buf):
+            return False
+        cam = self.cfg.robot.camera
+        w, h = cam.width, cam.height
+        if self._info is None:
+            self._info = rm.camera_info(rm.zero_stamp(), self.cfg.frames["camera_optical"], w, h, cam.fx, cam.fy,
+                                        cam.cx, cam.cy, cam.distortion)
+        # B G R A (bottom row first) to top-row-first bgr8 bytes in ONE strided copy
+        bgra = np.frombuffer(buf, dtype=np.uint8).reshape(h, w, 4)
+        data = (bgra[::-1, :, :3] if cam.bottom_up else bgra[:, :, :3]).tobytes()
+        stamp = rm.stamp_s(stamp_s)
+        self.pub_image.publish(rm.image_bgr8(stamp, self.cfg.frames["camera_optical"], data, w, h))
+        self._info.header.stamp = stamp
+        self.pub_info.publish(self._info)
+        self.counts["published"] += 1
+        self.rate.tick(time.monotonic() if arrival is None else arrival)
+        return True
 
     def _stamp(self, arrival: float, skipped: int):
         """The frame's stamp; waits (briefly) for the SensorFrame after it when the stamper needs it."""
@@ -316,11 +340,11 @@ class CameraLink:
         self.proc = subprocess.Popen(args, pass_fds=[child.fileno()])
         child.close()
 
-    def frame(self, time_ms: int, arrival: float) -> None:
-        self._send(TIMING.pack(int(time_ms), float(arrival)))
+    def frame(self, time_ms: int, arrival: float, camera_frames: int | None = None) -> None:
+        self._send(TIMING.pack(int(time_ms), float(arrival), -1 if camera_frames is None else int(camera_frames)))
 
     def reset(self) -> None:
-        self._send(TIMING.pack(RESET, 0.0))
+        self._send(TIMING.pack(RESET, 0.0, -1))
 
     def _send(self, data: bytes) -> None:
         try:

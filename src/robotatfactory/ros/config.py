@@ -24,6 +24,7 @@ from typing import Any
 from ..errors import ConfigError
 from ..field import DEFAULT_FIELD
 from ..robot import CameraSpec, LidarSpec, RobotSpec, load_robot
+from ..pace import PaceSettings
 from ..settings import build, describer, given, over, overlay, section, setting, tree
 from ..sim.control import CONTROL_PORT_OFFSET
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SIMTWO_UDP_PORT
@@ -229,6 +230,8 @@ class BridgeSettings:
                                      "calibration's")
     tf: Tf = section(Tf, "TF")
     diagnostics: Diagnostics = section(Diagnostics, "/diagnostics")
+    pace: PaceSettings = section(PaceSettings, "pacing by simulation time (the bridge replies to frame k once "
+                                               "the agent paced it; the camera side waits for CamN frames)")
     topics: Topics = section(Topics, "topic names")
     frames: Frames = section(Frames, "frame ids")
 

@@ -71,6 +71,8 @@ class LocalizationNode:
         self._K_from_info = False
         self._running = False
         self.frames = {k: cfg.frame(k) for k in tree(cfg.frames)}  # prefixed
+        self.pacer = None  # paced (pace.enabled): inputs held until their frame's cycle (_paced_cycle)
+        self._inbox: list = []  # paced: (stamp, order, handler, message) received, not yet run
 
     # ------------------------------------------------------------------ wiring
     def start(self) -> "LocalizationNode":
@@ -89,15 +91,27 @@ class LocalizationNode:
         self.pub_pose = node.publisher(t.pose, PoseWithCovarianceStamped, R, 10)
         self.pub_diag = node.publisher(t.diagnostics, DiagnosticArray, R, 5)
         self._running = True
+        self.use_beacons = bool(nc.use_lidar and len(self.beacon_xy))
+        scans = self.use_beacons or self.scan_matcher is not None
+        paced = self.cfg.pace.enabled
+        if paced:  # one cycle per paced frame (docs/pacing.md); every input counts: deeper queues
+            from .pace import Pacer
+
+            self.pacer = Pacer(node, "localization", {"bridge": ("odom",) + (("scan",) if scans else ()),
+                                                      "camera": ("image", "camera_info")},
+                               on_cycle=self._paced_cycle, timeout=self.cfg.pace.timeout)
+        inbox = self._held if paced else (lambda key, order, fn: fn)
         # odom: the bridge writes it reliably (QoS.SYNCHRONOUS); every message counts for the filter
         self.subs = [
-            node.subscribe(t.odom, Odometry, self._guard(self.on_odom), R, 50),
-            node.subscribe(t.image, Image, self._guard(self.on_image), QoS.SENSOR, 1, large=True),
-            node.subscribe(t.camera_info, CameraInfo, self._guard(self.on_camera_info), QoS.SENSOR, 1),
+            node.subscribe(t.odom, Odometry, inbox("odom", 3, self._guard(self.on_odom)), R, 50),
+            node.subscribe(t.image, Image, inbox("image", 1, self._guard(self.on_image)), QoS.SENSOR,
+                           4 if paced else 1, large=True),
+            node.subscribe(t.camera_info, CameraInfo, inbox("camera_info", 0, self._guard(self.on_camera_info)),
+                           QoS.SENSOR, 4 if paced else 1),
         ]
-        self.use_beacons = bool(nc.use_lidar and len(self.beacon_xy))
-        if self.use_beacons or self.scan_matcher is not None:
-            self.subs.append(node.subscribe(t.scan, LaserScan, self._guard(self.on_scan), QoS.SENSOR, 5))
+        if scans:
+            self.subs.append(node.subscribe(t.scan, LaserScan, inbox("scan", 2, self._guard(self.on_scan)),
+                                            QoS.SENSOR, 10 if paced else 5))
         self._diag_thread = threading.Thread(target=self._diag_loop, name="raf-localize-diag", daemon=True)
         self._diag_thread.start()
         node.info(f"localization: field {self.field.name}, camera fixes by '{nc.filter_method}', camera_pose "
@@ -126,6 +140,23 @@ class LocalizationNode:
                     self.counts[f"callback_error:{fn.__name__}"] += 1
                     self._warn(fn.__name__, f"localization: {fn.__name__} failed on a message: {e!r}")
         return run
+
+    def _held(self, key: str, order: int, fn):
+        """Paced: a callback that holds the message for its frame's cycle (``order`` among one stamp's inputs:
+        camera_info, image, scan, odom last: the odom publishes the pose) and counts it."""
+        def hold(msg):
+            with self.lock:
+                self._inbox.append((rm.stamp_to_s(msg.header.stamp), order, len(self._inbox), fn, msg))
+            self.pacer.got(key)
+        return hold
+
+    def _paced_cycle(self, t: float) -> None:
+        """Paced: the frame stamped ``t``: every input held so far, in stamp order, then the pace."""
+        with self.lock:
+            todo, self._inbox = sorted(self._inbox, key=lambda e: e[:3]), []
+        for _stamp, _order, _n, fn, msg in todo:
+            fn(msg)
+        self.pacer.done(t)
 
     def _warn(self, key: str, text: str) -> None:
         now = time.monotonic()
@@ -210,6 +241,8 @@ class LocalizationNode:
         m.pose.pose = rm.pose_from_matrix(se2_matrix(*x))
         m.pose.covariance = rm.pose_cov6(P)
         self.pub_pose.publish(m)
+        if self.pacer is not None:
+            self.pacer.sent("pose")
         if self.cfg.node.publish_tf:
             map_odom = matrix_se2(se2_matrix(*x) @ inv(se2_matrix(*odom_pose)))  # map <- odom (REP 105)
             self.node.send_tf([rm.planar_transform(self.frames["map"], self.frames["odom"], *map_odom,
