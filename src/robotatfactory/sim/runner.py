@@ -62,6 +62,7 @@ TIMEOUT_POLICIES = ("stop", "hold", "exit")
 MODES = ("realtime", "fast", "paced")
 RECV_BUFFER = 65535
 MAX_BEHIND = 0.25  # s: a realtime run further behind the wall clock than this stops trying to catch up
+PACED_SUBSCRIBER_WAIT = 30.0  # wall s a paced run waits for a camera subscriber before its first frame
 
 
 @dataclass(frozen=True)
@@ -317,7 +318,9 @@ class SimRunner:
                 import zmq
 
                 self._zmq_ctx = zmq.Context()
-                pub = self._zmq_ctx.socket(zmq.PUB)
+                # paced: XPUB, which hears subscriptions, so the first frame waits for the camera side (a PUB
+                # drops what it sends before a subscriber has joined, and a paced loop would wait for it)
+                pub = self._zmq_ctx.socket(zmq.PUB if c.mode != "paced" else zmq.XPUB)
                 # paced: the loop waits for the camera side, so a deeper queue never fills; it must not drop
                 pub.setsockopt(zmq.SNDHWM, 2 if c.mode != "paced" else 32)
                 pub.setsockopt(zmq.LINGER, 0)
@@ -644,6 +647,21 @@ class SimRunner:
                 self.counters.camera_errors += 1
                 self._rlog.warn("camera", f"camera frame {f.index} not published: {e}")
 
+    def _await_camera_subscriber(self, timeout: float = PACED_SUBSCRIBER_WAIT) -> None:
+        """Paced: wait (wall s) until a camera subscriber has joined, so that it gets the first frames."""
+        if self._held is None or self._pub is None:
+            return
+        end = time.monotonic() + timeout
+        while not self._stop.is_set():
+            left = end - time.monotonic()
+            if left <= 0:
+                log.warning("paced: no camera subscriber on %s after %g s: starting without one",
+                            self.config.camera_bind, timeout)
+                return
+            if self._pub.poll(int(min(left, 0.1) * 1000)):
+                self._pub.recv()  # a subscription (b"\x01" + topic)
+                return
+
     def _send(self, frame) -> None:
         try:
             self._sock.sendto(self._encoder.encode(frame), self.config.bridge)
@@ -694,6 +712,7 @@ class SimRunner:
         self._pace0 = (wall0, sim0)  # wall and simulation time that pacing counts from
         next_status = wall0 + c.status_every
         try:
+            self._await_camera_subscriber()
             while not self._stop.is_set():
                 self._poll_control()
                 sim = self.sim  # (a reset replaces it)

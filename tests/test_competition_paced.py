@@ -1,0 +1,28 @@
+"""The whole stack paced by simulation time (issue 23; docs/pacing.md): raf sim --paced, the bridge, the camera
+process, the localization and the agent, every node on the pace messages: a round plays faster than real
+time, with the loop's two control cycles of latency, and two runs of one seed give the same ground truth cycle
+by cycle. On each middleware (the traces of ROS 1 and ROS 2 agree too: docs/benchmarks.md)."""
+import pytest
+
+from robotatfactory.experiments._competition_full import play_full_stack
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.middlewares
+def test_a_paced_round_is_reproducible_and_faster_than_real_time(middleware, tmp_path):
+    runs = [play_full_stack(1, 100, None, False, None, paced=True, log_dir=tmp_path / f"run{i}") for i in (0, 1)]
+    for r in runs:
+        assert "error" not in r, r.get("error")
+        assert r["middleware"] == middleware
+        assert r["points"] == r["max_points"] == 4 and r["parts_knocked_out"] == 0, r["logs"]
+        assert r["command_delay_median_s"] == pytest.approx(0.08, abs=1e-6)  # the loop's two cycles
+        assert r["pose_error_docking_max_m"] <= 0.02
+        sim_log = (tmp_path / r["logs"] / "sim.log").read_text()
+        assert "paced" in sim_log and "lockstep timeouts 0" in sim_log
+        for name in ("bridge", "localize", "agent"):  # no node ran a cycle without its inputs
+            assert "paced: cycle" not in (tmp_path / r["logs"] / f"{name}.log").read_text(), name
+    a, b = ((tmp_path / f"run{i}" / "trace.jsonl").read_bytes() for i in (0, 1))
+    assert a == b, "two paced runs of one seed differ"
+    assert runs[0]["last_score_s"] == runs[1]["last_score_s"]
+    assert runs[0]["sim_s"] / runs[0]["wall_s"] > 1.0  # faster than real time even with the start-up
