@@ -55,6 +55,29 @@ def test_wait_blocks_until_the_inputs_come_and_times_out_otherwise():
     assert b.wait(1.08, timeout=0.5) is True
 
 
+def test_a_node_behind_in_the_loop_is_waited_for_one_cycle_late():
+    """The localization takes the agent's electromagnet command, which the agent sends after the
+    localization's cycle: cycle k needs the agent's pace of cycle k - 1 (none for the first cycle)."""
+    b = PaceBook({"bridge": ("odom",)}, behind={"agent": ("electromagnet",)})
+    b.paced(Pace("bridge", 0.04, {"odom": 1}))
+    b.got("odom")
+    assert b.next_ready() == 0.04  # the first cycle: nothing before it
+    b.done(0.04)
+    b.paced(Pace("bridge", 0.08, {"odom": 2}))
+    b.got("odom")
+    assert b.next_ready() is None and "agent's pace of 0.040 s" in b.missing(0.08)
+    b.paced(Pace("agent", 0.04, {"electromagnet": 1}))
+    assert b.next_ready() is None  # the command itself is still on its way
+    b.got("electromagnet")
+    assert b.next_ready() == 0.08
+    b.done(0.08)
+    b.paced(Pace("agent", 0.08, {"electromagnet": 2}))  # kept for the next cycle
+    b.paced(Pace("bridge", 0.12, {"odom": 3}))
+    b.got("odom")
+    b.got("electromagnet")
+    assert b.next_ready() == 0.12
+
+
 def test_counts_are_the_messages_sent_so_far():
     c = PaceCounts("bridge")
     c.sent("odom")

@@ -74,13 +74,16 @@ class PaceBook:
     callbacks call :meth:`got`, the pace subscription :meth:`paced`; :meth:`next_ready` says which cycle may
     run now, :meth:`wait` blocks for one (with a wall-clock limit, a safety net: a paced run never hangs)."""
 
-    def __init__(self, needs: dict[str, tuple[str, ...]]):
+    def __init__(self, needs: dict[str, tuple[str, ...]], behind: dict[str, tuple[str, ...]] | None = None):
         if not needs:
             raise ValueError("a paced node needs at least one upstream node")
         self.needs = {k: tuple(v) for k, v in needs.items()}
+        #: upstream nodes downstream of this one in the loop (the agent, for the localization): cycle k needs
+        #: their pace of the cycle before (k - 1), and the messages it counts
+        self.behind = {k: tuple(v) for k, v in (behind or {}).items()}
         self.clock = next(iter(self.needs))
         self.received: Counter = Counter()
-        self._paces: dict[str, list[Pace]] = {k: [] for k in self.needs}
+        self._paces: dict[str, list[Pace]] = {k: [] for k in (*self.needs, *self.behind)}
         self.done_t = -math.inf  # the latest cycle this node has run
         self.timeouts = 0
         self._cv = threading.Condition()
@@ -104,9 +107,16 @@ class PaceBook:
     def _of(self, name: str, t: float) -> Pace | None:
         return next((p for p in self._paces[name] if abs(p.t - t) <= STAMP_TOLERANCE), None)
 
+    def _wants(self, t: float):
+        """(upstream name, stamp of the pace cycle ``t`` needs from it, keys) of every requirement of ``t``."""
+        out = [(name, t, keys) for name, keys in self.needs.items()]
+        if self.done_t > -math.inf:  # (the first cycle has none before it)
+            out += [(name, self.done_t, keys) for name, keys in self.behind.items()]
+        return out
+
     def _ready(self, t: float) -> bool:
-        for name, keys in self.needs.items():
-            p = self._of(name, t)
+        for name, at, keys in self._wants(t):
+            p = self._of(name, at)
             if p is None or any(self.received[k] < p.counts.get(k, 0) for k in keys):
                 return False
         return True
@@ -142,17 +152,18 @@ class PaceBook:
         """Cycle ``t`` has run: forget the paces up to it."""
         with self._cv:
             self.done_t = max(self.done_t, t)
-            for name in self._paces:
-                self._paces[name] = [p for p in self._paces[name] if p.t > t + STAMP_TOLERANCE]
+            for name in self._paces:  # (a node behind keeps the pace of t: the next cycle needs it)
+                keep = t - STAMP_TOLERANCE if name in self.behind else t + STAMP_TOLERANCE
+                self._paces[name] = [p for p in self._paces[name] if p.t > keep]
 
     def missing(self, t: float) -> str:
         """What cycle ``t`` still waits for, in words (for a timeout's warning)."""
         with self._cv:
             out = []
-            for name, keys in self.needs.items():
-                p = self._of(name, t)
+            for name, at, keys in self._wants(t):
+                p = self._of(name, at)
                 if p is None:
-                    out.append(f"{name}'s pace")
+                    out.append(f"{name}'s pace of {at:.3f} s")
                     continue
                 out += [f"{k} {self.received[k]}/{p.counts.get(k, 0)}" for k in keys
                         if self.received[k] < p.counts.get(k, 0)]
@@ -161,8 +172,8 @@ class PaceBook:
     def give_up(self, t: float) -> None:
         """After a timeout: take what was received as complete, so the counts match again from here."""
         with self._cv:
-            for name, keys in self.needs.items():
-                p = self._of(name, t)
+            for name, at, keys in self._wants(t):
+                p = self._of(name, at)
                 if p is not None:
                     for k in keys:
                         self.received[k] = max(self.received[k], p.counts.get(k, 0))

@@ -44,14 +44,15 @@ def from_msg(m: DiagnosticArray) -> list[Pace]:
 class Pacer:
     """A node's side of pacing: counts what it publishes (:meth:`sent`) and receives (:meth:`got`), publishes
     its pace (:meth:`done`) and runs ``on_cycle(t)`` for each cycle once its inputs are in (in order, one at a
-    time, from whichever callback completed them). ``needs``: see :class:`~robotatfactory.pace.PaceBook`;
+    time, from whichever callback completed them). ``needs``, ``behind``: see :class:`~robotatfactory.pace.PaceBook`;
     None for a node that only publishes its pace (the bridge waits with :meth:`wait` instead)."""
 
     def __init__(self, node, name: str, needs: dict[str, tuple[str, ...]] | None,
-                 on_cycle: Callable[[float], None] | None = None, timeout: float = TIMEOUT):
+                 on_cycle: Callable[[float], None] | None = None, timeout: float = TIMEOUT,
+                 behind: dict[str, tuple[str, ...]] | None = None):
         self.node, self.name, self.timeout = node, name, timeout
         self.out = PaceCounts(name)
-        self.book = PaceBook(needs) if needs else None
+        self.book = PaceBook(needs, behind) if needs else None
         self.on_cycle = on_cycle
         self._run_lock = threading.Lock()
         self.pub = node.publisher(TOPIC, DiagnosticArray, QoS.RELIABLE, DEPTH)
