@@ -14,7 +14,7 @@ processes (the bare stand-in runs in the process), or serially in this one when 
 item.
 
 On Ray (``ray`` an address: ``HOST:PORT`` of a cluster's head, ``auto`` for the cluster this machine belongs to,
-``ray://HOST:10001`` for Ray Client, ``local`` for a private one-machine instance of ``jobs`` CPUs): each run is
+``local`` for a private one-machine instance of ``jobs`` CPUs; passed to ``ray.init``): each run is
 a Ray task reserving ``ray_cpus`` CPUs on some node; the cluster's CPUs decide how many run at once. Ray is
 imported here only then. What a run needs from this (the driver's) process travels with it:
 

@@ -154,8 +154,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--ray", metavar="ADDRESS", default=None,
                         help="run each run as a task on a Ray cluster (docs/batch.md) and gather the results here: "
                              "HOST:PORT of its head (ray start --head), auto (the cluster this machine is a node "
-                             "of), ray://HOST:10001 (Ray Client) or local (a private one-machine instance of --jobs "
-                             "CPUs); each machine needs the same checkout and bootstrap; --out's per-run files come "
+                             "of) or local (a private one-machine instance of --jobs CPUs); run it on a node of "
+                             "the cluster; each machine needs the same checkout and bootstrap; --out's per-run files come "
                              "back with the results (no shared filesystem); a run lost with its worker or node is "
                              "run again (--ray-retries)")
     parser.add_argument("--ray-cpus", type=float, default=None, metavar="N",
