@@ -37,8 +37,9 @@ def _free_port() -> int:
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    """(GCS address, RAY_TMPDIR) of a two-node Ray cluster, one CPU a node, private to this module."""
+def ray_cluster():
+    """A two-node Ray cluster (the :class:`ray.cluster_utils.Cluster`, its RAY_TMPDIR), one CPU a node, private
+    to this module."""
     import ray
     from ray.cluster_utils import Cluster
 
@@ -52,7 +53,7 @@ def cluster():
             "dashboard_agent_listen_port": None})
         c.add_node(num_cpus=1, include_dashboard=False)
         c.wait_for_nodes()
-        yield c.address, tmp
+        yield c, tmp
     finally:
         if ray.is_initialized():
             ray.shutdown()
@@ -63,6 +64,16 @@ def cluster():
         else:
             os.environ["RAY_TMPDIR"] = old
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+@pytest.fixture
+def cluster(ray_cluster):
+    """(GCS address, RAY_TMPDIR) of the module's cluster, with its two nodes (a test may have removed one)."""
+    c, tmp = ray_cluster
+    if len(c.worker_nodes) < 1:
+        c.add_node(num_cpus=1, include_dashboard=False)
+        c.wait_for_nodes()
+    return c.address, tmp
 
 
 @pytest.fixture(scope="module")
@@ -103,8 +114,9 @@ def test_the_batch_on_two_ray_nodes_gives_the_local_results(cluster, local, tmp_
     assert all(r["attempts"] == 1 and "lost_attempts" not in r for r in runs)
 
 
-def _busy_workers(tmp: str) -> list[int]:
-    """Pids of this cluster's Ray workers running a run now (process title ray::_remote_run)."""
+def _busy_workers(tmp: str, parent: int | None = None) -> list[int]:
+    """Pids of this cluster's Ray workers running a run now (process title ray::_remote_run), those of one node
+    only with ``parent`` (its raylet's pid)."""
     pids = []
     for d in os.listdir("/proc"):
         if not d.isdigit():
@@ -115,9 +127,16 @@ def _busy_workers(tmp: str) -> list[int]:
             env = Path(f"/proc/{d}/environ").read_bytes().split(b"\0")
         except OSError:
             continue
-        if f"RAY_TMPDIR={tmp}".encode() in env:
+        if f"RAY_TMPDIR={tmp}".encode() in env and (parent is None or _ppid(int(d)) == parent):
             pids.append(int(d))
     return pids
+
+
+def _ppid(pid: int) -> int:
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return -1
 
 
 def test_a_worker_killed_mid_run_has_its_run_retried_and_reported(cluster, local, tmp_path):
@@ -159,6 +178,43 @@ def test_a_worker_killed_mid_run_has_its_run_retried_and_reported(cluster, local
     assert not list(Path(tempfile.gettempdir()).glob(f"raf-batch-{killed[0]}-*"))
 
 
+def test_a_node_lost_mid_run_has_its_run_retried_on_the_other(ray_cluster, cluster, local, tmp_path):
+    """The second node (its raylet and workers) killed while it plays a run: the run goes to the head."""
+    import ray._private.ray_constants as rc
+
+    c, tmp = ray_cluster
+    address, _ = cluster
+    node = next(iter(c.worker_nodes))
+    raylet = node.all_processes[rc.PROCESS_TYPE_RAYLET][0].process.pid
+    removed: list[str] = []
+    stop = threading.Event()
+
+    def remover():  # as soon as the node has been playing a run for 0.5 s
+        seen: dict[int, float] = {}
+        while not stop.is_set() and not removed:
+            now = time.monotonic()
+            if any(now - seen.setdefault(pid, now) >= 0.5 for pid in _busy_workers(tmp, raylet)):
+                c.remove_node(node, allow_graceful=False)
+                removed.append(node.node_id)
+            time.sleep(0.05)
+
+    t = threading.Thread(target=remover, daemon=True)
+    t.start()
+    try:
+        res = competition.run(options(competition, **SPEC, ray=address), tmp_path)
+    finally:
+        stop.set()
+        t.join(30)
+    assert removed
+    runs = json.loads((tmp_path / "runs.json").read_text())
+    _same_as_local(local, res, runs)
+    retried = [r for r in runs if r["attempts"] > 1]
+    assert len(retried) == 1 and retried[0]["attempts"] == 2
+    assert retried[0]["lost_attempts"][0].split(":")[0] in ("NodeDiedError", "WorkerCrashedError")
+    assert retried[0]["ray_node"] != removed[0]  # elsewhere: the node is gone
+    assert res["ray_nodes"] == 2 and res["runs_retried"] == 1 and res["runs_lost"] == 0
+
+
 def _failed(item, e):
     return {"round": item.get("round", 0), "seed": item.get("seed", 0), "error": f"{type(e).__name__}: {e}"}
 
@@ -195,3 +251,24 @@ def test_a_worker_on_other_code_is_counted_and_warned_about(cluster, monkeypatch
     runs, info = _batch.execute(_batch.probe, [{"seed": 1}, {"seed": 2}], failed=_failed, ray=address)
     assert info["ray_code_differs_runs"] == 2 and all(r["ray_code_differs"] for r in runs)
     assert "2 run(s) ran code that differs" in capsys.readouterr().err
+
+
+def test_bench_batch_prints_a_table_and_writes_flat_json(raf_cmd, tmp_path):
+    """``raf bench batch`` at its smallest: one run locally and on a private one-CPU Ray instance."""
+    import subprocess
+
+    ray_tmp = tempfile.mkdtemp(prefix="rafray", dir="/tmp")
+    out = tmp_path / "batch.json"
+    try:
+        p = subprocess.run(raf_cmd + ["bench", "batch", "--rounds", "2", "--seeds", "1", "--workers", "1",
+                                      "--empty-tasks", "3", "--json", str(out)],
+                           env={**os.environ, "RAY_TMPDIR": ray_tmp}, capture_output=True, text=True, timeout=300)
+    finally:
+        shutil.rmtree(ray_tmp, ignore_errors=True)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "ray_w1_overhead_per_run_s" in p.stdout
+    res = json.loads(out.read_text())
+    assert all(not isinstance(v, (dict, list)) for v in res.values())
+    assert res["runs"] == 1 and res["ray_w1_same_results"] is True
+    assert res["local_w1_runs_per_min"] > 0 and res["ray_w1_runs_per_min"] > 0 and res["ray_w1_empty_task_ms"] > 0
+    assert res["ray_w1_overhead_per_run_s"] == pytest.approx((res["ray_w1_wall_s"] - res["local_w1_wall_s"]), abs=0.02)
