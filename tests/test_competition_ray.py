@@ -229,7 +229,8 @@ def test_the_executor_carries_inputs_outputs_and_settings_and_does_not_retry_a_p
     src.write_text("the driver's file")
     out = tmp_path / "out"
     out.mkdir()
-    items = [{"round": 1, "seed": 1, "read": str(src), "write": {"r1/log.txt": "one", "r1/sub/trace": "t"}},
+    items = [{"round": 1, "seed": 1, "read": str(src), "write": {"r1/log.txt": "one", "r1/sub/trace": "t"},
+              "child_signals": True},
              {"round": 1, "seed": 2, "write": {"r2/log.txt": "two"}, "sleep": 0.2},
              {"round": 1, "seed": 3, "raise": "a bug in the run"}]
     runs, info = _batch.execute(_batch.probe, items, out_dir=out, failed=_failed, ray=address, inputs=[src])
@@ -239,6 +240,8 @@ def test_the_executor_carries_inputs_outputs_and_settings_and_does_not_retry_a_p
     assert (out / "r1/log.txt").read_text() == "one" and (out / "r1/sub/trace").read_text() == "t"
     assert (out / "r2/log.txt").read_text() == "two" and b["out"] == [str(out / "r2/log.txt")]
     assert a["env"] == {"RAF_MIDDLEWARE": "ros1"} == b["env"]
+    # a process the run starts hears SIGINT (how the whole stack's nodes are stopped; Ray's worker blocks it)
+    assert int(a["child_signals"]["SigBlk"], 16) & (1 << (signal.SIGINT - 1)) == 0
     assert c["error"] == "ValueError: a bug in the run" and c["attempts"] == 1 and "lost_attempts" not in c
     assert info["executor"] == "ray" and info["runs_retried"] == 0 and info["run_attempts"] == 3
     assert info["ray_code_differs_runs"] == 0 and not any("ray_code_differs" in r for r in runs)

@@ -41,6 +41,7 @@ import functools
 import hashlib
 import os
 import shutil
+import signal
 import socket
 import sys
 import tempfile
@@ -278,6 +279,9 @@ def _remote_run(job, item, collect: bool, shipped: dict, env: dict) -> dict:
         if out is not None:
             out.mkdir()
         saved = {k: os.environ.get(k) for k in SHIPPED_ENV}
+        # Ray's worker blocks SIGINT, and a blocked signal stays blocked in every child it starts: the whole
+        # stack's nodes would not hear the SIGINT that stops them (raf record killed later, its bag unindexed)
+        mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         try:
             for k in SHIPPED_ENV:
                 if k in env:
@@ -286,6 +290,7 @@ def _remote_run(job, item, collect: bool, shipped: dict, env: dict) -> dict:
                     os.environ.pop(k, None)
             run = _swap(job, where)(_swap(item, where), out_dir=out)
         finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             for k, v in saved.items():
                 if v is None:
                     os.environ.pop(k, None)
@@ -371,7 +376,8 @@ def probe(item: dict, out_dir: Path | None = None) -> dict:
     """A job that plays no round, for the tests and ``raf bench batch`` (what the executor itself costs and
     carries): sleeps ``item["sleep"]`` s, reads the file ``item["read"]``, writes ``item["write"]``
     (``{relative path: text}``) under ``out_dir``, raises ValueError with ``item["raise"]``; returns what it saw
-    (``read`` text, ``out`` paths written, ``env``: the :data:`SHIPPED_ENV` settings, ``host``, ``pid``)."""
+    (``read`` text, ``out`` paths written, ``env``: the :data:`SHIPPED_ENV` settings, ``host``, ``pid``, with
+    ``item["child_signals"]`` the signal masks a child process starts with)."""
     if item.get("raise"):
         raise ValueError(item["raise"])
     time.sleep(float(item.get("sleep", 0.0)))
@@ -379,6 +385,12 @@ def probe(item: dict, out_dir: Path | None = None) -> dict:
            "pid": os.getpid(), "env": {k: os.environ[k] for k in SHIPPED_ENV if k in os.environ}}
     if item.get("read"):
         out["read"] = Path(item["read"]).read_text()
+    if item.get("child_signals"):  # the signals a child process starts with blocked / ignored (hex masks)
+        import subprocess
+
+        status = subprocess.run(["cat", "/proc/self/status"], capture_output=True, text=True).stdout
+        out["child_signals"] = {k: v.strip() for k, v in (ln.split(":", 1) for ln in status.splitlines())
+                                if k in ("SigBlk", "SigIgn")}
     if out_dir is not None:
         out["out"] = []
         for rel, text in (item.get("write") or {}).items():
