@@ -76,7 +76,9 @@ def test_localize_settings_are_checked_before_any_run():
     """--localize NAME=VALUE reaches the whole stack's raf localize; a bad one is refused at once, and outside
     the whole stack it is refused too (the bare mode runs no raf localize)."""
     for extra, msg in ((["--localize", "scan_match/nope=1"], "unknown setting(s) scan_match.nope"),
-                       (["--localize", "scan_match/enabled=false", "--mode", "bare_truth"], "only the whole stack")):
+                       (["--localize", "scan_match/enabled=false", "--mode", "bare_truth"], "only the whole stack"),
+                       (["--pace", "paced", "--mode", "bare_truth"], "the whole stack on the stand-in only"),
+                       (["--pace", "paced", "--simulator", "simtwo"], "SimTwo runs in real time")):
         r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "competition", "--rounds", "1",
                             "--seeds", "1", *extra], capture_output=True, text=True, timeout=60)
         assert r.returncode != 0 and msg in r.stderr, r.stderr[-1000:]

@@ -69,6 +69,7 @@ NAME = "competition"
 HELP = ("the autonomous robot plays rounds 1-3 over seeds on the whole stack (or --mode bare_truth): score, "
         "last-delivery time, failures, pose error while docking, per-round success rate and median time")
 MODES = ("bare_truth", "full_stack")
+PACES = ("realtime", "paced")  # full_stack's clock: the wall clock, or simulation time (docs/pacing.md)
 SIMTWO_MODE = "simtwo_full_stack"  # full_stack on the real SimTwo (--simulator simtwo): the keys' prefix
 TIME_TARGETS = {1: 60.0, 2: 80.0, 3: 120.0}  # s, median time of the last scoring delivery (issue 11)
 #: the seeds the agent was tuned on (issues 11-19) and a held-out set it never saw (issue 20): every result key
@@ -134,6 +135,11 @@ def add_arguments(parser) -> None:
                         help="full_stack's simulator: standin (raf sim, default) or simtwo: the real SimTwo (raf "
                              "simtwo run, field simtwo2022) with raf referee scoring from the part positions SimTwo reports; "
                              "one run at a time (SimTwo needs a core); keys start with " + SIMTWO_MODE)
+    parser.add_argument("--pace", choices=PACES, default="realtime",
+                        help="full_stack on the stand-in: realtime (default: raf sim paced by the wall clock, as "
+                             "SimTwo) or paced: by simulation time, each cycle as soon as every node has finished "
+                             "the one before, with real time's loop latency (raf sim --paced and every node's "
+                             "pace.enabled: faster than real time and reproducible; docs/pacing.md)")
     parser.add_argument("--analyse", metavar="DIR", default=None,
                         help="full_stack: do not run; measure again the runs an earlier --out DIR kept (logs, trace, "
                              "pose bag) with this code, for --rounds and --seeds")
@@ -384,9 +390,10 @@ def _job(spec, out_dir: Path | None = None):
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None,
               simulator: str = "standin", localize: tuple[str, ...] = (), agent: tuple[str, ...] = (),
               sim_set: tuple[str, ...] = (), loss: tuple[float, float, float] = (0.0, 0.0, 0.0),
-              calibration: str = "none") -> dict:
+              calibration: str = "none", paced: bool = False) -> dict:
     """One whole-stack run: its camera calibration first (``calibration``: what
-    :func:`._competition_calibration.resolve` gave; a drive with ``auto``), then the round on it."""
+    :func:`._competition_calibration.resolve` gave; a drive with ``auto``), then the round on it (``paced``: by
+    simulation time, docs/pacing.md)."""
     from ._competition_calibration import prepare
     from ._competition_full import SimStartError, play_full_stack, run_dir
 
@@ -400,7 +407,7 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
         tries -= 1
         try:
             out = play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set,
-                                  loss, calibration=calib, log_dir=log_dir)
+                                  loss, calibration=calib, log_dir=log_dir, paced=paced)
             break
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
@@ -752,6 +759,12 @@ def run(args, out_dir: Path | None) -> dict:
         from ..settings import parse_set
 
         load_config(overrides=parse_set(list(localize)))  # a bad name or value: ConfigError now, not in each run
+    pace = getattr(args, "pace", "realtime")
+    if pace not in PACES:
+        raise ConfigError(f"--pace {pace!r}: choose one of {', '.join(PACES)}")
+    if pace == "paced" and (simulator == "simtwo" or not mode.endswith("full_stack")):
+        raise ConfigError("--pace paced: the whole stack on the stand-in only (SimTwo runs in real time; bare_truth "
+                          "has no wall clock to drop)")
     ray = getattr(args, "ray", None)
     inputs = []  # files a run reads, shipped to Ray workers (_batch.py): a --field file, a --calibration YAML
     if ray and field_name and Path(field_name).is_file():
@@ -781,7 +794,8 @@ def run(args, out_dir: Path | None) -> dict:
                     for r, s, _l, _f, rec, *_ in specs]
         else:  # a thread per run locally (each run is its own processes), or a Ray task per run
             job = functools.partial(_full_item, field_name=field_name, simulator=simulator, localize=localize,
-                                    agent=agent_items, sim_set=tuple(sim_items), loss=loss, calibration=calibration)
+                                    agent=agent_items, sim_set=tuple(sim_items), loss=loss, calibration=calibration,
+                                    paced=pace == "paced")
             runs, batch = run_batch(job, [(sp[0], sp[1], sp[4]) for sp in specs], local="threads")
     else:  # the bare stand-in in a process: spawned processes (serially with one job), or a Ray task per run
         runs, batch = run_batch(_job, specs, local="processes")
@@ -819,6 +833,10 @@ def run(args, out_dir: Path | None) -> dict:
     out["cmd_delay_cycles"] = cmd_delay
     out["pose_predicted"] = bool(getattr(args, "pose_predict", False)) and (delay > 0 or cmd_delay > 0)
     out["wall_s"] = round(wall, 1)
+    out["pace"] = pace if mode.endswith("full_stack") else "none: bare_truth runs in-process, as fast as it can"
+    sim_s = [r.get("sim_s") for r in runs if isinstance(r.get("sim_s"), (int, float))]
+    if sim_s and wall > 0:  # the batch's simulated seconds per wall second (all runs, at --jobs at once)
+        out["sim_s_per_wall_s"] = round(sum(sim_s) / wall, 3)
     out["jobs"] = batch.get("ray_workers", jobs)  # runs at once: --jobs here, the cluster's slots on Ray
     out.update(batch)  # which executor ran the runs (local, ray: nodes, workers, runs retried)
     if out_dir is not None:
