@@ -1,0 +1,127 @@
+"""The EKF's carrying model (``ekf.carry_turn_sigma_per_sqrt_rad``, ``Ekf.set_carrying``): a robot turning with a
+part on its magnet gets more heading noise per radian turned, switched by time-stamped calls that replay like late
+measurements; without the flag the filter is what it was."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from robotatfactory.errors import ConfigError
+from robotatfactory.localization import reasons
+from robotatfactory.localization.config import from_dict
+from robotatfactory.localization.ekf import Ekf, EkfConfig
+
+TRACK = 0.1322
+CFG = EkfConfig(track_m=TRACK)
+OLD = replace(CFG, carry_turn_sigma_per_sqrt_rad=0.0)  # the filter before the carrying model
+DT = 0.04
+W = 1.5  # rad/s: a turn on the spot at carry.w_max
+P0 = np.diag([1e-6, 1e-6, 1e-6])
+
+
+def spin_wheels(w=W):
+    """One cycle's wheel travel turning on the spot at w (m, m)."""
+    d = w * TRACK / 2 * DT
+    return -d, d
+
+
+def run(cfg=CFG, switches=(), n=50, late=None, wheels=spin_wheels, fixes=()):
+    """A filter at the origin fed ``n`` cycles of odometry; ``switches`` (t, on) given before the odometry (the
+    ones ahead of it wait), ``late`` ones after all of it, ``fixes`` (t, z) at their time."""
+    ekf = Ekf(cfg)
+    ekf.initialise(0.0, (0.0, 0.0, 0.0), P0)
+    for t, on in switches:
+        ekf.set_carrying(t, on)
+    fix_at = dict(fixes)
+    for k in range(1, n + 1):
+        ekf.odometry_wheels(k * DT, *wheels())
+        if round(k * DT, 6) in fix_at:
+            ekf.pose_fix(k * DT, fix_at[round(k * DT, 6)], np.diag([1e-4, 1e-4, 1e-3]))
+    for t, on in late or ():
+        ekf.set_carrying(t, on)
+    return ekf
+
+
+def test_turning_with_a_part_adds_the_carry_sigma_per_radian_and_nothing_else_changes():
+    turned = W * DT * 50  # rad
+    empty, carrying = run(), run(switches=[(0.0, True)])
+    assert carrying.carrying and not empty.carrying
+    extra = carrying.covariance()[2, 2] - empty.covariance()[2, 2]
+    assert extra == pytest.approx(CFG.carry_turn_sigma_per_sqrt_rad ** 2 * turned, rel=1e-6)
+    assert CFG.carry_turn_sigma_per_sqrt_rad == 0.03  # the measured default (docs/localization.md)
+    # not carrying, the model changes nothing: the filter is the old one, bit for bit
+    assert np.array_equal(run(cfg=OLD).covariance(), empty.covariance())
+    assert run(cfg=OLD).pose() == empty.pose() == carrying.pose()  # noise only: no turn scale
+    # carrying with the model off (0) is the old filter too
+    assert np.array_equal(run(cfg=OLD, switches=[(0.0, True)]).covariance(), empty.covariance())
+    # straight driving with a part: no extra noise (the slip is in turns)
+    straight = lambda: (0.008, 0.008)  # noqa: E731
+    assert np.array_equal(run(switches=[(0.0, True)], wheels=straight).covariance(),
+                          run(wheels=straight).covariance())
+
+
+def test_a_switch_counts_from_its_own_stamp_whether_it_comes_ahead_on_time_or_late():
+    """On at 0.6 s, off at 1.4 s: the same filter whether the switches wait for the odometry, come as it
+    passes or come after it all (replayed, with a pose fix in between replayed too)."""
+    fixes = [(1.0, (0.0, 0.0, W * 1.0))]
+    ahead = run(switches=[(0.6, True), (1.4, False)], fixes=fixes)
+    late = run(late=[(0.6, True), (1.4, False)], fixes=fixes)
+    on_time = Ekf(CFG)
+    on_time.initialise(0.0, (0.0, 0.0, 0.0), P0)
+    for k in range(1, 51):
+        t = k * DT
+        on_time.odometry_wheels(t, *spin_wheels())
+        if abs(t - 0.6) < 1e-9:
+            on_time.set_carrying(0.6, True)
+        if abs(t - 1.4) < 1e-9:
+            on_time.set_carrying(1.4, False)
+        if abs(t - 1.0) < 1e-9:
+            on_time.pose_fix(t, fixes[0][1], np.diag([1e-4, 1e-4, 1e-3]))
+    for other in (late, on_time):
+        np.testing.assert_allclose(other.covariance(), ahead.covariance(), rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(other.pose(), ahead.pose(), atol=1e-12)
+    assert not ahead.carrying
+    # only the carried stretch counts: more than without it, less than carrying on to the end; a switch stamped
+    # mid-cycle splits that cycle's increment (half a cycle more of carrying than off at 1.4 s)
+    plain, longer = run(fixes=fixes), run(switches=[(0.6, True)], fixes=fixes)
+    mid = run(switches=[(0.6, True), (1.42, False)], fixes=fixes)
+    p = [e.covariance()[2, 2] for e in (plain, ahead, mid, longer)]
+    assert p[0] < p[1] < p[2] < p[3]
+    # without the fix: carrying from 0.6 to 1.4 s adds that stretch's turn times sigma^2 (turning on the spot,
+    # the heading's variance just adds up), the late switches as well
+    for kw in ({"switches": [(0.6, True), (1.4, False)]}, {"late": [(1.4, False), (0.6, True)]}):
+        extra = run(**kw).covariance()[2, 2] - run().covariance()[2, 2]
+        assert extra == pytest.approx(CFG.carry_turn_sigma_per_sqrt_rad ** 2 * W * 0.8, rel=1e-6)
+
+
+def test_repeats_bad_stamps_old_switches_and_a_full_queue():
+    ekf = Ekf(CFG)
+    assert ekf.set_carrying(0.0, True)  # before any odometry: waits for it
+    assert not ekf.set_carrying(0.0, True)  # the very same switch again: nothing to do
+    ekf.initialise(0.0, (0.0, 0.0, 0.0), P0)
+    ekf.odometry_wheels(DT, *spin_wheels())
+    assert ekf.carrying  # from the first odometry on
+    ekf.initialise(DT, (0.0, 0.0, 0.0), P0)
+    assert ekf.carrying  # (re)initialising keeps what the magnet does
+    for k in range(2, 11):
+        ekf.odometry_wheels(k * DT, *spin_wheels())
+    assert not ekf.set_carrying(float("nan"), False) and ekf.counts[reasons.BAD_INPUT] == 1 and ekf.carrying
+    # older than the history: from the history's start
+    for k in range(11, 151):
+        ekf.odometry_wheels(k * DT, *spin_wheels())
+    assert ekf.set_carrying(0.1, False) and not ekf.carrying
+    # a switch ahead of the odometry is never pushed out by measurements waiting for it (max_pending)
+    t = ekf.t
+    assert ekf.set_carrying(t + 0.5, True)
+    for j in range(CFG.max_pending + 5):
+        ekf.pose_fix(t + 0.1 + 0.01 * j, (0.0, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-3]))
+    assert ekf.counts[reasons.TOO_OLD] == 5 and not ekf.carrying
+    for k in range(1, 20):
+        ekf.odometry_wheels(t + k * DT, *spin_wheels())
+    assert ekf.carrying
+
+
+def test_the_setting_is_checked():
+    assert from_dict({"ekf": {"carry_turn_sigma_per_sqrt_rad": 0.05}}).ekf.carry_turn_sigma_per_sqrt_rad == 0.05
+    with pytest.raises(ConfigError, match="ekf.carry_turn_sigma_per_sqrt_rad"):
+        from_dict({"ekf": {"carry_turn_sigma_per_sqrt_rad": -0.01}})
