@@ -38,6 +38,7 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, middlewar
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import CameraInfo, Image, LaserScan
+    from std_msgs.msg import Bool
     from tf2_msgs.msg import TFMessage
     from visualization_msgs.msg import MarkerArray
 
@@ -52,6 +53,7 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, middlewar
     pub_info = publisher("/camera/camera_info", CameraInfo, QoS.SENSOR, 5, wait_for=0)
     pub_odom = publisher("/odom", Odometry, QoS.RELIABLE, 50, wait_for=0)
     pub_scan = publisher("/scan", LaserScan, QoS.SENSOR, 5, wait_for=0)
+    pub_magnet = publisher("/electromagnet", Bool, QoS.CONTROL, 1, wait_for=0)  # as the agent publishes it
     pose = Collector("/pose", PoseWithCovarianceStamped)
     cam = Collector("/camera_pose", PoseWithCovarianceStamped)
     fixes = Collector("/aruco/fixes/planar", PoseWithCovarianceStamped)
@@ -60,7 +62,8 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, middlewar
     tf = Collector("/tf", TFMessage)
     diag = Collector("/diagnostics", DiagnosticArray)
     wait_until(lambda: pub_odom.subscriber_count() and pub_img.subscriber_count() and pub_scan.subscriber_count()
-               and _publishers(pose.sub) and _publishers(debug.sub), timeout=30, what="the node's subscriptions")
+               and pub_magnet.subscriber_count() and _publishers(pose.sub) and _publishers(debug.sub), timeout=30,
+               what="the node's subscriptions")
     rend = SceneRenderer(field, robot.camera)
 
     def img_msg(img, t):
@@ -94,6 +97,8 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, middlewar
             r = simulate_scan(truth(t), field.beacons, field.beacon_diameter, angles, rng=rng)
             scan.ranges = [float(v) for v in np.where(r < 0, np.inf, r)]
             pub_scan.publish(scan)
+        if k >= 20:  # the agent switches its magnet on at 0.84 s and says so every cycle: the filter carries
+            pub_magnet.publish(Bool(data=True))
         if k == 41:  # garbage: a truncated image, a wrong encoding (between two frames), a NaN odometry
             bad = img_msg(np.zeros((480, 640, 3), np.uint8), t)
             bad.data = bad.data[:1000]
@@ -150,6 +155,10 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, middlewar
     assert "rejected_no_markers" in v or any(k.startswith("rejected_") for k in v)
     assert int(v["beacons_used"]) > 0
     assert int(v.get("bad_odom", "0")) == 1
+    # the robot's own magnet command reached the filter: one switch, carrying now
+    v = wait_until(lambda: (lambda d: d if int(d.get("magnet_commands", "0")) >= 50 else None)(values()), timeout=5,
+                   what="the magnet commands in the diagnostics")
+    assert int(v["carry_switches"]) == 1 and v["carrying"] == "True"
     assert proc.poll() is None
     assert len(got) >= 20
     # the settings as each middleware shows parameters: on the master (ROS 1), declared on the node (ROS 2)
@@ -165,7 +174,7 @@ def test_node_localizes_a_robot_from_images_odometry_and_beacons(node, middlewar
         assert p["use_sim_time"][0] is False  # --no-sim-time
     for c in (pose, cam, fixes, markers, debug, tf, diag):
         c.close()
-    for pub in (pub_img, pub_info, pub_odom, pub_scan):
+    for pub in (pub_img, pub_info, pub_odom, pub_scan, pub_magnet):
         unpublish(pub)
 
 

@@ -85,6 +85,8 @@ class Topics:
     camera_info: str = setting("camera/camera_info", "in: sensor_msgs/CameraInfo (K, D)")
     odom: str = setting("odom", "in: nav_msgs/Odometry, base_link in odom")
     scan: str = setting("scan", "in: sensor_msgs/LaserScan (beacons, scan matching)")
+    magnet: str = setting("electromagnet", "in: std_msgs/Bool, the robot's own command to its electromagnet (the "
+                                           "agent's): while on, the EKF turns with the carrying process noise")
     markers: str = setting("aruco/markers", "out: visualization_msgs/MarkerArray, the detected markers (in "
                                             "camera_optical) with their IDs")
     marker_poses: str = setting("aruco/poses", "out: geometry_msgs/PoseArray, the same poses")

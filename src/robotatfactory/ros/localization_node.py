@@ -1,7 +1,11 @@
 """The localization node (thin wiring around :mod:`robotatfactory.localization`, on either middleware: :mod:`.mw`).
 
 Subscribes (relative names): ``camera/image_raw`` + ``camera/camera_info`` (stamped by the bridge with the
-estimated simulation time of the render), ``odom`` (nav_msgs/Odometry, ``base_link`` in ``odom``), ``scan``.
+estimated simulation time of the render), ``odom`` (nav_msgs/Odometry, ``base_link`` in ``odom``), ``scan``,
+``electromagnet`` (std_msgs/Bool: the robot's own command to its magnet, the agent's; while it is on, the EKF
+turns with the carrying process noise, :meth:`~robotatfactory.localization.ekf.Ekf.set_carrying`; a Bool has no
+stamp, so a switch counts from the latest odometry the node has taken: the command acts on the wheels' cycles
+after it).
 Publishes: ``aruco/markers`` (visualization_msgs/MarkerArray: each detected marker in ``camera_optical``
 with its ID), ``aruco/poses`` (geometry_msgs/PoseArray, the same poses), ``aruco/debug_image`` (only while
 subscribed), ``camera_pose`` (PoseWithCovarianceStamped: ``camera_optical`` in ``map`` by the paper's
@@ -28,6 +32,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
+from std_msgs.msg import Bool
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..errors import ConfigError
@@ -65,6 +70,8 @@ class LocalizationNode:
         self.counts: Counter = Counter()
         self._last_warn: dict[str, float] = {}
         self._odom: tuple[float, tuple[float, float, float]] | None = None
+        self._magnet: bool | None = None  # the robot's last magnet command (None: none heard yet)
+        self._carry_due = False  # a magnet command heard before any odometry: applied with the first
         self._last_fix_t: float | None = None
         self._last_fix_wall: float | None = None
         self._frame_ms: list[float] = []
@@ -97,9 +104,11 @@ class LocalizationNode:
         if paced:  # one cycle per paced frame (docs/pacing.md); every input counts: deeper queues
             from .pace import Pacer
 
+            # the agent's magnet command of cycle k - 1 (sent after this node's cycle k - 1) before cycle k
             self.pacer = Pacer(node, "localization", {"bridge": ("odom",) + (("scan",) if scans else ()),
                                                       "camera": ("image", "camera_info")},
-                               on_cycle=self._paced_cycle, timeout=self.cfg.pace.timeout)
+                               on_cycle=self._paced_cycle, timeout=self.cfg.pace.timeout,
+                               behind={"agent": ("electromagnet",)})
         inbox = self._held if paced else (lambda key, order, fn: fn)
         # odom: the bridge writes it reliably (QoS.SYNCHRONOUS); every message counts for the filter
         self.subs = [
@@ -109,6 +118,10 @@ class LocalizationNode:
             node.subscribe(t.camera_info, CameraInfo, inbox("camera_info", 0, self._guard(self.on_camera_info)),
                            QoS.SENSOR, 4 if paced else 1),
         ]
+        # the agent's magnet command, reliable as the agent and the referee have it; taken at once (a Bool has no
+        # stamp): a switch counts from the latest odometry taken, the cycle the agent decided it on (paced: the
+        # cycle before the one that waits for it, so the same in every run)
+        self.subs.append(node.subscribe(t.magnet, Bool, self._guard(self.on_magnet), R, 10))
         if scans:
             self.subs.append(node.subscribe(t.scan, LaserScan, inbox("scan", 2, self._guard(self.on_scan)),
                                             QoS.SENSOR, 10 if paced else 5))
@@ -187,6 +200,23 @@ class LocalizationNode:
             self.counts["bad_camera_info"] += 1
             self._warn("camera_info", f"localization: ignoring camera_info: {e}")
 
+    def on_magnet(self, msg: Bool) -> None:
+        """The robot's magnet command: carrying a part (or no longer) from the latest odometry's stamp on."""
+        try:
+            on = bool(msg.data)
+            with self.lock:
+                self.counts["magnet_commands"] += 1
+                if on != self._magnet:
+                    self._magnet = on
+                    self.counts["carry_switches"] += 1
+                    if self._odom is None:
+                        self._carry_due = True
+                    else:
+                        self.ekf.set_carrying(self._odom[0], on)
+        finally:
+            if self.pacer is not None:  # counted once taken: the next cycle may run
+                self.pacer.got("electromagnet")
+
     def on_odom(self, msg: Odometry) -> None:
         t = rm.stamp_to_s(msg.header.stamp)
         p = msg.pose.pose
@@ -202,6 +232,7 @@ class LocalizationNode:
                     self.scan_matcher.reset()
                 self.counts["restarts"] += 1
                 self._odom = None  # (else every later message looks older still and restarts it again)
+                self._carry_due = self._magnet is not None  # the new filter learns what the magnet does
             if self._odom is not None and t <= self._odom[0]:
                 self.counts["odom_not_newer"] += 1
                 return
@@ -210,6 +241,9 @@ class LocalizationNode:
                 s = self.cfg.node
                 self.ekf.initialise(t, (sp.x, sp.y, sp.theta), np.diag(
                     [s.initial_sigma_xy ** 2, s.initial_sigma_xy ** 2, math.radians(s.initial_sigma_theta_deg) ** 2]))
+            if self._carry_due:
+                self.ekf.set_carrying(t, bool(self._magnet))
+                self._carry_due = False
             self.ekf.odometry_pose(t, pose)
             if self.scan_matcher is not None:
                 self.scan_matcher.add_odom(t, pose)
@@ -401,6 +435,7 @@ class LocalizationNode:
             lc = dict(self.loc.counts)
             ec = dict(self.ekf.counts)
             x, P = self.ekf.pose(), self.ekf.covariance()
+            carrying = self.ekf.carrying
         age = None if self._last_fix_wall is None else time.monotonic() - self._last_fix_wall
         frames = c.get("frames", 0)
         if frames == 0:
@@ -428,7 +463,8 @@ class LocalizationNode:
         vals.update({"odom_messages": c.get("odom", 0), "scans": c.get("scans", 0),
                      "beacons_seen": c.get("beacons_seen", 0), "beacons_used": c.get("beacons_used", 0),
                      "scan_fixes": c.get("scan_fixes", 0),
-                     "restarts": c.get("restarts", 0)})
+                     "restarts": c.get("restarts", 0), "carrying": carrying,
+                     "magnet_commands": c.get("magnet_commands", 0), "carry_switches": c.get("carry_switches", 0)})
         vals.update({k: v for k, v in c.items()
                      if k.startswith(("callback_error", "bad_", "scan_unmatched_", "scan_fix_"))})
         st2 = rm.diagnostic_status(f"{name}: filter", level, text, "ekf", dict(sorted(vals.items())), ".4g")
