@@ -233,7 +233,14 @@ def test_the_executor_carries_inputs_outputs_and_settings_and_does_not_retry_a_p
               "child_signals": True},
              {"round": 1, "seed": 2, "write": {"r2/log.txt": "two"}, "sleep": 0.2},
              {"round": 1, "seed": 3, "raise": "a bug in the run"}]
-    runs, info = _batch.execute(_batch.probe, items, out_dir=out, failed=_failed, ray=address, inputs=[src])
+    bars = []
+
+    def progress(total, jobs):  # the progress line's calls, as the local runner makes them
+        bars.append(Recorder(total, jobs))
+        return bars[-1]
+
+    runs, info = _batch.execute(_batch.probe, items, out_dir=out, failed=_failed, ray=address, inputs=[src],
+                                progress=progress)
     a, b, c = runs
     assert a["read"] == "the driver's file"  # shipped: the worker read its own copy
     assert a["out"] == [str(out / "r1/log.txt"), str(out / "r1/sub/trace")]  # paths rewritten to the driver's
@@ -246,6 +253,27 @@ def test_the_executor_carries_inputs_outputs_and_settings_and_does_not_retry_a_p
     assert info["executor"] == "ray" and info["runs_retried"] == 0 and info["run_attempts"] == 3
     assert info["ray_code_differs_runs"] == 0 and not any("ray_code_differs" in r for r in runs)
     assert sorted(os.listdir(out)) == ["r1", "r2"]  # nothing else came back (the inputs stay on the worker)
+    (bar,) = bars
+    assert (bar.total, bar.jobs) == (3, 2) and bar.calls[-1] == "close"  # 2 runs at once: the cluster's CPUs
+    ends = [c for c in bar.calls if isinstance(c, tuple) and c[1] is not None]
+    assert sorted(ok for _, ok, _ in ends) == [False, True, True] and ends[-1][2] == 0  # the failed run counted
+    assert max(c[2] for c in bar.calls if isinstance(c, tuple)) == 2  # never more running than the cluster runs
+
+
+class Recorder:
+    """A BatchProgress stand-in that records its calls."""
+
+    def __init__(self, total, jobs):
+        self.total, self.jobs, self.calls = total, jobs, []
+
+    def start(self):
+        self.calls.append("start")
+
+    def finish(self, ok=True, running=None):
+        self.calls.append(("finish", ok, running))
+
+    def close(self):
+        self.calls.append("close")
 
 
 def test_a_worker_on_other_code_is_counted_and_warned_about(cluster, monkeypatch, capsys):
