@@ -57,6 +57,7 @@ from .mw.base import OK, WARN, Node
 from .udp import TimestampedUDP
 
 JOINT_NAMES = ("left_wheel_joint", "right_wheel_joint")
+PACED_LOOP = ("camera", "localization", "agent")  # the nodes a paced bridge waits for before its first frame
 _VERDICT_HINT = {
     Verdict.HELD: ": held until further frames confirm the jump (forged or corrupt datagrams never do)",
     Verdict.IMPLAUSIBLE: ": its encoder totals moved faster than ~stream/max_wheel_speed allows",
@@ -96,6 +97,7 @@ class Bridge:
                                st.reorder_window)
         self.camera = None  # CameraLink: the camera half runs in its own process (camera_node)
         self.pacer = None  # paced (~pace/enabled): ros/pace.py's Pacer; replies wait for the agent's pace
+        self._loop_ready = False
         self.clock = SimClock()
         self.odo = DiffDriveOdometry(wheel_radius=cfg.robot.wheel_radius, track=cfg.odometry.track,
                                      ticks_per_rev=cfg.robot.ticks_per_rev,
@@ -147,7 +149,8 @@ class Bridge:
         self.pub_gt = node.publisher(t["ground_truth"], Odometry, QoS.RELIABLE, 10)
         self.pub_parts = node.publisher(t["parts_ground_truth"], PoseArray, QoS.RELIABLE, 10)
         self.pub_joints = node.publisher(t["joint_states"], JointState, QoS.RELIABLE, 10)
-        self.pub_scan = node.publisher(t["scan"], LaserScan, QoS.SENSOR, 10)
+        # paced: every scan counts (pace.py): reliable, also on ROS 2
+        self.pub_scan = node.publisher(t["scan"], LaserScan, QoS.RELIABLE if cfg.pace.enabled else QoS.SENSOR, 10)
         self.pub_contact = node.publisher(t["contact"], Bool, QoS.RELIABLE, 10)
         self.pub_magnet = node.publisher(t["magnet_state"], Bool, QoS.RELIABLE, 10)
         self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, QoS.RELIABLE, 10)
@@ -412,6 +415,9 @@ class Bridge:
         paced = self.pacer is not None and ev.accepted
         if reply and not paced:  # at once; paced: once the agent has paced this frame (below)
             self._reply(self.command_for(frame.seq, t_eval), addr, arrival)
+        if paced and not self._loop_ready:  # before the first frame's outputs: every node of the loop is ready
+            self._loop_ready = True
+            self.pacer.wait_ready(PACED_LOOP)
         self.datagram_rate.tick(arrival)
         if not ev.accepted:
             self._warn(ev.verdict.value, f"bridge: dropped a {ev.verdict.value} frame (Seq {frame.seq}, Tms "

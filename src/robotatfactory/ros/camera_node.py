@@ -74,8 +74,9 @@ class CameraBridge:
         from .mw import QoS
 
         t, node = self.cfg.topics, self.node
-        self.pub_image = node.publisher(t["image"], Image, QoS.SENSOR, 2)
-        self.pub_info = node.publisher(t["camera_info"], CameraInfo, QoS.SENSOR, 2)
+        q = QoS.RELIABLE if self.cfg.pace.enabled else QoS.SENSOR  # paced: every frame counts (pace.py)
+        self.pub_image = node.publisher(t["image"], Image, q, 2)
+        self.pub_info = node.publisher(t["camera_info"], CameraInfo, q, 2)
         self.pub_diag = node.publisher(t["diagnostics"], DiagnosticArray, QoS.RELIABLE, 10)
         self._running = True
         loops = (self._rx, self._publish)

@@ -110,13 +110,14 @@ class LocalizationNode:
                                on_cycle=self._paced_cycle, timeout=self.cfg.pace.timeout,
                                behind={"agent": ("electromagnet",)})
         inbox = self._held if paced else (lambda key, order, fn: fn)
+        sensor = QoS.RELIABLE if paced else QoS.SENSOR  # paced: every message counts (pace.py), also on ROS 2
         # odom: the bridge writes it reliably (QoS.SYNCHRONOUS); every message counts for the filter
         self.subs = [
             node.subscribe(t.odom, Odometry, inbox("odom", 3, self._guard(self.on_odom)), R, 50),
-            node.subscribe(t.image, Image, inbox("image", 1, self._guard(self.on_image)), QoS.SENSOR,
+            node.subscribe(t.image, Image, inbox("image", 1, self._guard(self.on_image)), sensor,
                            4 if paced else 1, large=True),
             node.subscribe(t.camera_info, CameraInfo, inbox("camera_info", 0, self._guard(self.on_camera_info)),
-                           QoS.SENSOR, 4 if paced else 1),
+                           sensor, 4 if paced else 1),
         ]
         # the agent's magnet command, reliable as the agent and the referee have it; taken at once (a Bool has no
         # stamp): a switch counts from the latest odometry taken, the cycle the agent decided it on (paced: the
@@ -124,7 +125,7 @@ class LocalizationNode:
         self.subs.append(node.subscribe(t.magnet, Bool, self._guard(self.on_magnet), R, 10))
         if scans:
             self.subs.append(node.subscribe(t.scan, LaserScan, inbox("scan", 2, self._guard(self.on_scan)),
-                                            QoS.SENSOR, 10 if paced else 5))
+                                            sensor, 10 if paced else 5))
         self._diag_thread = threading.Thread(target=self._diag_loop, name="raf-localize-diag", daemon=True)
         self._diag_thread.start()
         node.info(f"localization: field {self.field.name}, camera fixes by '{nc.filter_method}', camera_pose "

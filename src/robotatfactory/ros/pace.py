@@ -1,6 +1,12 @@
 """Pace messages over the middleware (see :mod:`robotatfactory.pace`): topic ``pace`` (relative: each robot's
 nodes pace among themselves), ``diagnostic_msgs/DiagnosticArray`` with the cycle's stamp in the header and one
-status per message: ``name`` the node's role, one ``KeyValue`` per output (key, messages published so far)."""
+status per message: ``name`` the node's role, ``message`` "pace" (or "hello" / "ready" at the start), one ``KeyValue`` per
+output (key, messages published so far).
+
+Start: a message published before its subscriber has been discovered is lost (ROS 2's discovery can take
+seconds), and a lost message would cost a timeout and make the run differ. So each node announces itself
+(*hello*) and, once it has heard the hello of every node it takes inputs from, says it is *ready*; the
+bridge publishes the first frame only when every node of the loop is ready. Pace messages are latched (a late subscriber still gets them)."""
 from __future__ import annotations
 
 import threading
@@ -14,17 +20,21 @@ from .mw import QoS
 
 TOPIC = "pace"
 DEPTH = 100
+HELLO, READY = -1.0, -2.0  # Pace.t of the start's announcements (on the wire: stamp 0, message hello / ready)
+_KIND = {HELLO: "hello", READY: "ready"}
+#: wall s the bridge waits for every node of the loop to be ready before it answers the first paced frame
+READY_TIMEOUT = 60.0
 #: wall s a paced node waits for a cycle's inputs before it runs the cycle anyway (warned and counted)
 TIMEOUT = 5.0
 
 
 def to_msg(p: Pace) -> DiagnosticArray:
     m = DiagnosticArray()
-    m.header.stamp = rm.stamp_s(p.t)
+    m.header.stamp = rm.stamp_s(p.t if p.t not in _KIND else 0.0)
     st = DiagnosticStatus()
     st.level = DiagnosticStatus.OK
     st.name = p.name
-    st.message = "pace"
+    st.message = _KIND.get(p.t, "pace")
     st.values = [KeyValue(key=k, value=str(int(v))) for k, v in sorted(p.counts.items())]
     m.status = [st]
     return m
@@ -34,8 +44,9 @@ def from_msg(m: DiagnosticArray) -> list[Pace]:
     t = rm.stamp_to_s(m.header.stamp)
     out = []
     for st in m.status:
+        at = {"hello": HELLO, "ready": READY}.get(st.message, t)
         try:
-            out.append(Pace(st.name, t, {kv.key: int(kv.value) for kv in st.values}))
+            out.append(Pace(st.name, at, {kv.key: int(kv.value) for kv in st.values}))
         except ValueError:  # not a count: not a pace message
             continue
     return out
@@ -55,8 +66,15 @@ class Pacer:
         self.book = PaceBook(needs, behind) if needs else None
         self.on_cycle = on_cycle
         self._run_lock = threading.Lock()
-        self.pub = node.publisher(TOPIC, DiagnosticArray, QoS.RELIABLE, DEPTH)
-        self.sub = node.subscribe(TOPIC, DiagnosticArray, self._on_pace, QoS.RELIABLE, DEPTH) if needs else None
+        self.upstream = set(needs or ()) | set(behind or ())
+        self.heard: set[str] = set()  # nodes whose hello (or ready) came
+        self.ready: set[str] = set()  # nodes that said they are ready
+        self._ready_cv = threading.Condition()
+        self._said_ready = False
+        self.pub = node.publisher(TOPIC, DiagnosticArray, QoS.LATCHED, DEPTH)
+        self.sub = node.subscribe(TOPIC, DiagnosticArray, self._on_pace, QoS.LATCHED, DEPTH)
+        self.pub.publish(to_msg(Pace(name, HELLO)))
+        self._check_ready()
         self._running = True
         if on_cycle is not None:  # the safety net: a cycle whose inputs never all come runs after the timeout
             threading.Thread(target=self._watch, name=f"raf-pace-{name}", daemon=True).start()
@@ -76,13 +94,38 @@ class Pacer:
 
     def _on_pace(self, m: DiagnosticArray) -> None:
         for p in from_msg(m):
-            self.book.paced(p)
+            if p.t in (HELLO, READY):
+                with self._ready_cv:
+                    self.heard.add(p.name)
+                    if p.t == READY:
+                        self.ready.add(p.name)
+                    self._ready_cv.notify_all()
+                self._check_ready()
+            elif self.book is not None:
+                self.book.paced(p)
         self.advance()
+
+    def _check_ready(self) -> None:
+        with self._ready_cv:
+            if self._said_ready or not self.upstream <= self.heard:
+                return
+            self._said_ready = True
+        self.pub.publish(to_msg(Pace(self.name, READY)))
+
+    def wait_ready(self, names, timeout: float = READY_TIMEOUT) -> bool:
+        """Block until every node in ``names`` has said it is ready (False after ``timeout`` wall s, warned)."""
+        names = set(names)
+        with self._ready_cv:
+            ok = self._ready_cv.wait_for(lambda: names <= self.ready, timeout)
+            missing = sorted(names - self.ready)
+        if not ok:
+            self.node.warn(f"{self.name}: paced: {', '.join(missing)} not ready after {timeout:g} s: starting anyway")
+        return ok
 
     def advance(self) -> None:
         """Run every cycle that is ready, in order (callbacks of other threads that find the lock taken leave
         it to the one running: it loops until nothing is ready)."""
-        if self.on_cycle is None or not self._run_lock.acquire(blocking=False):
+        if self.on_cycle is None or self.book is None or not self._run_lock.acquire(blocking=False):
             return
         try:
             while True:

@@ -100,8 +100,8 @@ def qos_profile(qos: QoS, depth: int = 10) -> QoSProfile:
     if qos is QoS.SENSOR:
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT,
                           durability=DurabilityPolicy.VOLATILE)
-    if qos is QoS.LATCHED:
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+    if qos is QoS.LATCHED:  # (a late subscriber gets the last ``depth`` messages)
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
     if qos is QoS.CONTROL:
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
