@@ -169,10 +169,6 @@ class AgentSettings:
     tasks: Tasks = section(Tasks, "choosing the next task")
     recovery: Recovery = section(Recovery, "getting out of trouble")
     drive: Drive = section(Drive, "the base's limits and the follower's gains (unset: from the robot file)")
-    paced_pose_lag: int = setting(1, "paced: the control cycle of frame k steers on the localization's pose of frame "
-                                     "k - this (1: as in real time, where the agent's timer runs on the frame's "
-                                     "/clock before the localization has published that frame's pose; 0: the "
-                                     "frame's own pose, a cycle fresher than real time gives)", lo=0, hi=5)
     pace: PaceSettings = section(PaceSettings, "pacing by simulation time: one control cycle per paced frame, "
                                                "once the bridge's and the localization's paces are in, the "
                                                "factory-state server asked within the cycle (no timer, no "

@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections import deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -76,7 +75,6 @@ class AgentNode:
         self.subscribers: list = []
         self.timer = None
         self.pacer = None  # paced (pace.enabled): cycles come from the paces, not from a timer
-        self._poses: deque = deque(maxlen=16)  # paced: (stamp, pose, covariance) as they came
 
     def start(self) -> AgentNode:
         node = self.node
@@ -97,11 +95,8 @@ class AgentNode:
         if paced:  # one cycle per paced frame, on the bridge's and the localization's paces (docs/pacing.md)
             from .pace import Pacer
 
-            lagged = self.cfg.paced_pose_lag > 0  # the previous frame's pose: the localization's pace a cycle late
-            self.pacer = Pacer(node, "agent", {"bridge": ("odom", "contact"),
-                                               **({} if lagged else {"localization": ("pose",)})},
-                               on_cycle=self._paced_tick, timeout=self.cfg.pace.timeout,
-                               behind={"localization": ("pose",)} if lagged else None)
+            self.pacer = Pacer(node, "agent", {"bridge": ("odom", "contact"), "localization": ("pose",)},
+                               on_cycle=self._paced_tick, timeout=self.cfg.pace.timeout)
             return self
         self._poller = threading.Thread(target=self._poll_loop, name="raf-agent-server", daemon=True)
         self._poller.start()
@@ -129,11 +124,8 @@ class AgentNode:
             return
         c = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)[np.ix_((0, 1, 5), (0, 1, 5))]
         with self.lock:
-            stamp, cov = rm.stamp_to_s(msg.header.stamp), (c if np.all(np.isfinite(c)) else None)
-            if self.pacer is not None:  # paced: kept by stamp; the cycle takes the one its lag says
-                self._poses.append((stamp, (x, y, th), cov))
-            else:
-                self.pose, self.pose_stamp, self.pose_cov = (x, y, th), stamp, cov
+            self.pose, self.pose_stamp = (x, y, th), rm.stamp_to_s(msg.header.stamp)
+            self.pose_cov = c if np.all(np.isfinite(c)) else None
         self._got("pose")
 
     def on_odom(self, msg: Odometry) -> None:
@@ -172,11 +164,6 @@ class AgentNode:
         factory-state server answers with its state at ``t``."""
         if not self._running:
             return
-        with self.lock:  # the pose of frame k - lag (a newer one may have come already: not this cycle's)
-            upto = t - self.cfg.paced_pose_lag * self.robot.control_period + 1e-4
-            for stamp, pose, cov in self._poses:
-                if stamp <= upto and stamp > self.pose_stamp:
-                    self.pose, self.pose_stamp, self.pose_cov = pose, stamp, cov
         if self.agent.wants_state:
             try:
                 st = self.client.poll_state()
