@@ -75,7 +75,9 @@ def test_a_node_behind_in_the_loop_is_waited_for_one_cycle_late():
     b.paced(Pace("bridge", 0.12, {"odom": 3}))
     b.got("odom")
     b.got("electromagnet")
+    b.got("electromagnet")  # the agent's next command, already here: not this cycle's
     assert b.next_ready() == 0.12
+    assert b.required(0.12) == {"odom": 3, "electromagnet": 2}  # what the cycle takes of each input
 
 
 def test_counts_are_the_messages_sent_so_far():

@@ -156,6 +156,17 @@ class PaceBook:
                 keep = t - STAMP_TOLERANCE if name in self.behind else t + STAMP_TOLERANCE
                 self._paces[name] = [p for p in self._paces[name] if p.t > keep]
 
+    def required(self, t: float) -> dict[str, int]:
+        """The messages cycle ``t`` counts on each input (those of the paces it waits for; a key whose pace has
+        not come is left out). Call before :meth:`done` (a node behind is asked for its previous cycle)."""
+        with self._cv:
+            out: dict[str, int] = {}
+            for name, at, keys in self._wants(t):
+                p = self._of(name, at)
+                if p is not None:
+                    out.update({k: p.counts.get(k, 0) for k in keys})
+            return out
+
     def missing(self, t: float) -> str:
         """What cycle ``t`` still waits for, in words (for a timeout's warning)."""
         with self._cv:

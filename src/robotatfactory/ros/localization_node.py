@@ -79,7 +79,8 @@ class LocalizationNode:
         self._running = False
         self.frames = {k: cfg.frame(k) for k in tree(cfg.frames)}  # prefixed
         self.pacer = None  # paced (pace.enabled): inputs held until their frame's cycle (_paced_cycle)
-        self._inbox: list = []  # paced: (stamp, order, handler, message) received, not yet run
+        self._inbox: dict = {}  # paced: input key -> [(stamp, order, n, handler, message)] received, not yet run
+        self._taken: Counter = Counter()  # paced: messages of each input run so far
 
     # ------------------------------------------------------------------ wiring
     def start(self) -> "LocalizationNode":
@@ -120,9 +121,11 @@ class LocalizationNode:
                            sensor, 4 if paced else 1),
         ]
         # the agent's magnet command, reliable as the agent and the referee have it; taken at once (a Bool has no
-        # stamp): a switch counts from the latest odometry taken, the cycle the agent decided it on (paced: the
-        # cycle before the one that waits for it, so the same in every run)
-        self.subs.append(node.subscribe(t.magnet, Bool, self._guard(self.on_magnet), R, 10))
+        # stamp): a switch counts from the latest odometry taken, the cycle the agent decided it on (paced: held,
+        # and taken first in the cycle that waits for it, from the previous cycle's odometry: the agent's cycle
+        # runs beside this node's, so taken at once it would count from either, run by run)
+        self.subs.append(node.subscribe(t.magnet, Bool, inbox("electromagnet", -1, self._guard(self.on_magnet)), R,
+                                        10))
         if scans:
             self.subs.append(node.subscribe(t.scan, LaserScan, inbox("scan", 2, self._guard(self.on_scan)),
                                             sensor, 10 if paced else 5))
@@ -157,17 +160,29 @@ class LocalizationNode:
 
     def _held(self, key: str, order: int, fn):
         """Paced: a callback that holds the message for its frame's cycle (``order`` among one stamp's inputs:
-        camera_info, image, scan, odom last: the odom publishes the pose) and counts it."""
+        camera_info, image, scan, odom last: the odom publishes the pose; the magnet command, unstamped, before
+        everything) and counts it."""
         def hold(msg):
+            stamp = rm.stamp_to_s(msg.header.stamp) if hasattr(msg, "header") else -math.inf  # (a Bool: first)
             with self.lock:
-                self._inbox.append((rm.stamp_to_s(msg.header.stamp), order, len(self._inbox), fn, msg))
+                q = self._inbox.setdefault(key, [])
+                q.append((stamp, order, len(q), fn, msg))
             self.pacer.got(key)
         return hold
 
     def _paced_cycle(self, t: float) -> None:
-        """Paced: the frame stamped ``t``: every input held so far, in stamp order, then the pace."""
+        """Paced: the frame stamped ``t``: of each input, the messages the paces count for it (later ones may be in
+        already: the agent's cycle runs beside this one, and the next frame's may follow), in stamp order; then the
+        pace."""
+        need = self.pacer.book.required(t)
         with self.lock:
-            todo, self._inbox = sorted(self._inbox, key=lambda e: e[:3]), []
+            todo = []
+            for key, q in self._inbox.items():
+                n = max(0, need.get(key, self._taken[key]) - self._taken[key])
+                todo += q[:n]
+                del q[:n]
+                self._taken[key] += n
+            todo.sort(key=lambda e: e[:3])
         for _stamp, _order, _n, fn, msg in todo:
             fn(msg)
         self.pacer.done(t)
@@ -203,20 +218,16 @@ class LocalizationNode:
 
     def on_magnet(self, msg: Bool) -> None:
         """The robot's magnet command: carrying a part (or no longer) from the latest odometry's stamp on."""
-        try:
-            on = bool(msg.data)
-            with self.lock:
-                self.counts["magnet_commands"] += 1
-                if on != self._magnet:
-                    self._magnet = on
-                    self.counts["carry_switches"] += 1
-                    if self._odom is None:
-                        self._carry_due = True
-                    else:
-                        self.ekf.set_carrying(self._odom[0], on)
-        finally:
-            if self.pacer is not None:  # counted once taken: the next cycle may run
-                self.pacer.got("electromagnet")
+        on = bool(msg.data)
+        with self.lock:
+            self.counts["magnet_commands"] += 1
+            if on != self._magnet:
+                self._magnet = on
+                self.counts["carry_switches"] += 1
+                if self._odom is None:
+                    self._carry_due = True
+                else:
+                    self.ekf.set_carrying(self._odom[0], on)
 
     def on_odom(self, msg: Odometry) -> None:
         t = rm.stamp_to_s(msg.header.stamp)
