@@ -208,8 +208,11 @@ def test_ctrl_c_stops_simtwo_and_its_x_server(tmp_path):
 
     log = tmp_path / "run.log"
     with open(log, "wb") as out:
+        # SIGINT's default disposition in the child, as a terminal's Ctrl-C finds it: an ignored SIGINT (a suite
+        # started in the background by a non-interactive shell) stays ignored in every child
         p = subprocess.Popen([sys.executable, "-m", "robotatfactory", "simtwo", "run", "--free-ports",
-                              "--no-camera"], stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+                              "--no-camera"], stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         end = time.monotonic() + 120
         while b"[simtwo] running (pid " not in log.read_bytes():
