@@ -146,17 +146,22 @@ class AgentNode:
     # ------------------------------------------------------------------ server
     def _poll_loop(self) -> None:
         while self._running and self.node.ok():
-            if self.agent.wants_state:
-                try:
-                    st = self.client.poll_state()
-                except (ServerTimeout, ServerReplyError, OSError) as e:
-                    self.counts["server_errors"] += 1
-                    self.node.warn(f"raf agent: factory-state server: {e}", throttle=5.0)
-                    st = None
-                if st is not None:
-                    with self.lock:
-                        self.agent.on_state(st, self.node.now_s())
+            self._poll_state(self.node.now_s)
             time.sleep(0.02)
+
+    def _poll_state(self, now) -> None:
+        """Ask the factory-state server if the agent wants its state; hand it over stamped ``now()`` (node clock)."""
+        if not self.agent.wants_state:
+            return
+        try:
+            st = self.client.poll_state()
+        except (ServerTimeout, ServerReplyError, OSError) as e:
+            self.counts["server_errors"] += 1
+            self.node.warn(f"raf agent: factory-state server: {e}", throttle=5.0)
+            return
+        if st is not None:
+            with self.lock:
+                self.agent.on_state(st, now())
 
     # ------------------------------------------------------------------ control
     def _paced_tick(self, t: float) -> None:
@@ -164,16 +169,7 @@ class AgentNode:
         factory-state server answers with its state at ``t``."""
         if not self._running:
             return
-        if self.agent.wants_state:
-            try:
-                st = self.client.poll_state()
-            except (ServerTimeout, ServerReplyError, OSError) as e:
-                self.counts["server_errors"] += 1
-                self.node.warn(f"raf agent: factory-state server: {e}", throttle=5.0)
-                st = None
-            if st is not None:
-                with self.lock:
-                    self.agent.on_state(st, t)
+        self._poll_state(lambda: t)
         self._tick(now=t)
         self.pacer.sent("cmd_vel")
         self.pacer.sent("electromagnet")
