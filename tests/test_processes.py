@@ -91,3 +91,29 @@ def test_a_killed_process_restarted_under_its_name_is_the_one_watched_with_its_o
         assert "run 1" in (tmp_path / "node.1.log").read_text()
         second = procs.get("node")
     assert second.poll() is not None  # stopped with the context
+
+
+def test_stop_all_signals_every_process_before_waiting_for_any(tmp_path):
+    # each takes 0.6 s to shut down after its SIGINT and notes when the signal came and when it left: stopped
+    # one after the other the second's signal would come after the first had left
+    code = ("import signal, sys, time\n"
+            "def bye(*_):\n"
+            "    print('got', time.time(), flush=True); time.sleep(0.6); print('left', time.time(), flush=True)\n"
+            "    sys.exit(0)\n"
+            "signal.signal(signal.SIGINT, bye)\n"
+            "print('up', flush=True)\n"
+            "time.sleep(60)\n")
+    procs = Procs(tmp_path)
+    for name in ("a", "b", "c"):
+        procs.start(name, [sys.executable, "-c", code], dict(os.environ))
+    for name in ("a", "b", "c"):
+        wait_until(lambda n=name: "up" in (tmp_path / f"{n}.log").read_text(), 20, f"{name} to start")
+    procs.stop_all()
+    times = {}
+    for name in ("a", "b", "c"):
+        for line in (tmp_path / f"{name}.log").read_text().split("\n"):
+            if line.startswith(("got", "left")):
+                what, t = line.split()
+                times[name, what] = float(t)
+    assert len(times) == 6, times
+    assert max(times[n, "got"] for n in "abc") < min(times[n, "left"] for n in "abc")

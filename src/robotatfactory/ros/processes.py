@@ -165,11 +165,10 @@ class Procs:
         return stop_process(self.get(name))
 
     def stop_all(self) -> None:
-        """Stop every process, the last started first."""
-        from .master import stop_process
+        """Stop every process: all are signalled (the last started first), then waited for together."""
+        from ..proc import stop_processes
 
-        for _name, p in reversed(self.procs):
-            stop_process(p)
+        stop_processes([p for _name, p in reversed(self.procs)])
         self.procs.clear()
 
     def __enter__(self):
