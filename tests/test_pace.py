@@ -55,6 +55,15 @@ def test_wait_blocks_until_the_inputs_come_and_times_out_otherwise():
     assert b.wait(1.08, timeout=0.5) is True
 
 
+def test_wait_done_blocks_until_another_thread_has_run_the_cycle():
+    b = PaceBook({"agent": ("cmd_vel",)})
+    b.paced(Pace("agent", 1.0, {"cmd_vel": 0}))
+    assert b.wait_done(1.0, timeout=0.05) is False  # nobody ran it
+    threading.Timer(0.05, b.done, args=(1.0,)).start()
+    assert b.wait_done(1.0, timeout=5.0) is True
+    assert b.pending() is None and b.wait_done(1.0, timeout=0.0) is True
+
+
 def test_a_node_behind_in_the_loop_is_waited_for_one_cycle_late():
     """The localization takes the agent's electromagnet command, which the agent sends after the
     localization's cycle: cycle k needs the agent's pace of cycle k - 1 (none for the first cycle)."""

@@ -155,6 +155,19 @@ class PaceBook:
             for name in self._paces:  # (a node behind keeps the pace of t: the next cycle needs it)
                 keep = t - STAMP_TOLERANCE if name in self.behind else t + STAMP_TOLERANCE
                 self._paces[name] = [p for p in self._paces[name] if p.t > keep]
+            self._cv.notify_all()
+
+    def wait_done(self, t: float, timeout: float) -> bool:
+        """Block until cycle ``t`` has run (True) or ``timeout`` wall seconds passed (False): for a thread that
+        found another one running it."""
+        end = time.monotonic() + timeout
+        with self._cv:
+            while self.done_t < t - STAMP_TOLERANCE:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cv.wait(min(left, 0.1))
+            return True
 
     def required(self, t: float) -> dict[str, int]:
         """The messages cycle ``t`` counts on each input (those of the paces it waits for; a key whose pace has

@@ -148,8 +148,8 @@ class Pacer:
                 time.sleep(0.05)
                 continue
             if self.book.wait(t, self.timeout):
-                self.advance()
-                time.sleep(0.001)
+                self.advance()  # (another thread may be running it: wait for that instead of spinning)
+                self.book.wait_done(t, self.timeout)
                 continue
             if self.book.pending() != t:  # run meanwhile
                 continue
