@@ -31,6 +31,10 @@ FULL_DURATION = {1: 130.0, 2: 190.0, 3: 230.0}  # simulated s of one run at most
 START_AFTER = 3.0  # simulated s before the run starts (the agent's nodes are up by then)
 END_AFTER_MAX = 1.0  # simulated s the maximum score must stand before raf sim ends the run
 DONE_GRACE = 3.0  # wall s after the agent logged "task: done" before raf sim is stopped
+#: every process of a run: OpenCV's own thread pool off (one thread per process; the runs of a batch are the
+#: parallelism). Measured alone, paced, round 1 seed 100, ROS 1: 42-46 CPU s with the pool, 39-40 without, the
+#: same trace byte for byte (docs/benchmarks.md)
+RUN_ENV = {"OPENCV_FOR_THREADS_NUM": "1"}
 #: paced: wall s raf sim waits for a reply (then --on-timeout stop): above the nodes' own safety net (5 s)
 PACED_REPLY_TIMEOUT = 15.0
 
@@ -162,6 +166,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     pace = ["--set", "pace.enabled=true"] if paced else []
     sim_pace = ["--paced", "--pace-hold", "2", "--lockstep-timeout", str(PACED_REPLY_TIMEOUT)] if paced else []
     wall0 = time.perf_counter()
+    phases: dict[str, float] = {}  # wall s of starting the processes, the run, stopping them (and analysing)
     graph = private_graph(mw).start()
     procs = Procs(log_dir, watch=("bridge", "localize", "agent", "record"))
     proxy = None
@@ -173,7 +178,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             proxy = Proxy((LOCAL, bridge_port), seed=1000 * round_no + seed)
             proxy.set_faults(*loss)
             frames_to = proxy.port
-        env = graph.env()
+        env = graph.env(**RUN_ENV)
         procs.raf("bridge", *field_args, "bridge", "--port", str(bridge_port), "--camera",
                   f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", *calib_args, *pace, env=env)
         procs.raf("localize", *field_args, "localize", *calib_args, *pace,
@@ -204,6 +209,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         ender = "referee" if simtwo else "sim"  # the process that ends the run and writes the final report
         sim = procs.get(ender)
         started = time.monotonic()
+        phases["start_s"] = time.perf_counter() - wall0
         limit = started + FULL_DURATION[round_no] * 1.5 + 60.0
         done_at = None
         while sim.poll() is None and time.monotonic() < limit:
@@ -212,19 +218,22 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                 done_at = time.monotonic()  # the agent has nothing left to do: no need to wait out the round
             if done_at is not None and time.monotonic() - done_at > DONE_GRACE:
                 break
-            time.sleep(0.5)
+            time.sleep(0.2)
         if sim.poll() is not None and sim.returncode != 0 and time.monotonic() - started < 20.0:
             raise SimStartError(f"raf {ender} could not start (exit code {sim.returncode}): {procs.tail(ender, 3)}")
+        phases["run_s"] = time.perf_counter() - wall0 - phases["start_s"]
         procs.stop(ender)  # SIGINT: raf sim (raf referee) writes its final report on the way out
-        wait_for_report(log_dir / f"{ender}.log")
-        procs.stop("record")  # closes the bag
+        wait_for_report(log_dir / f"{ender}.log")  # (then every node at once, raf record closing its bag)
     finally:
         procs.stop_all()
         graph.cleanup()
         if proxy is not None:
             proxy.close()
+    phases["stop_s"] = time.perf_counter() - wall0 - phases.get("start_s", 0.0) - phases.get("run_s", 0.0)
     out = analyse(round_no, seed, log_dir, trace_path, bag_path, record_path, field_name,
                   wall_s=time.perf_counter() - wall0, middleware=mw, report_log=f"{ender}.log")
+    out.update({f"wall_{k}": round(v, 3) for k, v in phases.items()})
+    out["wall_analyse_s"] = round(time.perf_counter() - wall0 - sum(phases.values()), 3)
     if proxy is not None:  # what the lossy link did (both directions)
         out["link"] = {k: int(proxy.counts.get(k, 0)) for k in ("frames", "replies", "dropped", "duplicated",
                                                                "reordered")}
