@@ -58,3 +58,37 @@ def test_outgoing_slots_are_kept_for_the_parts_from_machine_b(field, robot, pend
         free, _ = carrying_agent(field, robot, state, src, reserve_outgoing=False)
         free._go_fastest("to_place", pose, dest)
         assert agent.target == free.target
+
+
+def _pick_and_carry_time(agent, pose, m):
+    """The test's own sum for a move: the pick leg from ``pose``, then the carrying leg from the slot's carrying
+    approach pose (where the robot backs out to) to the move's target."""
+    legs = agent.legs
+    t_pick = legs.leg_time(legs.plan(agent._obstacles(), pose, m.source, False, "pick"), pose, False)
+    after = agent.state.with_slot(m.source, None)
+    obstacles = legs.obstacles(after)
+    start = legs.path_planner(obstacles, True).approach_pose(agent.field.slot(m.source.zone, m.source.number),
+                                                             legs.d_dock, legs.footprint(True))
+    return t_pick + legs.leg_time(legs.plan(obstacles, start, m.target, True, "place"), start, True)
+
+
+def test_the_next_part_is_the_one_picked_and_carried_soonest(field, robot):
+    state = FactoryState.from_letters("BBBB")
+    sp = field.start_pose
+    pose = (sp.x, sp.y, sp.theta)
+    chosen = {}
+    for by_time in (True, False):
+        agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": by_time}}))
+        agent.on_state(state, 0.0)
+        agent._decide(pose)
+        assert agent.mode == "to_pick" and agent.target == agent.task.source
+        chosen[by_time] = agent
+    agent = chosen[True]
+    tied = agent.policy.tied(state)
+    assert len(tied) == 4
+    times = {m.source: _pick_and_carry_time(agent, pose, m) for m in tied}
+    assert agent.target == min(times, key=times.get)
+    # the earlier choice, the nearest part (incoming 1 from the start), takes longer picked and carried
+    nearest = chosen[False].target
+    assert nearest == SlotRef("incoming", 1) != agent.target
+    assert times[nearest] > times[agent.target]

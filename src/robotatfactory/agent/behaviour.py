@@ -262,6 +262,9 @@ class RoundAgent:
         avoid = {ref for ref, n in self.failures.items() if n >= self.settings.tasks.give_up_after}
         task = self.policy.next_task(st, robot_xy=tuple(pose[:2]), ready_at={k: v for k, v in ready.items() if v},
                                      avoid=avoid)
+        leg = None
+        if isinstance(task, Move) and self.settings.tasks.pick_by_time:
+            task, leg = self._soonest(pose, self.policy.tied(st, avoid), task)
         if task != self.task:
             self._event(self.t, f"task: {task}")
         self.task = task
@@ -273,7 +276,40 @@ class RoundAgent:
         self.target = task.source
         self.attempts = 0
         self._leg_replans = 0
+        if leg is not None:
+            self._no_path.pop(self.target, None)
+            self._escapes = 0
+            self._start_leg("to_pick", leg)
+            return
         self._go("to_pick", pose)
+
+    def _soonest(self, pose, tied: list, default: Move) -> tuple[Move, LegPlan | None]:
+        """Of the tied moves (:meth:`TaskPolicy.tied`), the one whose pick leg from ``pose`` plus its carrying
+        leg from the part's slot to its destination take the least time (:meth:`.LegPlanner.leg_time`, a
+        kinematic run of the follower on each planned leg), with its planned pick leg; ``default`` (and no leg)
+        when only one is tied or none has a path."""
+        if len(tied) < 2:
+            return default, None
+        obstacles = self._obstacles()
+        best = None
+        for m in tied:
+            try:
+                leg = self.legs.plan(obstacles, pose, m.source, False, "pick")
+                cost = self.legs.leg_time(leg, pose, False) + self._carry_time(m)
+            except NoPath:
+                continue
+            if best is None or cost < best[0] - 1e-6:
+                best = (cost, m, leg)
+        return (best[1], best[2]) if best is not None else (default, None)
+
+    def _carry_time(self, m: Move) -> float:
+        """Seconds of the carrying leg of ``m``: from the carrying approach pose at its source (where the robot
+        backs out to) to its target. Raises NoPath."""
+        obstacles = self.legs.obstacles(self.state.with_slot(m.source, None), self.blocked_spots)
+        slot = self.field.slot(m.source.zone, m.source.number)
+        fp = self.legs.footprint(True)
+        start = self.legs.path_planner(obstacles, True).approach_pose(slot, self.d_dock, fp)
+        return self.legs.leg_time(self.legs.plan(obstacles, start, m.target, True, "place"), start, True)
 
     def _usable(self, dest: list) -> list:
         """Destinations without ``give_up_after`` - 1 failed places (else all: a slot is better than none)."""

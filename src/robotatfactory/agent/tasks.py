@@ -177,6 +177,12 @@ class TaskPolicy:
         elsewhere."""
         return _PRIORITY[m.part], m.source not in self._outputs
 
+    def tied(self, state: FactoryState, avoid: frozenset[SlotRef] | set[SlotRef] = frozenset()) -> list[Move]:
+        """The candidates of the best rank (:meth:`next_task` picks among them by distance; the agent may pick by
+        time instead)."""
+        moves = self.candidates(state, avoid)
+        return [m for m in moves if self._rank(m) == self._rank(moves[0])] if moves else []
+
     def next_task(self, state: FactoryState, robot_xy: tuple[float, float] | None = None,
                   ready_at: dict[SlotRef, float] | None = None,
                   avoid: frozenset[SlotRef] | set[SlotRef] = frozenset()) -> Task:
