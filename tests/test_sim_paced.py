@@ -57,7 +57,7 @@ def test_paced_frames_count_the_camera_frames_and_stamp_them(field, robot):
     import zmq
 
     from robotatfactory.simtwo import SensorFrame
-    from robotatfactory.sim.runner import parse_camera_header
+    from robotatfactory.simtwo.camera import parse_camera_header
 
     import time
 

@@ -32,7 +32,7 @@ class PacedCamera:
     def rx(self) -> None:
         import zmq
 
-        from ..sim.runner import parse_camera_header
+        from ..simtwo.camera import parse_camera_header
 
         cam = self.cam
         sock = zmq.Context.instance().socket(zmq.SUB)

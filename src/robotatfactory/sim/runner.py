@@ -52,6 +52,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..ratelog import RateLimitedLog
 from ..simtwo import Command, ProtocolError
+from ..simtwo.camera import camera_header
 from ..simtwo.labels import format_real
 from ..simtwo.messages import LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, encode_parts, encode_ranges
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT, bind_udp
@@ -182,27 +183,6 @@ class CachedFrameEncoder:
             text += f"CamN\r\n{int(frame.camera_frames)}\r\n\r\n"
         return text.encode("ascii")
 
-
-
-#: paced runs send each camera frame as two ZMQ parts: this header, then SimTwo's payload
-CAMERA_HEADER = b"raf-camera-frame"
-
-
-def camera_header(t: float, index: int) -> bytes:
-    """A paced camera frame's first part: ``raf-camera-frame <simulation time s> <index>``."""
-    return b"%s %.6f %d" % (CAMERA_HEADER, t, index)
-
-
-def parse_camera_header(data: bytes) -> tuple[float, int] | None:
-    """(time s, index) of a paced camera frame's header, or None if ``data`` is not one."""
-    parts = bytes(data).split()
-    if len(parts) != 3 or parts[0] != CAMERA_HEADER:
-        return None
-    try:
-        t, i = float(parts[1]), int(parts[2])
-    except ValueError:
-        return None
-    return (t, i) if math.isfinite(t) and i >= 0 else None
 
 
 def _malloc_trim() -> None:

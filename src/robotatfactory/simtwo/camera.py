@@ -1,9 +1,12 @@
 """SimTwo's camera frames over ZMQ: one raw message per frame, no header, no timestamp.
 
 640 x 480 x 4 bytes, B G R A per pixel, rows in OpenGL order (row 0 is the BOTTOM image row) unless
-the ``bottom_up`` setting says otherwise.
+the ``bottom_up`` setting says otherwise. ``raf sim --paced`` (docs/pacing.md) sends each frame as two ZMQ
+parts instead: a header with the frame's simulation time and index (:func:`camera_header`), then this payload.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -39,3 +42,24 @@ def encode_frame(bgr: np.ndarray, bottom_up: bool = True) -> bytes:
     out[:, :, :3] = src
     out[:, :, 3] = 255
     return out.tobytes()
+
+
+#: paced runs send each camera frame as two ZMQ parts: this header, then SimTwo's payload
+CAMERA_HEADER = b"raf-camera-frame"
+
+
+def camera_header(t: float, index: int) -> bytes:
+    """A paced camera frame's first part: ``raf-camera-frame <simulation time s> <index>``."""
+    return b"%s %.6f %d" % (CAMERA_HEADER, t, index)
+
+
+def parse_camera_header(data: bytes) -> tuple[float, int] | None:
+    """(time s, index) of a paced camera frame's header, or None if ``data`` is not one."""
+    parts = bytes(data).split()
+    if len(parts) != 3 or parts[0] != CAMERA_HEADER:
+        return None
+    try:
+        t, i = float(parts[1]), int(parts[2])
+    except ValueError:
+        return None
+    return (t, i) if math.isfinite(t) and i >= 0 else None
