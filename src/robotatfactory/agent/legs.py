@@ -70,14 +70,23 @@ class LegPlanner:
         self.fp_carry = carrying_footprint(robot, field.part)
         self.d_dock = dock_distance(robot, field.part)
 
+    def slot(self, target):
+        """The slot a leg goes to: ``target`` itself when it is one already (anything with ``xy`` and
+        ``facing``: a part lying on the floor, :class:`~.refind.FloorSlot`), else the field's slot of the
+        :class:`~.state.SlotRef`."""
+        return target if hasattr(target, "xy") else self.field.slot(target.zone, target.number)
+
     def footprint(self, carrying: bool) -> Footprint:
         """The robot's outline, with a part on the magnet or not."""
         return self.fp_carry if carrying else self.fp_empty
 
-    def obstacles(self, state: FactoryState, blocked=(), exclude: SlotRef | None = None) -> FieldObstacles:
-        """The field with the parts of ``state`` (but the one in ``exclude``) and a small square on each
-        blocked spot ``blocked`` ((x, y, ...) in m; the caller drops those it no longer remembers)."""
-        parts = []
+    def obstacles(self, state: FactoryState, blocked=(), exclude: SlotRef | None = None,
+                  floor=()) -> FieldObstacles:
+        """The field with the parts of ``state`` (but the one in ``exclude``), the parts lying on the floor
+        ``floor`` (:class:`~.obstacles.PartObstacle`: lost on the way, which the server does not list) and a
+        small square on each blocked spot ``blocked`` ((x, y, ...) in m; the caller drops those it no longer
+        remembers)."""
+        parts = list(floor)
         for zone in ZONES:
             for n, p in enumerate(state.zone(zone), start=1):
                 if p is not None and SlotRef(zone, n) != exclude:
@@ -94,9 +103,9 @@ class LegPlanner:
     def plan(self, obstacles: FieldObstacles, pose, target: SlotRef, carrying: bool, dock: str) -> LegPlan:
         """The leg from ``pose`` to ``target``'s approach pose, the ``dock`` ("pick" or "place") following on:
         arriving along the slot's normal where it can (then at the docking's entry speed), else with a turn
-        on the spot farther out. Raises NoPath."""
+        on the spot farther out. ``target``: a SlotRef, or a slot itself (:meth:`slot`). Raises NoPath."""
         fp = self.footprint(carrying)
-        slot = self.field.slot(target.zone, target.number)
+        slot = self.slot(target)
         pl = self.path_planner(obstacles, carrying)
         goal = pl.approach_pose(slot, self.d_dock, fp)
         goals = [goal]
@@ -207,8 +216,9 @@ class LegPlanner:
     def retreat(self, obstacles: FieldObstacles, target: SlotRef, carrying: bool) -> float:
         """Distance from ``target``'s centre to back out to after docking there (m): the approach distance of
         the footprint the robot will have afterwards (``carrying``), at least :data:`MACHINE_CLEARANCE` from a
-        machine input. ``obstacles``: without the part in ``target`` (the one being picked or placed)."""
-        slot = self.field.slot(target.zone, target.number)
+        machine input. ``obstacles``: without the part in ``target`` (the one being picked or placed);
+        ``target``: a SlotRef or a slot itself (:meth:`slot`)."""
+        slot = self.slot(target)
         fp = self.footprint(carrying)
         pl = self.path_planner(obstacles, carrying)
         try:
