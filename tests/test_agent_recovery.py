@@ -127,8 +127,9 @@ def test_a_spot_that_blocks_the_path_is_planned_around(field, robot):
     assert agent.counters.timeouts == 0
 
 
-def test_a_part_lost_on_the_way_is_noticed(field, robot):
-    agent = RoundAgent(field, robot)
+@pytest.mark.parametrize("refind", [True, False])
+def test_a_part_lost_on_the_way_is_noticed(field, robot, refind):
+    agent = RoundAgent(field, robot, agent_settings({"recovery": {"refind": refind}}))
     bot = KinRobot(field, robot)
     run(agent, bot, lambda a: a.mode == "to_place" and abs(a._v) > 0.1)
     assert agent.counters.picks == 1 and bot.held
@@ -136,7 +137,10 @@ def test_a_part_lost_on_the_way_is_noticed(field, robot):
     run(agent, bot, lambda a: a.mode != "to_place", limit=bot.t + 2.0)
     assert agent.counters.parts_lost == 1 and agent.carrying is None and not agent.magnet
     assert any("lost the blue part" in text for _, text in agent.events)
-    assert agent.mode in ("decide", "to_pick", "done")
+    if refind:  # it stops to look for it (tests/test_agent_drop.py: found and picked up again)
+        assert agent.mode == "search" and agent.lost is not None and agent.lost.part.label == "blue"
+    else:  # forgotten: decided again from the server's state
+        assert agent.mode in ("decide", "to_pick", "done") and agent.lost is None
 
 
 def test_the_relocalizer_turns_only_where_the_outline_is_clear(field):

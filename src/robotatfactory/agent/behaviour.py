@@ -13,6 +13,13 @@ Each leg (to a part, or carrying it to a slot) is planned by :class:`~.legs.LegP
 state machine decides when to plan, starts the follower on the plan and handles a failure (re-plan, escape,
 give up).
 
+A part lost on the way (the contact switch released while carrying) is looked for and picked up from the
+floor again (``recovery.refind``): the caller may hand the agent each LIDAR sweep (:meth:`RoundAgent.on_scan`,
+optional); the agent stops, finds the part in a sweep taken while it stands (:mod:`.refind`), or takes the spot
+where it fell, plans a leg to face its plate, approaches slowly with the magnet on until the contact switch
+closes, backs out and carries it on to a destination as after any pick (docs/agent.md, "A part dropped on the
+floor").
+
 Events (``events``: list of (t, text)) say what it did: the task chosen, picked, placed, failures.
 """
 from __future__ import annotations
@@ -24,14 +31,19 @@ from ..competition.parts import PartType
 from .delay import DelayEstimator, lanes_of
 from .docking import Docker, DockSettings
 from .follower import DriveLimits, PathFollower
+from .footprint import wrap
 from .hybrid import NoCarryPath
 from .legs import LegPlan, LegPlanner
-from .obstacles import FieldObstacles
+from .obstacles import FieldObstacles, PartObstacle
 from .planner import NoPath
 from .recovery import Relocalizer, StuckDetector, uncertainty_of
+from .refind import FloorSlot, FoundPart, Scan, find_part, lost_spot
 from .settings import AgentSettings
 from .state import FactoryState, SlotRef
 from .tasks import Done, Move, TaskPolicy, Wait
+
+
+FLOOR_BACK_OUT = 0.06  # m a floor pick backs out at least, past the dock pose (see _start_floor_dock)
 
 
 @dataclass(frozen=True)
@@ -58,6 +70,36 @@ class AgentCounters:
     blocked: int = 0  # legs found stuck or timed out and re-planned around the spot
     parts_lost: int = 0  # the contact switch released while carrying
     replans_off_path: int = 0  # legs planned again because the robot was far off its path
+    parts_refound: int = 0  # searches for a lost part in which the LIDAR found it on the floor
+    floor_picks: int = 0  # lost parts picked up from the floor again
+    floor_pick_failures: int = 0  # floor picks that failed (no contact, not held, blocked, no path, timeout)
+    parts_left: int = 0  # lost parts left on the floor after recovery.refind_tries failed floor picks
+
+
+@dataclass
+class LostPart:
+    """A part that fell off the magnet: its type, where it fell (``spot``: :func:`~.refind.lost_spot`, the plate's
+    heading then first), when (``t``, s), the destination it was going to, the state the agent expected then
+    (to tell a part that landed in a slot), where it is taken to lie now (``where``), floor picks tried."""
+
+    part: PartType
+    spot: FoundPart
+    t: float
+    dest: SlotRef | None
+    state: FactoryState | None
+    where: FoundPart | None = None
+    tries: int = 0
+
+
+@dataclass
+class _Search:
+    """Where the search for a lost part is: ``stop`` (braking), ``look`` (standing, waiting for a sweep taken
+    since ``still``), ``turn`` (towards ``heading``, to look again)."""
+
+    phase: str = "stop"
+    still: float = 0.0
+    turned: bool = False
+    heading: float = 0.0
 
 
 @dataclass
@@ -91,6 +133,11 @@ class RoundAgent:
         dl.place_limits = replace(dl.place_limits, w_max=min(dl.place_limits.w_max, self.carry_limits.w_max),
                                   alpha_max=min(dl.place_limits.alpha_max, self.carry_limits.alpha_max))
         self.legs = LegPlanner(f, r, self.settings, self.limits, self.carry_limits, self.dt, self.docker.entry_speed)
+        # a part on the floor: no ribs to guide it, nothing behind it; approached slower, the magnet on early
+        rc = self.settings.recovery
+        self.floor_docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
+                                   DockSettings(v_dock=rc.refind_speed, v_place=self.settings.dock.place_speed,
+                                                v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back))
         self.mode = "wait_start"
         self.state: FactoryState | None = None
         self.state_time = -math.inf
@@ -120,6 +167,12 @@ class RoundAgent:
         self._no_contact = 0
         self._no_path: dict = {}  # consecutive legs without a path per target (SlotRef)
         self._escapes = 0  # escape drives since the last leg that started
+        self.scan: Scan | None = None  # the latest LIDAR sweep (on_scan), None: never given one
+        self.lost: LostPart | None = None  # a part that fell off the magnet, being recovered
+        self.floor_parts: list[PartObstacle] = []  # lost parts left on the floor: obstacles from then on
+        self._floor_slot: FloorSlot | None = None  # the floor part being picked, as a slot
+        self._search = _Search()
+        self._held_pose = None  # the pose at the last cycle the contact switch showed the carried part
 
     @property
     def d_dock(self) -> float:
@@ -132,15 +185,16 @@ class RoundAgent:
         """What the robot is doing this cycle, for the time split (docs/agent.md): ``wait_start``,
         ``decide`` (deciding or waiting for a machine), ``drive`` (moving along a path, turning on the way
         included), ``turn`` (turning in place on a path), ``final_turn``, ``dock_approach``, ``dock_wait``
-        (magnet on/off, standing), ``dock_back`` (backing out), ``relocalize`` (standing, looking at markers), ``done``."""
-        if self.mode in ("wait_start", "decide", "done", "relocalize"):
+        (magnet on/off, standing), ``dock_back`` (backing out), ``relocalize`` (standing, looking at markers),
+        ``search`` (looking for a part that fell off the magnet), ``done``."""
+        if self.mode in ("wait_start", "decide", "done", "relocalize", "search"):
             return self.mode
         if self.mode == "escape":
             return "drive"
-        if self.mode in ("to_pick", "to_place"):
+        if self.mode in ("to_pick", "to_place", "to_floor"):
             ph = self.follower.phase
             return "drive" if ph in ("drive", "done") else ph
-        ph = self.docker.phase
+        ph = (self.floor_docker if self.mode == "floor_pick" else self.docker).phase
         return {"approach": "dock_approach", "grip": "dock_wait", "release": "dock_wait",
                 "back": "dock_back"}.get(ph, "dock_back")
 
@@ -164,6 +218,11 @@ class RoundAgent:
         if self.mode == "wait_start":
             self._event(t, f"part list {state.letters('incoming')}: the run starts")
             self.mode = "decide"
+
+    def on_scan(self, scan: Scan) -> None:
+        """A LIDAR sweep (:class:`~.refind.Scan`), optional: hand over each one as it comes. Only a part that fell
+        off the magnet is looked for in it (the newest one taken while the robot stood still)."""
+        self.scan = scan
 
     # ------------------------------------------------------------------------------------------ cycle
     def step(self, t: float, pose, contact: bool, uncertainty=None) -> AgentCommand:
@@ -193,9 +252,13 @@ class RoundAgent:
         if self.mode == "to_place" and self.carrying is not None:
             # the contact switch stays pressed while a part hangs on the magnet
             self._no_contact = 0 if contact else self._no_contact + 1
+            if contact:
+                self._held_pose = tuple(pose[:3])
             if self._no_contact >= self.settings.recovery.lost_cycles:
                 self._part_lost()
                 return self._brake()
+        if self.mode == "search":
+            return self._search_step(pose)
         if self.mode == "decide":
             if self.state_time < self.need_state_after:
                 return self._brake()
@@ -206,10 +269,13 @@ class RoundAgent:
             o = self.follower.step(pose)
             if o.done or o.off_path or self.t - self._mode_t0 > self.settings.recovery.escape_time:
                 self.follower.stop()
-                self.mode, self.need_state_after = "decide", self.t
+                if self.lost is not None and self.lost.where is not None and self.carrying is None:
+                    self._go("to_floor", pose)  # on to the part on the floor from here
+                else:
+                    self.mode, self.need_state_after = "decide", self.t
                 return self._brake()
             return self._cmd(o.v, o.w)
-        if self.mode in ("to_pick", "to_place") and self.t - self._mode_t0 > self._budget:
+        if self.mode in ("to_pick", "to_place", "to_floor") and self.t - self._mode_t0 > self._budget:
             if self._leg_replans < self.settings.recovery.replans:
                 self._blocked(pose, f"took more than {self._budget:.0f} s")
             else:
@@ -218,7 +284,7 @@ class RoundAgent:
         if self.mode in ("pick", "place") and self.t - self._mode_t0 > self.settings.dock.timeout \
                 and self.docker.phase not in ("back", "done", "failed"):
             self.docker.abort(pose)  # back out first, then the failure comes through the docker
-        if self.mode in ("to_pick", "to_place"):
+        if self.mode in ("to_pick", "to_place", "to_floor"):
             if self.stuck.update(self.t, pose, self._v, self._w):
                 if self._leg_replans < self.settings.recovery.replans:
                     self._blocked(pose, "stuck")
@@ -234,6 +300,17 @@ class RoundAgent:
                 return self._brake()
             if o.done:
                 self._start_dock(pose)
+            return self._cmd(o.v, o.w)
+        if self.mode == "floor_pick":
+            dk = self.floor_docker
+            if self.t - self._mode_t0 > self.settings.dock.timeout and dk.phase not in ("back", "done", "failed"):
+                dk.abort(pose)
+            o = dk.step(pose, contact)
+            self.magnet = o.magnet
+            if o.failed:
+                self._floor_failed(o.failed, pose)
+            elif o.done:
+                self._floor_picked(pose)
             return self._cmd(o.v, o.w)
         if self.mode in ("pick", "place"):
             o = self.docker.step(pose, contact)
@@ -320,7 +397,15 @@ class RoundAgent:
         """The field as legs are planned on now: the parts of the last state (but the one in ``exclude``) and the
         blocked spots still remembered (those past their time are forgotten here)."""
         self.blocked_spots = [b for b in self.blocked_spots if b[2] > self.t]
-        return self.legs.obstacles(self.state, self.blocked_spots, exclude)
+        return self.legs.obstacles(self.state, self.blocked_spots, exclude, self._floor_obstacles())
+
+    def _floor_obstacles(self, target: bool = True) -> list[PartObstacle]:
+        """The parts lying on the floor: those left there, and (``target``) the one being recovered."""
+        out = list(self.floor_parts)
+        if target and self._floor_slot is not None:
+            fs = self._floor_slot
+            out.append(PartObstacle(fs.xy[0], fs.xy[1], fs.facing))
+        return out
 
     def _can_turn(self, pose) -> bool:
         """The exact outline (carrying or not, 5 mm margin) at ``pose`` touches nothing."""
@@ -375,15 +460,225 @@ class RoundAgent:
     def _part_lost(self) -> None:
         self.counters.parts_lost += 1
         self._event(self.t, f"lost the {self.carrying.label} part on the way to {self.target}")
-        self.carrying = None
+        part, self.carrying = self.carrying, None
         self.magnet = False
         self._no_contact = 0
         self.follower.stop()
         self.mode, self.need_state_after = "decide", self.t
+        if self.settings.recovery.refind and self._held_pose is not None:
+            spot = lost_spot(self._held_pose, self.docker.magnet_x, self.field.part)
+            self.lost = LostPart(part, spot, self.t, self.target, self.state)
+            self._event(self.t, f"looking for it: it fell near ({spot.x:.3f}, {spot.y:.3f})")
+            self._start_search()
+
+    # ------------------------------------------------------------------------------------------ a part on the floor
+    def _start_search(self) -> None:
+        """Stop, then look for the lost part (:meth:`_search_step`); a fresh server state is asked for (did it
+        land in a slot?)."""
+        self.follower.stop()
+        self.mode, self.need_state_after = "search", self.t
+        self._search = _Search()
+        self._floor_slot = None
+
+    def _search_step(self, pose) -> AgentCommand:
+        """One cycle of looking for the lost part: brake to a stop; take the first LIDAR sweep measured since
+        the robot stands (waiting at most ``refind_scan_wait`` s; none given: at once); the part seen far to the
+        side (where the robot's own wheels hide part of it), turn towards it once and look again. Then
+        :meth:`_found`."""
+        s, rc = self._search, self.settings.recovery
+        if s.phase == "stop":
+            if abs(self._v) > 1e-9 or abs(self._w) > 1e-9:
+                return self._brake()
+            s.phase, s.still = "look", self.t
+        if s.phase == "turn":
+            err = wrap(s.heading - pose[2])
+            if (abs(err) < 0.05 and abs(self._w) < 0.2) or self.t - s.still > 6.0:
+                s.phase = "stop"
+                return self._brake()
+            al = self.limits.alpha_max * self.dt
+            w_max = min(self.limits.w_max, 1.2)
+            want = math.copysign(min(w_max, math.sqrt(2 * 0.7 * self.limits.alpha_max * abs(err)), 4.0 * abs(err)), err)
+            self._w += max(-al, min(al, want - self._w))
+            return self._cmd(0.0, self._w)
+        # look: a sweep measured after the robot stood still (its commands act command_latency later)
+        since = s.still + self.settings.command_latency + self.dt
+        sc = self.scan
+        fresh = sc is not None and sc.t0 >= since - 1e-9
+        waited = self.t - s.still
+        state_new = self.state_time >= self.lost.t
+        if (not fresh or not state_new) and waited < rc.refind_scan_wait and (sc is not None or not state_new):
+            return self._brake()
+        found = None
+        if fresh:
+            found = find_part(sc, pose, self._lidar_mount(), self.lost.spot, self._obstacles_for_scan(),
+                              self.field.part, self.legs.footprint(False), rc.refind_radius, rc.refind_margin)
+            if found is not None and not s.turned:
+                bearing = wrap(math.atan2(found.y - pose[1], found.x - pose[0]) - pose[2])
+                if abs(bearing) > rc.refind_turn and self._can_turn_to(pose, pose[2] + bearing, found):
+                    s.turned, s.phase, s.heading, s.still = True, "turn", wrap(pose[2] + bearing), self.t
+                    self._event(self.t, f"LIDAR: something at ({found.x:.3f}, {found.y:.3f}), "
+                                        f"{math.degrees(bearing):.0f} deg off the heading: turning to look at it")
+                    return self._brake()
+        why = "no LIDAR" if sc is None else ("no sweep since it stopped" if not fresh else "nothing there")
+        self._found(pose, found, why)
+        return self._brake()
+
+    def _lidar_mount(self) -> tuple[float, float]:
+        xyz = self.robot.lidar.xyz
+        return float(xyz[0]), float(xyz[1])
+
+    def _obstacles_for_scan(self) -> FieldObstacles:
+        """What the map explains in a sweep: walls, ribs, the parts the server lists and those left on the
+        floor (not the blocked spots: something the map lacks, which may be the part itself)."""
+        st = self.state if self.state is not None else FactoryState.from_letters("XXXX")
+        return self.legs.obstacles(st, (), None, self._floor_obstacles(target=False))
+
+    def _can_turn_to(self, pose, heading: float, part: FoundPart) -> bool:
+        """The outline (5 mm margin) clears everything, ``part`` on the floor included, at every 0.1 rad of the
+        turn in place from ``pose`` to ``heading``."""
+        ob = self.legs.obstacles(self.state, self.blocked_spots, None,
+                                 self._floor_obstacles() + [PartObstacle(part.x, part.y, part.facings[0])])
+        fp = self.legs.footprint(False).inflated(0.005)
+        d = wrap(heading - pose[2])
+        n = max(1, int(abs(d) / 0.1))
+        return not any(ob.collides(fp, (pose[0], pose[1], pose[2] + d * k / n)) for k in range(n + 1))
+
+    def _found(self, pose, found: FoundPart | None, why: str) -> None:
+        """The search's outcome: the part where the LIDAR saw it, or (``found`` None) where it fell, both faces
+        of the plate possible. Unless it landed in a slot (the server lists it), a leg to pick it up."""
+        lost = self.lost
+        if found is not None:
+            self.counters.parts_refound += 1
+            d = math.hypot(found.x - lost.spot.x, found.y - lost.spot.y)
+            self._event(self.t, f"LIDAR: found the lost {lost.part.label} part at ({found.x:.3f}, {found.y:.3f}), "
+                                f"{d * 100:.0f} cm from where it fell ({found.points} returns)")
+        else:
+            f0 = lost.spot.facings[0]
+            found = FoundPart(lost.spot.x, lost.spot.y, (f0, wrap(f0 + math.pi)))
+            self._event(self.t, f"LIDAR: {why}: picking it up where it fell ({found.x:.3f}, {found.y:.3f})")
+        landed = self._landed_in(found)
+        if landed is not None:
+            self._event(self.t, f"the lost {lost.part.label} part is in {landed} (the server lists it): deciding "
+                                "again")
+            self.lost = None
+            self.mode, self.need_state_after = "decide", self.t
+            return
+        lost.where = found
+        self._leg_replans = 0
+        self._go("to_floor", pose)
+
+    def _landed_in(self, found: FoundPart) -> SlotRef | None:
+        """A slot within ``refind_radius`` of where the part fell or was found that the server's state (asked
+        since the loss) shows occupied and that was empty when it fell: the part landed there. Machine
+        outputs are left out (a machine fills them)."""
+        st, before = self.state, self.lost.state
+        if st is None or before is None or self.state_time < self.lost.t:
+            return None
+        r = self.settings.recovery.refind_radius
+        for zone in ("incoming", "machine_A", "machine_B", "outgoing"):
+            for n, (now, then) in enumerate(zip(st.zone(zone), before.zone(zone)), start=1):
+                slot = self.field.slot(zone, n)
+                if now is None or then is not None or slot.role == "output":
+                    continue
+                if min(math.hypot(slot.xy[0] - p.x, slot.xy[1] - p.y) for p in (found, self.lost.spot)) <= r:
+                    return SlotRef(zone, n)
+        return None
+
+    def _go_floor(self, pose) -> None:
+        """Plan the leg to the lost part's approach pose, facing the plate (the side tried next: tries alternate
+        between the two faces the LIDAR cannot tell apart), and start it; no path either way: :meth:`_no_leg`."""
+        lost = self.lost
+        facings = lost.where.facings
+        order = [facings[(lost.tries + k) % len(facings)] for k in range(len(facings))]
+        err = None
+        for facing in order:
+            self._floor_slot = FloorSlot((lost.where.x, lost.where.y), facing)
+            obstacles = self._obstacles()
+            if facing is order[0] and self._escapes < self.settings.recovery.escape_tries:
+                # standing next to it (it fell beside the robot): first straight away to where the robot may turn
+                point = self.legs.escape_point(obstacles, pose, False)
+                if point is not None:
+                    self._escapes += 1
+                    self._event(self.t, f"too close to the part on the floor: driving to ({point[0]:.2f}, "
+                                        f"{point[1]:.2f}) first")
+                    behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
+                    self.follower.limits = self.limits
+                    self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=True)
+                    self.mode, self._mode_t0 = "escape", self.t
+                    return
+            try:
+                leg = self.legs.plan(obstacles, pose, self._floor_slot, False, "pick")
+            except NoPath as e:
+                err = e
+                continue
+            self._escapes = 0
+            self._start_leg("to_floor", leg)
+            return
+        self.counters.no_path += 1
+        self._event(self.t, f"no path to the lost part at ({lost.where.x:.3f}, {lost.where.y:.3f}): {err}")
+        self._no_leg(pose)
+
+    def _start_floor_dock(self, pose) -> None:
+        fs = self._floor_slot
+        v0 = self.follower.v
+        self.follower.v = self.follower.w = 0.0
+        # backing out tells a held part from one only touched (the contact switch released): in the open the
+        # carrying approach distance may be the dock pose itself, so at least FLOOR_BACK_OUT farther
+        retreat = max(self.legs.retreat(self.legs.obstacles(self.state, (), None, self._floor_obstacles(target=False)),
+                                        fs, carrying=True), self.d_dock + FLOOR_BACK_OUT)
+        self.floor_docker.start_pick(fs, pose, retreat, v0=v0)
+        self._event(self.t, f"docking to pick the lost {self.lost.part.label} part from the floor at "
+                            f"({fs.xy[0]:.3f}, {fs.xy[1]:.3f}), plate towards {math.degrees(fs.facing):.0f} deg "
+                            f"(try {self.lost.tries + 1} of {self.settings.recovery.refind_tries})")
+        self.mode, self._mode_t0 = "floor_pick", self.t
+
+    def _floor_picked(self, pose) -> None:
+        """Picked up from the floor: on as after any pick, to a destination."""
+        lost = self.lost
+        self.counters.floor_picks += 1
+        self.carrying = lost.part
+        self._event(self.t, f"picked the lost {lost.part.label} part up from the floor, {self.t - lost.t:.1f} s after "
+                            "it fell")
+        self.docker.held_offset = self.floor_docker.held_offset  # the place repeats the offset it was held with
+        self.lost, self._floor_slot = None, None
+        self._held_pose = tuple(pose[:3])
+        dest = self._usable(self.policy.destinations(self.state, self.carrying))
+        if not dest:
+            self.mode, self.need_state_after = "decide", self.t
+            return
+        self.target = lost.dest if lost.dest in dest else dest[0]
+        self._leg_replans = 0
+        self._go_fastest("to_place", pose, dest)
+
+    def _floor_failed(self, reason: str, pose) -> None:
+        """A floor pick (or the leg to it) failed: look again (it may have been pushed; the next try faces its
+        other side), or after ``refind_tries`` leave it where it lies, an obstacle from now on."""
+        lost = self.lost
+        self.counters.floor_pick_failures += 1
+        lost.tries += 1
+        self.magnet = False
+        self.follower.stop()
+        n = self.settings.recovery.refind_tries
+        self._event(self.t, f"picking the lost {lost.part.label} part from the floor failed: {reason} "
+                            f"(try {lost.tries} of {n})")
+        if lost.tries < n:
+            self._start_search()
+            return
+        w = lost.where or lost.spot
+        fs = self._floor_slot
+        self.floor_parts.append(PartObstacle(w.x, w.y, fs.facing if fs is not None else w.facings[0]))
+        self.counters.parts_left += 1
+        self._event(self.t, f"left the lost {lost.part.label} part on the floor at ({w.x:.3f}, {w.y:.3f}) after "
+                            f"{lost.tries} tries")
+        self.lost, self._floor_slot = None, None
+        self.mode, self.need_state_after = "decide", self.t
 
     def _go(self, mode: str, pose) -> None:
         """Plan the leg to ``self.target`` from ``pose`` and start it in ``mode`` (``to_pick`` / ``to_place``);
-        no path: :meth:`_no_leg`."""
+        no path: :meth:`_no_leg`. ``to_floor``: the lost part on the floor (:meth:`_go_floor`)."""
+        if mode == "to_floor":
+            self._go_floor(pose)
+            return
         carrying = self.carrying is not None
         self.follower.limits = self.limits if not carrying else self.carry_limits
         obstacles = self._obstacles()
@@ -415,6 +710,9 @@ class RoundAgent:
             behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
             self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=carrying)
             self.mode, self._mode_t0 = "escape", self.t
+            return
+        if self.lost is not None and not carrying:  # on the way to a part on the floor
+            self._floor_failed("no path", pose)
             return
         n = self._no_path[self.target] = self._no_path.get(self.target, 0) + 1
         if n >= self.settings.tasks.give_up_after:
@@ -505,6 +803,9 @@ class RoundAgent:
         return True
 
     def _start_dock(self, pose) -> None:
+        if self.mode == "to_floor":
+            self._start_floor_dock(pose)
+            return
         slot = self.field.slot(self.target.zone, self.target.number)
         v0 = self.follower.v
         self.follower.v = self.follower.w = 0.0  # the docker drives from here (at the speed it arrived with)
@@ -526,6 +827,7 @@ class RoundAgent:
         if self.mode == "pick":
             self.counters.picks += 1
             self.carrying = self.task.part
+            self._held_pose = tuple(pose[:3])
             self._event(self.t, f"picked the {self.carrying.label} part from {self.target}")
             self.state = self.state.with_slot(self.task.source, None)  # expected until the server says
             self.target = self.task.target
@@ -550,6 +852,9 @@ class RoundAgent:
     def _timeout(self, text: str) -> None:
         self.counters.timeouts += 1
         self._event(self.t, f"timeout: {text}")
+        if self.mode == "to_floor":
+            self._floor_failed("timeout", None)
+            return
         if self.task is not None and isinstance(self.task, Move) and self.carrying is None:
             self.failures[self.task.source] = self.failures.get(self.task.source, 0) + 1
         self.follower.stop()

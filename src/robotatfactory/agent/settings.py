@@ -113,6 +113,21 @@ class Recovery:
     block_memory: float = setting(20.0, "s a blocked spot stays an obstacle", lo=0.0, hi=3600.0)
     lost_cycles: int = setting(5, "control cycles without contact while carrying = the part was lost", lo=1,
                                hi=1000)
+    refind: bool = setting(True, "a part lost on the way is looked for (LIDAR; else where it fell) and picked up "
+                                 "from the floor again (false: forgotten; the server does not list a part on "
+                                 "the floor, so it never scores)")
+    refind_tries: int = setting(3, "floor picks of a lost part before it is left where it lies", lo=1, hi=20)
+    refind_radius: float = setting(0.35, "m around where the part fell within which a LIDAR return may be it",
+                                   lo=0.05, hi=2.0)
+    refind_margin: float = setting(0.02, "m: LIDAR returns this near a wall, rib or listed part are the map's",
+                                   lo=0.0, hi=0.2)
+    refind_scan_wait: float = setting(1.5, "s standing still for a LIDAR sweep taken since (none: the part is "
+                                           "looked for where it fell)", lo=0.0, hi=30.0)
+    refind_turn: float = setting(0.8, "rad: a part seen farther off the heading than this is looked at again "
+                                      "after turning towards it (the robot's own wheels hide the LIDAR's view "
+                                      "to the sides)", lo=0.0, hi=math.pi)
+    refind_speed: float = setting(0.06, "m/s, the approach to a part on the floor (the contact switch stops it)",
+                                  lo=0.0, hi=0.5, lo_open=True)
 
 
 @dataclass(frozen=True)
