@@ -31,7 +31,7 @@ from ..competition.parts import PartType
 from .delay import DelayEstimator, lanes_of
 from .docking import Docker, DockSettings
 from .follower import DriveLimits, PathFollower
-from .footprint import wrap
+from .footprint import pose_in_front, wrap
 from .hybrid import NoCarryPath
 from .legs import LegPlan, LegPlanner
 from .obstacles import FieldObstacles, PartObstacle
@@ -43,7 +43,12 @@ from .state import FactoryState, SlotRef
 from .tasks import Done, Move, TaskPolicy, Wait
 
 
-FLOOR_BACK_OUT = 0.06  # m a floor pick backs out at least, past the dock pose (see _start_floor_dock)
+#: m a floor pick backs out at least, past the dock pose: then the contact switch (1 cm beam) is clear of a part
+#: that was touched but not held (in the open the carrying approach distance is the dock pose itself)
+FLOOR_BACK_OUT = 0.025
+#: rad: a part on the floor is approached along its plate's normal or, where that line is not clear (the part by a
+#: rib), this much to either side of it: the magnet's ray still meets the 8 cm plate, which it pulls flat
+FLOOR_SLANTS = (0.0, 0.3, -0.3)
 
 
 @dataclass(frozen=True)
@@ -80,7 +85,8 @@ class AgentCounters:
 class LostPart:
     """A part that fell off the magnet: its type, where it fell (``spot``: :func:`~.refind.lost_spot`, the plate's
     heading then first), when (``t``, s), the destination it was going to, the state the agent expected then
-    (to tell a part that landed in a slot), where it is taken to lie now (``where``), floor picks tried."""
+    (to tell a part that landed in a slot), where it is taken to lie now (``where``), floor picks tried, the
+    faces touched but not held."""
 
     part: PartType
     spot: FoundPart
@@ -89,6 +95,7 @@ class LostPart:
     state: FactoryState | None
     where: FoundPart | None = None
     tries: int = 0
+    held_not: list = field(default_factory=list)  # plate headings (rad) tried that the magnet did not hold
 
 
 @dataclass
@@ -173,6 +180,7 @@ class RoundAgent:
         self._floor_slot: FloorSlot | None = None  # the floor part being picked, as a slot
         self._search = _Search()
         self._held_pose = None  # the pose at the last cycle the contact switch showed the carried part
+        self._floor_retreat = 0.0  # m from the floor part's centre the floor pick backs out to
 
     @property
     def d_dock(self) -> float:
@@ -305,6 +313,9 @@ class RoundAgent:
             dk = self.floor_docker
             if self.t - self._mode_t0 > self.settings.dock.timeout and dk.phase not in ("back", "done", "failed"):
                 dk.abort(pose)
+            if self.t - self._mode_t0 > 2 * self.settings.dock.timeout:  # not even backing out gets anywhere
+                self._floor_failed("timeout", pose)
+                return self._brake()
             o = dk.step(pose, contact)
             self.magnet = o.magnet
             if o.failed:
@@ -394,8 +405,9 @@ class RoundAgent:
         return ok or dest
 
     def _obstacles(self, exclude: SlotRef | None = None) -> FieldObstacles:
-        """The field as legs are planned on now: the parts of the last state (but the one in ``exclude``) and the
-        blocked spots still remembered (those past their time are forgotten here)."""
+        """The field as legs are planned on now: the parts of the last state (but the one in ``exclude``), the
+        blocked spots still remembered (those past their time are forgotten here) and the parts lying on the
+        floor."""
         self.blocked_spots = [b for b in self.blocked_spots if b[2] > self.t]
         return self.legs.obstacles(self.state, self.blocked_spots, exclude, self._floor_obstacles())
 
@@ -404,7 +416,7 @@ class RoundAgent:
         out = list(self.floor_parts)
         if target and self._floor_slot is not None:
             fs = self._floor_slot
-            out.append(PartObstacle(fs.xy[0], fs.xy[1], fs.facing))
+            out.append(PartObstacle(fs.xy[0], fs.xy[1], fs.plate))
         return out
 
     def _can_turn(self, pose) -> bool:
@@ -479,6 +491,8 @@ class RoundAgent:
         self.mode, self.need_state_after = "search", self.t
         self._search = _Search()
         self._floor_slot = None
+        if self.lost is not None:
+            self.lost.where = None  # until this search says
 
     def _search_step(self, pose) -> AgentCommand:
         """One cycle of looking for the lost part: brake to a stop; take the first LIDAR sweep measured since
@@ -511,7 +525,7 @@ class RoundAgent:
         found = None
         if fresh:
             found = find_part(sc, pose, self._lidar_mount(), self.lost.spot, self._obstacles_for_scan(),
-                              self.field.part, self.legs.footprint(False), rc.refind_radius, rc.refind_margin)
+                              self.field.part, self.legs.footprint(False), self._search_radius(), rc.refind_margin)
             if found is not None and not s.turned:
                 bearing = wrap(math.atan2(found.y - pose[1], found.x - pose[0]) - pose[2])
                 if abs(bearing) > rc.refind_turn and self._can_turn_to(pose, pose[2] + bearing, found):
@@ -519,9 +533,21 @@ class RoundAgent:
                     self._event(self.t, f"LIDAR: something at ({found.x:.3f}, {found.y:.3f}), "
                                         f"{math.degrees(bearing):.0f} deg off the heading: turning to look at it")
                     return self._brake()
+            if found is None and not s.turned:  # a part beside the robot may lie in its wheels' shadow
+                for turn in (math.pi / 2, -math.pi / 2):
+                    if self._can_turn_to(pose, pose[2] + turn, None):  # (not ahead, where the LIDAR sees)
+                        s.turned, s.phase, s.heading, s.still = True, "turn", wrap(pose[2] + turn), self.t
+                        self._event(self.t, "LIDAR: nothing near where it fell: a quarter turn to look past the "
+                                            "wheels")
+                        return self._brake()
         why = "no LIDAR" if sc is None else ("no sweep since it stopped" if not fresh else "nothing there")
-        self._found(pose, found, why)
+        self._found(pose, found, why, seen_empty=fresh)
         return self._brake()
+
+    def _search_radius(self) -> float:
+        """m around where the part fell that a search looks: ``refind_radius``, wider on each later try (a part
+        slides far on a smooth floor, or was pushed)."""
+        return self.settings.recovery.refind_radius * (1 + self.lost.tries)
 
     def _lidar_mount(self) -> tuple[float, float]:
         xyz = self.robot.lidar.xyz
@@ -533,36 +559,41 @@ class RoundAgent:
         st = self.state if self.state is not None else FactoryState.from_letters("XXXX")
         return self.legs.obstacles(st, (), None, self._floor_obstacles(target=False))
 
-    def _can_turn_to(self, pose, heading: float, part: FoundPart) -> bool:
-        """The outline (5 mm margin) clears everything, ``part`` on the floor included, at every 0.1 rad of the
-        turn in place from ``pose`` to ``heading``."""
-        ob = self.legs.obstacles(self.state, self.blocked_spots, None,
-                                 self._floor_obstacles() + [PartObstacle(part.x, part.y, part.facings[0])])
+    def _can_turn_to(self, pose, heading: float, part: FoundPart | None) -> bool:
+        """The outline (5 mm margin) clears everything, ``part`` on the floor included (the lost part where the
+        LIDAR saw it), at every 0.1 rad of the turn in place from ``pose`` to ``heading``."""
+        seen = [PartObstacle(part.x, part.y, part.facings[0])] if part is not None else []
+        ob = self.legs.obstacles(self.state, self.blocked_spots, None, self._floor_obstacles() + seen)
         fp = self.legs.footprint(False).inflated(0.005)
         d = wrap(heading - pose[2])
         n = max(1, int(abs(d) / 0.1))
         return not any(ob.collides(fp, (pose[0], pose[1], pose[2] + d * k / n)) for k in range(n + 1))
 
-    def _found(self, pose, found: FoundPart | None, why: str) -> None:
-        """The search's outcome: the part where the LIDAR saw it, or (``found`` None) where it fell, both faces
-        of the plate possible. Unless it landed in a slot (the server lists it), a leg to pick it up."""
+    def _found(self, pose, found: FoundPart | None, why: str, seen_empty: bool = False) -> None:
+        """The search's outcome: the part where the LIDAR saw it; a part the server lists in a slot near where it
+        fell is left to the next decision; not seen in a sweep (``seen_empty``): a failed try (the next looks
+        farther); no sweep at all: where it fell, both faces of the plate possible. Then a leg to pick it up."""
         lost = self.lost
-        if found is not None:
-            self.counters.parts_refound += 1
-            d = math.hypot(found.x - lost.spot.x, found.y - lost.spot.y)
-            self._event(self.t, f"LIDAR: found the lost {lost.part.label} part at ({found.x:.3f}, {found.y:.3f}), "
-                                f"{d * 100:.0f} cm from where it fell ({found.points} returns)")
-        else:
-            f0 = lost.spot.facings[0]
-            found = FoundPart(lost.spot.x, lost.spot.y, (f0, wrap(f0 + math.pi)))
-            self._event(self.t, f"LIDAR: {why}: picking it up where it fell ({found.x:.3f}, {found.y:.3f})")
-        landed = self._landed_in(found)
+        landed = self._landed_in(found or lost.spot)
         if landed is not None:
             self._event(self.t, f"the lost {lost.part.label} part is in {landed} (the server lists it): deciding "
                                 "again")
             self.lost = None
             self.mode, self.need_state_after = "decide", self.t
             return
+        if found is not None:
+            self.counters.parts_refound += 1
+            d = math.hypot(found.x - lost.spot.x, found.y - lost.spot.y)
+            self._event(self.t, f"LIDAR: found the lost {lost.part.label} part at ({found.x:.3f}, {found.y:.3f}), "
+                                f"{d * 100:.0f} cm from where it fell ({found.points} returns)")
+        elif seen_empty:
+            self._event(self.t, f"LIDAR: no part within {self._search_radius():.2f} m of where it fell")
+            self._floor_failed("not seen", pose)
+            return
+        else:
+            f0 = lost.spot.facings[0]
+            found = FoundPart(lost.spot.x, lost.spot.y, (f0, wrap(f0 + math.pi)))
+            self._event(self.t, f"LIDAR: {why}: picking it up where it fell ({found.x:.3f}, {found.y:.3f})")
         lost.where = found
         self._leg_replans = 0
         self._go("to_floor", pose)
@@ -585,50 +616,74 @@ class RoundAgent:
         return None
 
     def _go_floor(self, pose) -> None:
-        """Plan the leg to the lost part's approach pose, facing the plate (the side tried next: tries alternate
-        between the two faces the LIDAR cannot tell apart), and start it; no path either way: :meth:`_no_leg`."""
+        """Plan the leg to the lost part's approach pose, facing its plate (tries alternate between the two faces
+        the LIDAR cannot tell apart; a face the magnet did not hold is not tried again), straight along the
+        plate's normal or, where that line is not clear, at :data:`FLOOR_SLANTS` to it; start it. Standing too
+        close to the part to turn, first drive straight away from it. No leg at all: :meth:`_no_leg`."""
         lost = self.lost
         facings = lost.where.facings
         order = [facings[(lost.tries + k) % len(facings)] for k in range(len(facings))]
-        err = None
-        for facing in order:
-            self._floor_slot = FloorSlot((lost.where.x, lost.where.y), facing)
-            obstacles = self._obstacles()
-            if facing is order[0] and self._escapes < self.settings.recovery.escape_tries:
-                # standing next to it (it fell beside the robot): first straight away to where the robot may turn
-                point = self.legs.escape_point(obstacles, pose, False)
-                if point is not None:
-                    self._escapes += 1
-                    self._event(self.t, f"too close to the part on the floor: driving to ({point[0]:.2f}, "
-                                        f"{point[1]:.2f}) first")
-                    behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
-                    self.follower.limits = self.limits
-                    self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=True)
-                    self.mode, self._mode_t0 = "escape", self.t
-                    return
-            try:
-                leg = self.legs.plan(obstacles, pose, self._floor_slot, False, "pick")
-            except NoPath as e:
-                err = e
-                continue
-            self._escapes = 0
-            self._start_leg("to_floor", leg)
+        order = [f for f in order if not any(abs(wrap(f - w)) < 0.5 for w in lost.held_not)]
+        if not order:
+            self._leave_floor_part("its plate faces where the robot cannot reach (the other side did not hold)")
             return
+        xy = (lost.where.x, lost.where.y)
+        self._floor_slot = FloorSlot(xy, order[0], plate=order[0])
+        obstacles = self._obstacles()
+        if self._escapes < self.settings.recovery.escape_tries:
+            # standing next to it (it fell beside the robot): first straight away to where the robot may turn
+            point = self.legs.escape_point(obstacles, pose, False)
+            if point is not None:
+                self._escapes += 1
+                self._event(self.t, f"too close to the part on the floor: driving to ({point[0]:.2f}, "
+                                    f"{point[1]:.2f}) first")
+                behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
+                self.follower.limits = self.limits
+                self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=True)
+                self.mode, self._mode_t0 = "escape", self.t
+                return
+        err = None
+        for plate in order:
+            for slant in FLOOR_SLANTS:
+                self._floor_slot = FloorSlot(xy, wrap(plate + slant), plate=plate)
+                obstacles = self._obstacles()
+                try:
+                    leg = self.legs.plan(obstacles, pose, self._floor_slot, False, "pick")
+                except NoPath as e:
+                    err = e
+                    continue
+                d = math.hypot(leg.goal[0] - xy[0], leg.goal[1] - xy[1])
+                far = max(d, self.d_dock + FLOOR_BACK_OUT)
+                if not self._floor_line_clear(far):  # (a part lying by a wall: the approach pose beyond it)
+                    err = NoPath(f"the straight approach from {far:.2f} m, plate towards "
+                                 f"{math.degrees(plate):.0f} deg, is not clear")
+                    continue
+                self._floor_retreat = far
+                self._escapes = 0
+                self._start_leg("to_floor", leg)
+                return
         self.counters.no_path += 1
-        self._event(self.t, f"no path to the lost part at ({lost.where.x:.3f}, {lost.where.y:.3f}): {err}")
+        self._event(self.t, f"no path to the lost part at ({xy[0]:.3f}, {xy[1]:.3f}): {err}")
         self._no_leg(pose)
+
+    def _floor_line_clear(self, far: float) -> bool:
+        """The empty outline (5 mm margin) is clear all along the straight line the floor pick drives and backs
+        out on: from ``far`` m in front of the part (``_floor_slot``) to its dock pose, the part itself left out."""
+        fs = self._floor_slot
+        ob = self.legs.obstacles(self.state, self.blocked_spots, None, self._floor_obstacles(target=False))
+        a, b = pose_in_front(fs, far), pose_in_front(fs, self.d_dock)
+        return self.legs.path_planner(ob, False).straight_clear(a[:2], b[:2], self.legs.footprint(False), 0.005) \
+            and not ob.collides(self.legs.footprint(False).inflated(0.005), b)
 
     def _start_floor_dock(self, pose) -> None:
         fs = self._floor_slot
         v0 = self.follower.v
         self.follower.v = self.follower.w = 0.0
-        # backing out tells a held part from one only touched (the contact switch released): in the open the
-        # carrying approach distance may be the dock pose itself, so at least FLOOR_BACK_OUT farther
-        retreat = max(self.legs.retreat(self.legs.obstacles(self.state, (), None, self._floor_obstacles(target=False)),
-                                        fs, carrying=True), self.d_dock + FLOOR_BACK_OUT)
-        self.floor_docker.start_pick(fs, pose, retreat, v0=v0)
+        # back out along the line it came (checked clear), far enough to tell a held part from one only touched
+        self.floor_docker.start_pick(fs, pose, self._floor_retreat, v0=v0)
         self._event(self.t, f"docking to pick the lost {self.lost.part.label} part from the floor at "
-                            f"({fs.xy[0]:.3f}, {fs.xy[1]:.3f}), plate towards {math.degrees(fs.facing):.0f} deg "
+                            f"({fs.xy[0]:.3f}, {fs.xy[1]:.3f}), plate towards {math.degrees(fs.plate):.0f} deg"
+                            f"{'' if fs.facing == fs.plate else f', from {math.degrees(wrap(fs.facing - fs.plate)):+.0f} deg'} "
                             f"(try {self.lost.tries + 1} of {self.settings.recovery.refind_tries})")
         self.mode, self._mode_t0 = "floor_pick", self.t
 
@@ -661,15 +716,23 @@ class RoundAgent:
         n = self.settings.recovery.refind_tries
         self._event(self.t, f"picking the lost {lost.part.label} part from the floor failed: {reason} "
                             f"(try {lost.tries} of {n})")
+        if reason == "part_lost" and self._floor_slot is not None:  # touched, not held: the plate is not there
+            lost.held_not.append(self._floor_slot.plate)
         if lost.tries < n:
             self._start_search()
             return
-        w = lost.where or lost.spot
-        fs = self._floor_slot
-        self.floor_parts.append(PartObstacle(w.x, w.y, fs.facing if fs is not None else w.facings[0]))
+        self._leave_floor_part(f"after {lost.tries} tries")
+
+    def _leave_floor_part(self, why: str) -> None:
+        """Give the lost part up: it stays where it lies, an obstacle from now on (driving into it would push it
+        and knock the carried part off: measured, a cascade of losses); the round goes on."""
+        lost = self.lost
+        w, fs = lost.where, self._floor_slot
+        if w is not None:  # (where the last search saw it or took it to be; not seen: nowhere known)
+            self.floor_parts.append(PartObstacle(w.x, w.y, fs.plate if fs is not None else w.facings[0]))
         self.counters.parts_left += 1
-        self._event(self.t, f"left the lost {lost.part.label} part on the floor at ({w.x:.3f}, {w.y:.3f}) after "
-                            f"{lost.tries} tries")
+        at = f" at ({w.x:.3f}, {w.y:.3f})" if w is not None else ""
+        self._event(self.t, f"left the lost {lost.part.label} part on the floor{at}: {why}")
         self.lost, self._floor_slot = None, None
         self.mode, self.need_state_after = "decide", self.t
 

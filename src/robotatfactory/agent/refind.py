@@ -34,6 +34,11 @@ from .footprint import HOLD_GAP, PLATE_THICKNESS, Footprint, wrap
 from .obstacles import FieldObstacles
 
 
+#: m around the robot's outline within which a return is the robot's own (SimTwo's rays hit its wheels, at
+#: 0.065-0.07 m with 1.6 mm of noise; the bridge's self filter takes 9 mm)
+OWN_MARGIN = 0.009
+
+
 @dataclass(frozen=True)
 class Scan:
     """One LIDAR sweep as the agent takes it (a ``sensor_msgs/LaserScan`` without ROS): ray ``i`` looks at
@@ -94,12 +99,18 @@ class FoundPart:
 @dataclass(frozen=True)
 class FloorSlot:
     """A part lying on the floor as the planner and the docker take a slot: its centre ``xy`` (m) and the
-    heading its plate faces (``facing``, rad); the pick faces the plate as at a slot, with nothing around."""
+    heading the pick comes from (``facing``, rad: the robot faces the other way); ``plate``: the heading its plate
+    faces (None: ``facing``; an approach at an angle to the plate's normal differs)."""
 
     xy: tuple[float, float]
     facing: float
+    plate: float | None = None
     name: str = "the part on the floor"
     role: str = "floor"
+
+    def __post_init__(self):
+        if self.plate is None:
+            object.__setattr__(self, "plate", self.facing)
 
 
 def lost_spot(pose, magnet_x: float, part) -> FoundPart:
@@ -239,7 +250,8 @@ def find_part(scan: Scan, pose, mount, near: FoundPart, obstacles: FieldObstacle
     """The part nearest ``near`` (where it was lost) in ``scan`` taken with base_link at ``pose`` (standing) and
     the laser at ``mount`` (x, y in base_link), or None. Returns farther than ``radius`` m from ``near``, within
     ``margin`` of the map (``obstacles``: walls, ribs, listed parts, the floor) or inside the robot's own
-    outline ``own`` grown by 4 mm (its wheels: a part touching the magnet is 1 cm ahead of it) are ignored; the rest are clustered (``gap``) and the nearest cluster of at
+    outline ``own`` grown by :data:`OWN_MARGIN` (its wheels; but ahead of the magnet's face, where a part touching it
+    lies) are ignored; the rest are clustered (``gap``) and the nearest cluster of at
     least ``min_points`` that a part-sized box fits (:func:`fit_box`) is the part. Its ``facings``: the plate's
     two possible headings, the one nearer ``near.facings[0]`` first."""
     pts = scan.points(pose, mount)
@@ -247,11 +259,12 @@ def find_part(scan: Scan, pose, mount, near: FoundPart, obstacles: FieldObstacle
         return None
     keep = np.hypot(pts[:, 0] - near.x, pts[:, 1] - near.y) <= radius
     pts = pts[keep]
-    if len(pts):
+    if len(pts):  # the robot's own wheels (rays hit them; never anything ahead of the magnet's face)
         mine = np.zeros(len(pts), dtype=bool)
-        for poly in own.inflated(0.004).polygons(*pose[:3]):
+        for poly in own.inflated(OWN_MARGIN).polygons(*pose[:3]):
             mine |= distances_to([poly], pts) == 0.0
-        pts = pts[~mine]
+        ahead = (pts[:, 0] - pose[0]) * math.cos(pose[2]) + (pts[:, 1] - pose[1]) * math.sin(pose[2]) > own.front
+        pts = pts[~mine | ahead]
     pts = pts[unexplained(pts, obstacles, margin)] if len(pts) else pts
     if len(pts) < min_points:
         return None
