@@ -272,10 +272,14 @@ def parse_sim(items) -> dict:
 def play_round(round_no: int, seed: int, limit: float = 300.0,
                field_name: str | None = None, record_path: bool = False, agent: dict | None = None,
                sim_options: dict | None = None, pose_noise: tuple[float, float] = (0.0, 0.0),
-               pose_delay: int = 0, pose_predict: bool = False, cmd_delay: int = 0) -> dict:
+               pose_delay: int = 0, pose_predict: bool = False, cmd_delay: int = 0, *, lidar: bool = False,
+               on_cycle=None) -> dict:
     """One round on the bare stand-in with ground truth as the agent's pose; a flat dict of the run's
     figures (plus ``path`` [(t, x, y)] and ``events`` [(t, text, x, y)] when ``record_path``).
-    ``cmd_delay``: the agent's commands run that many cycles late (the whole stack's loop: 2)."""
+    ``cmd_delay``: the agent's commands run that many cycles late (the whole stack's loop: 2). ``lidar``: the
+    simulator casts the LIDAR and the agent gets each sweep (``RoundAgent.on_scan``, assembled and stamped as
+    the bridge does: :mod:`robotatfactory.simtwo.scan`). ``on_cycle(sim, agent)``: called before every cycle
+    (a test's hand in the run, e.g. a part knocked off the magnet)."""
     from ..agent.behaviour import RoundAgent
     from ..agent.client import FactoryClient
     from ..agent.settings import agent_settings
@@ -284,15 +288,20 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
     from ..robot import load_robot
     from ..sim import Simulator
     from ..sim.config import sim_config
+    from ..agent.refind import Scan
     from ..simtwo import Command
+    from ..simtwo.scan import make_assembler
     from ._competition_observe import RunObserver
 
     field = load_field(field_name) if field_name else load_field()
     robot = load_robot()
     settings = agent_settings(agent)
     wall0 = time.perf_counter()
-    sim = Simulator(field, robot, sim_config({**(sim_options or {}), "camera": False, "lidar": False,
+    sim = Simulator(field, robot, sim_config({**(sim_options or {}), "camera": False, "lidar": bool(lidar),
                                               "round_no": round_no, "seed": seed, "start_after": 1.0}))
+    L = robot.lidar
+    sweeps = make_assembler(sim.config.lidar_update, L.rays, L.period, robot.control_period, robot.physics_step) \
+        if lidar else None
     server = FactoryServer(sim.factory, port=0, clock=lambda: sim.time).start()
     obs = RunObserver(field, robot, record_path)
     pose_in = _PoseChannel(robot, pose_noise, pose_delay, pose_predict, seed * 7919 + round_no, cmd_delay)
@@ -306,6 +315,8 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             agent = RoundAgent(field, robot, settings)
             contact = False
             while sim.time < limit and agent.mode != "done":
+                if on_cycle is not None:
+                    on_cycle(sim, agent)
                 if agent.wants_state:
                     st = client.poll_state()
                     if st is not None:
@@ -317,6 +328,9 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
                 queued.append(Command(c.v, c.w, c.magnet))
                 frame = sim.step_cycle(queued.pop(0))
                 contact = frame.contact
+                if sweeps is not None and len(frame.ranges):
+                    for sw in sweeps.add(frame.time_ms, frame.ranges):
+                        agent.on_scan(Scan.from_lidar(L, sw.t0, sw.ranges, sw.time_increment))
                 obs.cycle(sim.time, sim.seq, sim.pose, sim.held, frame.enc_total,
                           lambda: {pid: sim.part_pose(pid) for pid in part_ids}, agent.activity)
                 if record_path:
@@ -332,7 +346,9 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             "points_lost": rep.lost, "world": world, "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
             "picks_attempted": cnt.picks + cnt.pick_failures, "pick_failures": cnt.pick_failures,
             "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
-            "no_path": cnt.no_path, "moved_before_start_cycles": moved_early,
+            "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "parts_lost": cnt.parts_lost,
+            "parts_refound": cnt.parts_refound, "floor_picks": cnt.floor_picks,
+            "floor_pick_failures": cnt.floor_pick_failures, "parts_left": cnt.parts_left,
             "agent_done": agent.mode == "done", "sim_s": sim.time, "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
