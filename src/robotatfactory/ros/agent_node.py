@@ -3,8 +3,9 @@ middleware (:mod:`.mw`).
 
 Uses only what a real robot has. Subscribes (relative names): ``pose``
 (geometry_msgs/PoseWithCovarianceStamped, base_link in map, from ``raf localize``), ``odom``
-(nav_msgs/Odometry, only to tell that the robot's own sensors are alive) and ``contact`` (std_msgs/Bool).
-Never ``ground_truth`` nor simulator state. Publishes ``cmd_vel`` (geometry_msgs/Twist), ``electromagnet``
+(nav_msgs/Odometry, only to tell that the robot's own sensors are alive), ``contact`` (std_msgs/Bool) and
+``scan`` (sensor_msgs/LaserScan from the bridge, handed to the agent as a :class:`~..agent.refind.Scan`: it looks
+for a part that fell off the magnet in it). Never ``ground_truth`` nor simulator state. Publishes ``cmd_vel`` (geometry_msgs/Twist), ``electromagnet``
 (std_msgs/Bool), ``agent/path`` (nav_msgs/Path, the path being followed, map frame), ``agent/markers``
 (visualization_msgs/MarkerArray, map frame: the planned round as arrows from source to destination slot with
 their order and part, the current task highlighted, the current goal pose) and ``/diagnostics``.
@@ -27,6 +28,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Bool
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -34,6 +36,7 @@ from ..agent.behaviour import RoundAgent
 from ..agent.client import FactoryClient, ServerReplyError, ServerTimeout
 from ..agent.footprint import pose_in_front
 from ..agent.predict import InFlight, extrapolate
+from ..agent.refind import Scan
 from ..agent.settings import AgentSettings, agent_settings
 from ..agent.tasks import Move, Wait, plan_round
 from ..field import load_field
@@ -43,7 +46,7 @@ from . import messages as rm
 from .mw import QoS
 from .mw.base import OK, WARN, Node
 
-SUBSCRIBED = ("pose", "odom", "contact")  # the only inputs; a test checks no other is subscribed
+SUBSCRIBED = ("pose", "odom", "contact", "scan")  # the only inputs; a test checks no other is subscribed
 
 
 class AgentNode:
@@ -62,6 +65,7 @@ class AgentNode:
         self.pose_stamp = -math.inf
         self.odom_stamp = -math.inf
         self.contact = False
+        self.scan: Scan | None = None  # the latest LIDAR sweep not yet handed to the agent
         self.twist = (0.0, 0.0)  # (v m/s, w rad/s) from the latest odometry
         self.in_flight = InFlight(cfg.command_latency, self.robot.control_period)  # commands sent, not yet run
         self.counts = {"bad_pose": 0, "stale_cycles": 0, "server_errors": 0, "cycles": 0}
@@ -89,13 +93,15 @@ class AgentNode:
             node.subscribe("pose", PoseWithCovarianceStamped, self.on_pose, QoS.RELIABLE, 5),
             node.subscribe("odom", Odometry, self.on_odom, QoS.RELIABLE, 5),
             node.subscribe("contact", Bool, self.on_contact, QoS.RELIABLE, 5),
+            # paced: every scan counts (the bridge publishes them reliably then)
+            node.subscribe("scan", LaserScan, self.on_scan, QoS.RELIABLE if paced else QoS.SENSOR, 2),
         ]
         self.client = FactoryClient(self.cfg.server.host, self.cfg.server.port, timeout=0.2, retries=2)
         self._running = True
         if paced:  # one cycle per paced frame, on the bridge's and the localization's paces (docs/pacing.md)
             from .pace import Pacer
 
-            self.pacer = Pacer(node, "agent", {"bridge": ("odom", "contact"), "localization": ("pose",)},
+            self.pacer = Pacer(node, "agent", {"bridge": ("odom", "contact", "scan"), "localization": ("pose",)},
                                on_cycle=self._paced_tick, timeout=self.cfg.pace.timeout)
             return self
         self._poller = threading.Thread(target=self._poll_loop, name="raf-agent-server", daemon=True)
@@ -138,6 +144,12 @@ class AgentNode:
         with self.lock:
             self.contact = bool(msg.data)
         self._got("contact")
+
+    def on_scan(self, msg: LaserScan) -> None:
+        scan = scan_from_msg(msg)
+        with self.lock:
+            self.scan = scan
+        self._got("scan")
 
     def _got(self, key: str) -> None:
         if self.pacer is not None:
@@ -189,6 +201,9 @@ class AgentNode:
                 if fresh and self.pose is not None else None
             if pose is None:
                 self.counts["stale_cycles"] += 1
+            if self.scan is not None:  # (paced: the frame's sweep is in, the pace counted it)
+                self.agent.on_scan(self.scan)
+                self.scan = None
             cmd = self.agent.step(now, pose, self.contact, uncertainty=self.pose_cov if pose is not None else None)
             self.counts["cycles"] += 1
             self.in_flight.sent(now, float(cmd.v), float(cmd.w))
@@ -343,6 +358,13 @@ class AgentNode:
         arr.status.append(rm.diagnostic_status("raf agent", level, f"{a.mode}: {a.task}", "robot",
                                                {k: str(v) for k, v in values.items()}))
         return arr
+
+
+def scan_from_msg(msg: LaserScan) -> Scan:
+    """A LaserScan as the agent takes it (rays at ``angle_min + i * angle_increment`` in the laser frame, ray i
+    measured at the stamp + ``i * time_increment``; inf and NaN: no return)."""
+    return Scan(rm.stamp_to_s(msg.header.stamp), tuple(msg.ranges), float(msg.angle_min), float(msg.angle_increment),
+                float(msg.time_increment), float(msg.range_min), float(msg.range_max))
 
 
 def config_from_params(p: dict) -> AgentSettings:
