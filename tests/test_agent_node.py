@@ -1,4 +1,4 @@
-"""The agent's ROS node: inputs only pose/odom/contact (never ground truth), cmd_vel and electromagnet out,
+"""The agent's ROS node: inputs only pose/odom/contact/scan (never ground truth), cmd_vel and electromagnet out,
 the factory-state server over UDP, and a stop when the pose goes stale. A real roscore on a free port and
 the real FactoryServer on loopback; the node runs in the test process, on the test node of rosutil
 (:mod:`robotatfactory.ros.mw`)."""
@@ -100,11 +100,24 @@ def test_node_plays_only_on_its_own_inputs_and_stops_when_they_go_stale(middlewa
         goal = next(m for m in arr.markers if m.ns == "agent_goal")
         end = path.poses[-1].pose.position
         assert (goal.pose.position.x, goal.pose.position.y) == pytest.approx((end.x, end.y), abs=1e-9)
-        # the node's inputs are exactly its own sensors' topics; nobody subscribes to ground truth
+        # the node's inputs are exactly its own sensors' topics (the LIDAR's scan among them); nobody subscribes to
+        # ground truth
         assert sorted(_topic(s) for s in node.subscribers) == sorted(f"/{t}" for t in SUBSCRIBED)
         subscribed = _subscribed_topics(tnode)
         assert {f"/{t}" for t in SUBSCRIBED} <= subscribed
         assert not any("ground_truth" in t or t.startswith("/sim") for t in subscribed), subscribed
+        # a LIDAR sweep reaches the agent as its Scan at the next control cycle (it looks for dropped parts in it)
+        from sensor_msgs.msg import LaserScan
+
+        pub_scan = publisher("/scan", LaserScan, QoS.SENSOR, 2, wait_for=1)
+        scan = rm.laser_scan(rm.stamp_s(12.5), "laser", [0.5, -1.0, 0.25], 360.0, 0.02, 6.0, 0.2, 0.001)
+        wait_until(lambda: pub_scan.publish(scan) or time.sleep(0.05) or node.agent.scan is not None,
+                   timeout=10, what="the scan handed to the agent")
+        got = node.agent.scan
+        assert got.t0 == pytest.approx(12.5) and got.time_increment == pytest.approx(0.001)
+        assert got.ranges[0] == 0.5 and got.ranges[1] == float("inf") and got.range_max == 6.0
+        assert got.angle_min == pytest.approx(-3.14159265, abs=1e-6) and got.angle_increment == pytest.approx(3.14159265)
+        unpublish(pub_scan)
         # the pose stops coming: within the staleness limit and the braking the commands reach zero
         stale0 = node.counts["stale_cycles"]
         time.sleep(node.cfg.max_input_age + 1.0)
