@@ -299,3 +299,42 @@ def test_a_part_that_landed_in_a_slot_is_left_to_the_next_decision(field, robot)
     assert run(agent, bot, lambda a: a.counters.parts_lost and a.lost is None, limit=t_drop + 5.0, scans=False)
     assert agent.counters.floor_picks == 0 and agent.mode != "floor_pick"
     assert any(f"is in {zone} {n}" in t for t in events_after(agent, t_drop)), events_after(agent, t_drop)
+
+
+def test_a_part_let_go_while_backing_out_of_a_pick_is_found_on_the_floor(field, robot):
+    """Held at the slot, then let go while backing out (the pick fails: part_lost) and out of its slot, which the
+    server no longer lists: it lies on the floor in front of the robot; looked for and picked up from there."""
+    agent = RoundAgent(field, robot)
+    bot = FloorBot(field, robot)
+    assert run(agent, bot, lambda a: a.mode == "pick" and a.docker.phase == "back" and bot.held)
+    t0 = bot.t
+    s = field.slot("incoming", 2)
+
+    def out_of_slot(a):  # 4 cm out of it (the server takes it as gone)
+        spot = lost_spot(bot.pose, robot.electromagnet["x"], field.part)
+        return math.hypot(spot.x - s.xy[0], spot.y - s.xy[1]) > 0.04
+
+    assert run(agent, bot, out_of_slot, limit=t0 + 2.0) and agent.mode == "pick"
+    spot = lost_spot(bot.pose, robot.electromagnet["x"], field.part)
+    bot.drop(spot.x, spot.y, wrap(s.facing + 0.2))  # it stays where it is (caught on a rib) as the robot backs on
+    bot.can_hold = False
+    assert run(agent, bot, lambda a: a.mode == "search", limit=t0 + 5.0)
+    bot.can_hold = True
+    assert run(agent, bot, lambda a: a.counters.places >= 1, limit=t0 + 40.0)
+    c = agent.counters
+    assert (c.pick_failures, c.parts_lost, c.parts_refound, c.floor_picks, c.places) == (1, 1, 1, 1, 1)
+    ev = events_after(agent, t0)
+    assert any(t.startswith("pick at incoming 2 failed: part_lost") for t in ev), ev
+    assert any(t.startswith("lost the blue part picking it at incoming 2: the server no longer lists it") for t in ev)
+    assert any(t.startswith("picked the lost blue part up from the floor") for t in ev)
+
+
+def test_a_part_let_go_at_the_pick_that_stays_in_its_slot_is_picked_there_again(field, robot):
+    """part_lost but the server still lists it in its slot: the usual retry, no floor search."""
+    agent = RoundAgent(field, robot)
+    bot = FloorBot(field, robot)
+    assert run(agent, bot, lambda a: a.mode == "pick" and a.docker.phase == "back" and bot.held)
+    bot.held, bot.can_hold = False, False  # it stays in the slot
+    bot.state = bot.state.with_slot(SlotRef("incoming", 2), PartType.BLUE)
+    assert run(agent, bot, lambda a: a.counters.pick_failures >= 1 and a.mode == "to_pick", limit=bot.t + 5.0)
+    assert agent.counters.parts_lost == 0 and agent.lost is None and str(agent.target) == "incoming 2"

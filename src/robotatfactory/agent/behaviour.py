@@ -181,6 +181,7 @@ class RoundAgent:
         self._search = _Search()
         self._held_pose = None  # the pose at the last cycle the contact switch showed the carried part
         self._floor_retreat = 0.0  # m from the floor part's centre the floor pick backs out to
+        self._pick_lost: LostPart | None = None  # a pick that let its part go: on the floor if not in its slot
 
     @property
     def d_dock(self) -> float:
@@ -338,6 +339,16 @@ class RoundAgent:
     # ------------------------------------------------------------------------------------------ decisions
     def _decide(self, pose) -> None:
         st = self.state
+        if self._pick_lost is not None:  # a state seen since a pick let its part go: is it still in its slot?
+            lost, self._pick_lost = self._pick_lost, None
+            if isinstance(self.task, Move) and st.at(self.task.source) is None:
+                self.counters.parts_lost += 1
+                self._event(self.t, f"lost the {lost.part.label} part picking it at {self.task.source}: the server "
+                                    f"no longer lists it there; looking for it near ({lost.spot.x:.3f}, "
+                                    f"{lost.spot.y:.3f})")
+                self.lost = lost
+                self._start_search()
+                return
         if self.carrying is not None:  # a place failed or the destination changed: find a new one
             dest = self._usable(self.policy.destinations(st, self.carrying))
             if not dest:
@@ -934,6 +945,13 @@ class RoundAgent:
             if reason == "no_contact" and self.attempts < self.settings.dock.retries:
                 self._go("to_pick", pose)  # back to the approach pose, then try again
                 return
+            if reason == "part_lost" and self.settings.recovery.refind and isinstance(self.task, Move):
+                # held, then let go backing out: if the server no longer lists it in its slot, it lies on the
+                # floor between the slot and the robot (:meth:`_decide` asks)
+                spot = lost_spot(pose, self.docker.magnet_x, self.field.part)
+                slot = self.field.slot(self.target.zone, self.target.number)
+                spot = FoundPart(spot.x, spot.y, (slot.facing,))
+                self._pick_lost = LostPart(self.task.part, spot, self.t, self.task.target, self.state)
         else:
             self.counters.place_failures += 1
             self.place_failed[self.target] = self.place_failed.get(self.target, 0) + 1
