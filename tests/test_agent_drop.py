@@ -277,8 +277,11 @@ def test_a_part_that_cannot_be_picked_up_is_left_on_the_floor_after_the_tries(fi
     assert agent.lost is None and len(agent.floor_parts) == 1
     assert math.hypot(agent.floor_parts[0].x - spot.x, agent.floor_parts[0].y - spot.y) < 0.01
     assert any(t.startswith("left the lost blue part on the floor") for t in events_after(agent, t_drop))
-    # the round goes on without it (the server lists no other part: done), the part an obstacle from now on
+    # the round goes on without it (the server lists no other part: done); the part is an obstacle from now on
+    # for legs with a part on the magnet (the empty robot may push it aside)
     assert run(agent, bot, lambda a: a.mode == "done", limit=bot.t + 5.0)
+    assert agent._obstacles().clearance_at(spot.x, spot.y) > 0.02
+    agent.carrying = PartType.BLUE
     assert agent._obstacles().clearance_at(spot.x, spot.y) == 0.0
 
 
