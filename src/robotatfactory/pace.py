@@ -157,6 +157,11 @@ class PaceBook:
                 self._paces[name] = [p for p in self._paces[name] if p.t > keep]
             self._cv.notify_all()
 
+    def backlog(self) -> int:
+        """How many paces are held (those of cycles not yet done): stays small in a sound run."""
+        with self._cv:
+            return sum(len(v) for v in self._paces.values())
+
     def wait_done(self, t: float, timeout: float) -> bool:
         """Block until cycle ``t`` has run (True) or ``timeout`` wall seconds passed (False): for a thread that
         found another one running it."""

@@ -264,15 +264,15 @@ class LocalizationNode:
             self._odom = (t, pose)
             self.counts["odom"] += 1
             self._publish_filter(t, pose)
-        for f in finished:
-            if f.source == "camera":
+        for f in finished:  # (messages nobody subscribes to are not built: lazy, as image_transport does)
+            if f.source == "camera" and self.pub_verdict[f.accepted].subscriber_count() > 0:
                 self.pub_verdict[f.accepted].publish(self._verdict_msg(f))
 
     def _verdict_msg(self, f) -> PoseWithCovarianceStamped:
         m = PoseWithCovarianceStamped()
         m.header.stamp = rm.stamp_s(f.t)
         m.header.frame_id = self.frames["map"]
-        m.pose.pose = rm.pose_from_matrix(se2_matrix(*f.z))
+        m.pose.pose = rm.planar_pose(*f.z)
         m.pose.covariance = rm.pose_cov6(f.R)
         return m
 
@@ -284,7 +284,7 @@ class LocalizationNode:
         m = PoseWithCovarianceStamped()
         m.header.stamp = stamp
         m.header.frame_id = self.frames["map"]
-        m.pose.pose = rm.pose_from_matrix(se2_matrix(*x))
+        m.pose.pose = rm.planar_pose(*x)
         m.pose.covariance = rm.pose_cov6(P)
         self.pub_pose.publish(m)
         if self.pacer is not None:
@@ -311,12 +311,13 @@ class LocalizationNode:
         self._frame_ms = self._frame_ms[-200:]
         self.counts["frames"] += 1
         header_cam = msg.header.frame_id or self.frames["camera_optical"]
-        self._publish_markers(res, msg.header.stamp, header_cam)
+        if self.pub_markers.subscriber_count() > 0 or self.pub_poses.subscriber_count() > 0:
+            self._publish_markers(res, msg.header.stamp, header_cam)
         for name, e in res.estimates.items():
-            if e.ok and name in self.pub_fix:
+            if e.ok and name in self.pub_fix and self.pub_fix[name].subscriber_count() > 0:
                 self.pub_fix[name].publish(self._fix_msg(e, msg.header.stamp))
         cp = res.estimates.get(nc.camera_pose_method)
-        if cp is not None and cp.ok and cp.cov6 is not None:
+        if cp is not None and cp.ok and cp.cov6 is not None and self.pub_camera_pose.subscriber_count() > 0:
             m = PoseWithCovarianceStamped()
             m.header.stamp = msg.header.stamp
             m.header.frame_id = self.frames["map"]
@@ -346,7 +347,7 @@ class LocalizationNode:
         m = PoseWithCovarianceStamped()
         m.header.stamp = stamp
         m.header.frame_id = self.frames["map"]
-        m.pose.pose = rm.pose_from_matrix(se2_matrix(*e.base))
+        m.pose.pose = rm.planar_pose(*e.base)
         m.pose.covariance = rm.pose_cov6(e.cov)
         return m
 

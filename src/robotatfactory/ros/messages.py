@@ -239,6 +239,14 @@ def image_to_bgr(msg: Image) -> np.ndarray:
     return a
 
 
+def planar_pose(x: float, y: float, theta: float) -> Pose:
+    """geometry_msgs/Pose of a pose on the floor (z = 0, a rotation about z): no matrix, no general rotation."""
+    p = Pose()
+    p.position.x, p.position.y = float(x), float(y)
+    p.orientation = yaw_quaternion(float(theta))
+    return p
+
+
 def pose_from_matrix(T: np.ndarray) -> Pose:
     """A 4x4 homogeneous transform to geometry_msgs/Pose."""
     p = Pose()

@@ -1,12 +1,16 @@
-"""Pace messages over the middleware (see :mod:`robotatfactory.pace`): topic ``pace`` (relative: each robot's
-nodes pace among themselves), ``diagnostic_msgs/DiagnosticArray`` with the cycle's stamp in the header and one
-status per message: ``name`` the node's role, ``message`` "pace" (or "hello" / "ready" at the start), one ``KeyValue`` per
-output (key, messages published so far).
+"""Pace messages over the middleware (see :mod:`robotatfactory.pace`): each node publishes its paces on its
+own topic ``pace/<role>`` (relative: each robot's nodes pace among themselves) and subscribes only to the
+topics of the nodes it takes inputs from; ``diagnostic_msgs/DiagnosticArray`` with the cycle's stamp in the
+header and one status per message: ``name`` the node's role, ``message`` "pace" (or "hello" at the start), one
+``KeyValue`` per output (key, messages published so far). (One shared topic would deliver every node's pace
+to every node, 16 deliveries a cycle instead of 6: about a quarter of the messages of a paced cycle.)
 
 Start: a message published before its subscriber has been discovered is lost (ROS 2's discovery can take
 seconds), and a lost message would cost a timeout and make the run differ. So each node announces itself
-(*hello*) and, once it has heard the hello of every node it takes inputs from, says it is *ready*; the
-bridge publishes the first frame only when every node of the loop is ready. Pace messages are latched (a late subscriber still gets them)."""
+(*hello*, on its own pace topic: hearing it shows that the connection which will carry its paces is up) and,
+once it has heard the hello of every node it takes inputs from, says it is *ready* on the shared topic
+``pace``; the bridge publishes the first frame only when every node of the loop is ready. Pace messages are
+latched (a late subscriber still gets them)."""
 from __future__ import annotations
 
 import threading
@@ -18,7 +22,7 @@ from ..pace import Pace, PaceBook, PaceCounts
 from . import messages as rm
 from .mw import QoS
 
-TOPIC = "pace"
+TOPIC = "pace"  # the start's "ready" announcements; the paces of the node with role R are on f"{TOPIC}/{R}"
 DEPTH = 100
 HELLO, READY = -1.0, -2.0  # Pace.t of the start's announcements (on the wire: stamp 0, message hello / ready)
 _KIND = {HELLO: "hello", READY: "ready"}
@@ -71,8 +75,11 @@ class Pacer:
         self.ready: set[str] = set()  # nodes that said they are ready
         self._ready_cv = threading.Condition()
         self._said_ready = False
-        self.pub = node.publisher(TOPIC, DiagnosticArray, QoS.LATCHED, DEPTH)
-        self.sub = node.subscribe(TOPIC, DiagnosticArray, self._on_pace, QoS.LATCHED, DEPTH)
+        self.pub = node.publisher(f"{TOPIC}/{name}", DiagnosticArray, QoS.LATCHED, DEPTH)
+        self.pub_ready = node.publisher(TOPIC, DiagnosticArray, QoS.LATCHED, DEPTH)
+        self.subs = [node.subscribe(f"{TOPIC}/{up}", DiagnosticArray, self._on_pace, QoS.LATCHED, DEPTH)
+                     for up in sorted(self.upstream)]
+        self.sub_ready = node.subscribe(TOPIC, DiagnosticArray, self._on_ready, QoS.LATCHED, DEPTH)
         self.pub.publish(to_msg(Pace(name, HELLO)))
         self._check_ready()
         self._running = True
@@ -93,24 +100,34 @@ class Pacer:
         self.advance()
 
     def _on_pace(self, m: DiagnosticArray) -> None:
-        for p in from_msg(m):
-            if p.t in (HELLO, READY):
-                with self._ready_cv:
-                    self.heard.add(p.name)
-                    if p.t == READY:
-                        self.ready.add(p.name)
-                    self._ready_cv.notify_all()
-                self._check_ready()
-            elif self.book is not None:
-                self.book.paced(p)
+        """A message on an upstream node's pace topic: its hello (or, joined late, one of its paces: latched)
+        says the connection is up; a pace goes to the book."""
+        paces = from_msg(m)
+        fresh = [p.name for p in paces if p.name in self.upstream and p.name not in self.heard]
+        if fresh:
+            with self._ready_cv:
+                self.heard.update(fresh)
+                self._ready_cv.notify_all()
+            self._check_ready()
+        if self.book is not None:
+            for p in paces:
+                if p.t not in _KIND:
+                    self.book.paced(p)
         self.advance()
+
+    def _on_ready(self, m: DiagnosticArray) -> None:
+        names = [p.name for p in from_msg(m) if p.t == READY]
+        if names:
+            with self._ready_cv:
+                self.ready.update(names)
+                self._ready_cv.notify_all()
 
     def _check_ready(self) -> None:
         with self._ready_cv:
             if self._said_ready or not self.upstream <= self.heard:
                 return
             self._said_ready = True
-        self.pub.publish(to_msg(Pace(self.name, READY)))
+        self.pub_ready.publish(to_msg(Pace(self.name, READY)))
 
     def wait_ready(self, names, timeout: float = READY_TIMEOUT) -> bool:
         """Block until every node in ``names`` has said it is ready (False after ``timeout`` wall s, warned)."""
@@ -163,10 +180,13 @@ class Pacer:
             self.advance()
 
     def wait(self, t: float) -> bool:
-        """Block until cycle ``t``'s inputs are in; after the timeout warn, take what came and go on (False)."""
-        if self.book.wait(t, self.timeout):
-            return True
-        self.node.warn(f"{self.name}: paced: cycle {t:.3f} s still waits for {self.book.missing(t)} after "
-                       f"{self.timeout:g} s: going on without it ({self.book.timeouts} timeouts)", throttle=5.0)
-        self.book.give_up(t)
-        return False
+        """Block until cycle ``t``'s inputs are in; after the timeout warn, take what came and go on (False).
+        Either way cycle ``t`` is then done: its paces are forgotten (kept, they would pile up for the whole
+        run and make every later lookup slower)."""
+        ok = self.book.wait(t, self.timeout)
+        if not ok:
+            self.node.warn(f"{self.name}: paced: cycle {t:.3f} s still waits for {self.book.missing(t)} after "
+                           f"{self.timeout:g} s: going on without it ({self.book.timeouts} timeouts)", throttle=5.0)
+            self.book.give_up(t)
+        self.book.done(t)
+        return ok
