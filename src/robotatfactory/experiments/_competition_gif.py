@@ -39,7 +39,8 @@ def write_gif(run: dict, path: Path, mode: str = "bare_truth", field_name: str |
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.animation import PillowWriter
+    import numpy as np
+    from PIL import Image
     from matplotlib.patches import Polygon, Rectangle
     from matplotlib.transforms import Affine2D
 
@@ -70,16 +71,17 @@ def write_gif(run: dict, path: Path, mode: str = "bare_truth", field_name: str |
     ax.set_title(f"round {run.get('round', '?')} seed {run.get('seed', '?')} ({mode}): "
                  f"{run.get('points', '?')}/{run.get('max_points', '?')} points", fontsize=10)
     fig.tight_layout()
-    (trail,) = ax.plot([], [], lw=0.8, color="tab:blue", zorder=2)
-    body = Polygon([[0, 0]] * 4, closed=True, fc="tab:blue", ec="k", alpha=0.6, zorder=4)
+    # what moves is drawn on top of a still background each frame (blitting), not the whole figure again
+    (trail,) = ax.plot([], [], lw=0.8, color="tab:blue", zorder=2, animated=True)
+    body = Polygon([[0, 0]] * 4, closed=True, fc="tab:blue", ec="k", alpha=0.6, zorder=4, animated=True)
     ax.add_patch(body)
-    (nose,) = ax.plot([], [], lw=2, color="k", zorder=5)
+    (nose,) = ax.plot([], [], lw=2, color="k", zorder=5, animated=True)
     parts: dict = {}
-    picks = ax.scatter([], [], marker="^", s=40, color="tab:green", zorder=6, label="picked")
-    places = ax.scatter([], [], marker="v", s=40, color="tab:red", zorder=6, label="placed")
+    picks = ax.scatter([], [], marker="^", s=40, color="tab:green", zorder=6, label="picked", animated=True)
+    places = ax.scatter([], [], marker="v", s=40, color="tab:red", zorder=6, label="placed", animated=True)
     ax.legend(loc="upper right", fontsize=7)
     clock = ax.text(0.01, 0.98, "", transform=ax.transAxes, va="top", fontsize=10, family="monospace",
-                    bbox=dict(fc="white", ec="0.7", alpha=0.8))
+                    bbox=dict(fc="white", ec="0.7", alpha=0.8), animated=True)
     events = run.get("events") or []
     xs = [f[1] for f in frames]
     ys = [f[2] for f in frames]
@@ -90,24 +92,35 @@ def write_gif(run: dict, path: Path, mode: str = "bare_truth", field_name: str |
                 ((-lx / 2, -ly / 2), (lx / 2, -ly / 2), (lx / 2, ly / 2), (-lx / 2, ly / 2))]
 
     path = Path(path)
-    writer = PillowWriter(fps=min(fps, 10.0))
-    with writer.saving(fig, str(path), dpi=dpi):
-        for i in idx:
-            t, x, y, th, held, plist = frames[i]
-            trail.set_data(xs[: i + 1], ys[: i + 1])
-            body.set_xy(box(x, y, th, bx, by))
-            nose.set_data([x, x + 0.12 * math.cos(th)], [y, y + 0.12 * math.sin(th)])
-            for pid, px, py, pyaw in plist:
-                if pid not in parts:
-                    parts[pid] = Polygon([[0, 0]] * 4, closed=True, fc="tab:purple", ec="k", lw=0.5, zorder=3)
-                    ax.add_patch(parts[pid])
-                parts[pid].set_xy(box(px, py, pyaw, pd, pw))
-                parts[pid].set_facecolor("tab:orange" if pid == held else "tab:purple")
-            done = [e for e in events if e[0] <= t]
-            for sc, kind in ((picks, "picked"), (places, "placed")):
-                pts = [(e[2], e[3]) for e in done if str(e[1]).startswith(kind)]
-                sc.set_offsets(pts if pts else [[math.nan, math.nan]])
-            clock.set_text(f"t = {t:6.1f} s")
-            writer.grab_frame()
+    fig.set_dpi(dpi)
+    canvas = fig.canvas
+    canvas.draw()
+    background = canvas.copy_from_bbox(fig.bbox)
+    images = []
+    for i in idx:
+        t, x, y, th, held, plist = frames[i]
+        trail.set_data(xs[: i + 1], ys[: i + 1])
+        body.set_xy(box(x, y, th, bx, by))
+        nose.set_data([x, x + 0.12 * math.cos(th)], [y, y + 0.12 * math.sin(th)])
+        for pid, px, py, pyaw in plist:
+            if pid not in parts:
+                parts[pid] = Polygon([[0, 0]] * 4, closed=True, fc="tab:purple", ec="k", lw=0.5, zorder=3,
+                                     animated=True)
+                ax.add_patch(parts[pid])
+            parts[pid].set_xy(box(px, py, pyaw, pd, pw))
+            parts[pid].set_facecolor("tab:orange" if pid == held else "tab:purple")
+        done = [e for e in events if e[0] <= t]
+        for sc, kind in ((picks, "picked"), (places, "placed")):
+            pts = [(e[2], e[3]) for e in done if str(e[1]).startswith(kind)]
+            sc.set_offsets(pts if pts else [[math.nan, math.nan]])
+        clock.set_text(f"t = {t:6.1f} s")
+        canvas.restore_region(background)
+        for a in sorted([trail, *parts.values(), body, nose, picks, places, clock], key=lambda a: a.get_zorder()):
+            ax.draw_artist(a)
+        images.append(Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3].copy()))
+    # one palette for the whole film, taken from its last frame (it has every colour the others have)
+    palette = images[-1].quantize(colors=64)
+    film = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
+    film[0].save(path, save_all=True, append_images=film[1:], duration=round(1000 / min(fps, 10.0)), loop=0)
     plt.close(fig)
     return path
