@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 from ..competition.parts import PartType
 from .delay import DelayEstimator, lanes_of
 from .docking import Docker, DockSettings
-from .follower import DriveLimits, PathFollower
+from .follower import DriveLimits, PathFollower, ramp
 from .footprint import pose_in_front, wrap
 from .hybrid import NoCarryPath
 from .legs import LegPlan, LegPlanner
@@ -465,9 +465,7 @@ class RoundAgent:
         if abs(self._v) > 1e-9:  # stop first
             return self._brake()
         w = self.relocalizer.step(pose, self.dt) if self.carrying is None else 0.0  # no spin with a part on
-        al = self.limits.alpha_max * self.dt
-        self._w += max(-al, min(al, w - self._w))
-        return self._cmd(0.0, self._w)
+        return self._cmd(0.0, ramp(self._w, w, self.limits.alpha_max * self.dt))
 
     def _blocked(self, pose, why: str) -> None:
         """Something the map lacks blocks the leg: remember the spot ahead of the robot as an obstacle for
