@@ -376,9 +376,7 @@ class RoundAgent:
         self.attempts = 0
         self._leg_replans = 0
         if leg is not None:
-            self._no_path.pop(self.target, None)
-            self._escapes = 0
-            self._start_leg("to_pick", leg)
+            self._start_planned("to_pick", leg)
             return
         self._go("to_pick", pose)
 
@@ -671,8 +669,7 @@ class RoundAgent:
                                  f"{math.degrees(plate):.0f} deg, is not clear")
                     continue
                 self._floor_retreat = far
-                self._escapes = 0
-                self._start_leg("to_floor", leg)
+                self._start_planned("to_floor", leg)
                 return
         self.counters.no_path += 1
         self._event(self.t, f"no path to the lost part at ({xy[0]:.3f}, {xy[1]:.3f}): {err}")
@@ -767,7 +764,14 @@ class RoundAgent:
             self._event(self.t, f"no path to {self.target}: {e}")
             self._no_leg(pose)
             return
-        self._no_path.pop(self.target, None)
+        self._start_planned(mode, leg)
+
+    def _start_planned(self, mode: str, leg: LegPlan) -> None:
+        """Start ``leg``, just planned with a path, in ``mode``: the target's count of legs without a path and the
+        escape drives (:meth:`_no_leg`) start again. A leg to the lost part on the floor (``to_floor``) is not to
+        ``self.target`` (it still names the slot of the task the part fell in): that count is left alone."""
+        if mode != "to_floor":
+            self._no_path.pop(self.target, None)
         self._escapes = 0
         self._start_leg(mode, leg)
 
