@@ -49,6 +49,13 @@ FLOOR_BACK_OUT = 0.025
 #: rad: a part on the floor is approached along its plate's normal or, where that line is not clear (the part by a
 #: rib), this much to either side of it: the magnet's ray still meets the 8 cm plate, which it pulls flat
 FLOOR_SLANTS = (0.0, 0.3, -0.3)
+#: x dock.timeout: a floor pick still under way this long after it started is given up outright (a failed try),
+#: on top of the back-out at dock.timeout that every docking shares: the back-out itself may get nowhere (on the
+#: stand-in a floor pick backed into a wall for 280 s before this limit; a pick or a place backs out along its
+#: slot's normal to the approach pose its leg arrived on). Not the shared path: picks and places never had this
+#: limit (adding it would change them), and :meth:`RoundAgent._timeout` would count it in ``timeouts`` and log
+#: it, which it never did. So it stays the floor pick's own.
+FLOOR_PICK_GIVE_UP = 2
 
 
 @dataclass(frozen=True)
@@ -203,7 +210,7 @@ class RoundAgent:
         if self.mode in ("to_pick", "to_place", "to_floor"):
             ph = self.follower.phase
             return "drive" if ph in ("drive", "done") else ph
-        ph = (self.floor_docker if self.mode == "floor_pick" else self.docker).phase
+        ph = self._docking().phase
         return {"approach": "dock_approach", "grip": "dock_wait", "release": "dock_wait",
                 "back": "dock_back"}.get(ph, "dock_back")
 
@@ -290,9 +297,9 @@ class RoundAgent:
             else:
                 self._timeout(f"{self.mode.replace('_', ' ')} {self.target} took more than {self._budget:.0f} s")
             return self._brake()
-        if self.mode in ("pick", "place") and self.t - self._mode_t0 > self.settings.dock.timeout \
-                and self.docker.phase not in ("back", "done", "failed"):
-            self.docker.abort(pose)  # back out first, then the failure comes through the docker
+        if self.mode in ("pick", "place", "floor_pick") and self.t - self._mode_t0 > self.settings.dock.timeout \
+                and self._docking().phase not in ("back", "done", "failed"):
+            self._docking().abort(pose)  # back out first, then the failure comes through the docker
         if self.mode in ("to_pick", "to_place", "to_floor"):
             if self.stuck.update(self.t, pose, self._v, self._w):
                 if self._leg_replans < self.settings.recovery.replans:
@@ -310,22 +317,11 @@ class RoundAgent:
             if o.done:
                 self._start_dock(pose)
             return self._cmd(o.v, o.w)
-        if self.mode == "floor_pick":
-            dk = self.floor_docker
-            if self.t - self._mode_t0 > self.settings.dock.timeout and dk.phase not in ("back", "done", "failed"):
-                dk.abort(pose)
-            if self.t - self._mode_t0 > 2 * self.settings.dock.timeout:  # not even backing out gets anywhere
-                self._floor_failed("timeout", pose)
-                return self._brake()
-            o = dk.step(pose, contact)
-            self.magnet = o.magnet
-            if o.failed:
-                self._floor_failed(o.failed, pose)
-            elif o.done:
-                self._floor_picked(pose)
-            return self._cmd(o.v, o.w)
-        if self.mode in ("pick", "place"):
-            o = self.docker.step(pose, contact)
+        if self.mode == "floor_pick" and self.t - self._mode_t0 > FLOOR_PICK_GIVE_UP * self.settings.dock.timeout:
+            self._floor_failed("timeout", pose)  # not even backing out gets anywhere
+            return self._brake()
+        if self.mode in ("pick", "place", "floor_pick"):
+            o = self._docking().step(pose, contact)
             self.magnet = o.magnet
             if self.mode == "place" and not o.magnet and self._released_t is None:
                 self._released_t = self.t  # the part is free from now: the delay is measured from here
@@ -904,6 +900,9 @@ class RoundAgent:
             self._mode_t0 = self.t
 
     def _dock_done(self, pose) -> None:
+        if self.mode == "floor_pick":
+            self._floor_picked(pose)
+            return
         if self.mode == "pick":
             self.counters.picks += 1
             self.carrying = self.task.part
@@ -941,6 +940,9 @@ class RoundAgent:
         self.mode, self.need_state_after = "decide", self.t
 
     def _dock_failed(self, reason: str, pose) -> None:
+        if self.mode == "floor_pick":
+            self._floor_failed(reason, pose)
+            return
         self._event(self.t, f"{self.mode} at {self.target} failed: {reason}")
         if self.mode == "pick":
             self.failures[self.target] = self.failures.get(self.target, 0) + 1
@@ -965,6 +967,10 @@ class RoundAgent:
                 self.magnet = False
         self.carrying = None if self.mode == "pick" else self.carrying
         self.mode, self.need_state_after = "decide", self.t
+
+    def _docking(self) -> Docker:
+        """The docker of the docking under way: the floor pick's own, or the slots'."""
+        return self.floor_docker if self.mode == "floor_pick" else self.docker
 
     # ------------------------------------------------------------------------------------------ output
     def _cmd(self, v: float, w: float) -> AgentCommand:
