@@ -15,10 +15,9 @@ give up).
 
 A part lost on the way (the contact switch released while carrying) is looked for and picked up from the
 floor again (``recovery.refind``): the caller may hand the agent each LIDAR sweep (:meth:`RoundAgent.on_scan`,
-optional); the agent stops, finds the part in a sweep taken while it stands (:mod:`.refind`), or takes the spot
-where it fell, plans a leg to face its plate, approaches slowly with the magnet on until the contact switch
-closes, backs out and carries it on to a destination as after any pick (docs/agent.md, "A part dropped on the
-floor").
+optional). The modes ``search``, ``to_floor`` and ``floor_pick`` are the state machine's; their work (where it
+fell, the search in a sweep, the leg to face its plate, the floor pick's docker, giving it up) is
+:class:`~.floor.FloorRecovery`'s, which answers what to do next (docs/agent.md, "A part dropped on the floor").
 
 Events (``events``: list of (t, text)) say what it did: the task chosen, picked, placed, failures.
 """
@@ -30,25 +29,26 @@ from dataclasses import dataclass, field, replace
 from ..competition.parts import PartType
 from .delay import DelayEstimator, lanes_of
 from .docking import Docker, DockSettings
-from .follower import DriveLimits, PathFollower
-from .footprint import pose_in_front, wrap
+from .floor import FloorRecovery, LostPart, Next
+from .follower import DriveLimits, PathFollower, ramp
 from .hybrid import NoCarryPath
 from .legs import LegPlan, LegPlanner
 from .obstacles import FieldObstacles, PartObstacle
 from .planner import NoPath
 from .recovery import Relocalizer, StuckDetector, uncertainty_of
-from .refind import FloorSlot, FoundPart, Scan, find_part, lost_spot
+from .refind import Scan
 from .settings import AgentSettings
 from .state import FactoryState, SlotRef
 from .tasks import Done, Move, TaskPolicy, Wait
 
 
-#: m a floor pick backs out at least, past the dock pose: then the contact switch (1 cm beam) is clear of a part
-#: that was touched but not held (in the open the carrying approach distance is the dock pose itself)
-FLOOR_BACK_OUT = 0.025
-#: rad: a part on the floor is approached along its plate's normal or, where that line is not clear (the part by a
-#: rib), this much to either side of it: the magnet's ray still meets the 8 cm plate, which it pulls flat
-FLOOR_SLANTS = (0.0, 0.3, -0.3)
+#: x dock.timeout: a floor pick still under way this long after it started is given up outright (a failed try),
+#: on top of the back-out at dock.timeout that every docking shares: the back-out itself may get nowhere (on the
+#: stand-in a floor pick backed into a wall for 280 s before this limit; a pick or a place backs out along its
+#: slot's normal to the approach pose its leg arrived on). Not the shared path: picks and places never had this
+#: limit (adding it would change them), and :meth:`RoundAgent._timeout` would count it in ``timeouts`` and log
+#: it, which it never did. So it stays the floor pick's own.
+FLOOR_PICK_GIVE_UP = 2
 
 
 @dataclass(frozen=True)
@@ -82,34 +82,6 @@ class AgentCounters:
 
 
 @dataclass
-class LostPart:
-    """A part that fell off the magnet: its type, where it fell (``spot``: :func:`~.refind.lost_spot`, the plate's
-    heading then first), when (``t``, s), the destination it was going to, the state the agent expected then
-    (to tell a part that landed in a slot), where it is taken to lie now (``where``), floor picks tried, the
-    faces touched but not held."""
-
-    part: PartType
-    spot: FoundPart
-    t: float
-    dest: SlotRef | None
-    state: FactoryState | None
-    where: FoundPart | None = None
-    tries: int = 0
-    held_not: list = field(default_factory=list)  # plate headings (rad) tried that the magnet did not hold
-
-
-@dataclass
-class _Search:
-    """Where the search for a lost part is: ``stop`` (braking), ``look`` (standing, waiting for a sweep taken
-    since ``still``), ``turn`` (towards ``heading``, to look again)."""
-
-    phase: str = "stop"
-    still: float = 0.0
-    turned: bool = False
-    heading: float = 0.0
-
-
-@dataclass
 class RoundAgent:
     """See the module docstring. ``settings``: every tuning setting (:class:`~.settings.AgentSettings`)."""
 
@@ -131,20 +103,17 @@ class RoundAgent:
         cl = {k: v for k, v in (("w_max", c.w_max), ("alpha_max", c.alpha_max), ("v_max", c.v_max),
                                 ("long_spin", c.long_spin), ("w_long_spin", c.w_long_spin)) if v > 0}
         self.carry_limits = replace(self.limits, **cl)
-        self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
-                             DockSettings(v_dock=self.settings.dock.approach_speed,
-                                          v_place=self.settings.dock.place_speed,
-                                          v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back))
+        dock = DockSettings(v_dock=self.settings.dock.approach_speed, v_place=self.settings.dock.place_speed,
+                            v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back)
+        self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part, dock)
         # the place approach steers with a part on the magnet: no faster turning than carrying allows
         dl = self.docker
         dl.place_limits = replace(dl.place_limits, w_max=min(dl.place_limits.w_max, self.carry_limits.w_max),
                                   alpha_max=min(dl.place_limits.alpha_max, self.carry_limits.alpha_max))
         self.legs = LegPlanner(f, r, self.settings, self.limits, self.carry_limits, self.dt, self.docker.entry_speed)
-        # a part on the floor: no ribs to guide it, nothing behind it; approached slower, the magnet on early
-        rc = self.settings.recovery
-        self.floor_docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part,
-                                   DockSettings(v_dock=rc.refind_speed, v_place=self.settings.dock.place_speed,
-                                                v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back))
+        # a part dropped on the floor: found and picked up again (modes search, to_floor, floor_pick)
+        self.floor = FloorRecovery(f, r, self.settings, self.limits, self.dt, self.legs, dock, self.counters,
+                                   self._event, self._obstacles, self._mapped)
         self.mode = "wait_start"
         self.state: FactoryState | None = None
         self.state_time = -math.inf
@@ -175,18 +144,22 @@ class RoundAgent:
         self._no_path: dict = {}  # consecutive legs without a path per target (SlotRef)
         self._escapes = 0  # escape drives since the last leg that started
         self.scan: Scan | None = None  # the latest LIDAR sweep (on_scan), None: never given one
-        self.lost: LostPart | None = None  # a part that fell off the magnet, being recovered
-        self.floor_parts: list[PartObstacle] = []  # lost parts left on the floor: obstacles while carrying
-        self._floor_slot: FloorSlot | None = None  # the floor part being picked, as a slot
-        self._search = _Search()
         self._held_pose = None  # the pose at the last cycle the contact switch showed the carried part
-        self._floor_retreat = 0.0  # m from the floor part's centre the floor pick backs out to
-        self._pick_lost: LostPart | None = None  # a pick that let its part go: on the floor if not in its slot
 
     @property
     def d_dock(self) -> float:
         """Distance (m) from a slot's centre to base_link docked there (the leg planner's)."""
         return self.legs.d_dock
+
+    @property
+    def lost(self) -> LostPart | None:
+        """A part that fell off the magnet, being recovered (:attr:`.FloorRecovery.lost`), or None."""
+        return self.floor.lost
+
+    @property
+    def floor_parts(self) -> list[PartObstacle]:
+        """Lost parts left on the floor (:attr:`.FloorRecovery.left`): obstacles while carrying."""
+        return self.floor.left
 
     # ------------------------------------------------------------------------------------------ inputs
     @property
@@ -203,7 +176,7 @@ class RoundAgent:
         if self.mode in ("to_pick", "to_place", "to_floor"):
             ph = self.follower.phase
             return "drive" if ph in ("drive", "done") else ph
-        ph = (self.floor_docker if self.mode == "floor_pick" else self.docker).phase
+        ph = self._docking().phase
         return {"approach": "dock_approach", "grip": "dock_wait", "release": "dock_wait",
                 "back": "dock_back"}.get(ph, "dock_back")
 
@@ -290,9 +263,9 @@ class RoundAgent:
             else:
                 self._timeout(f"{self.mode.replace('_', ' ')} {self.target} took more than {self._budget:.0f} s")
             return self._brake()
-        if self.mode in ("pick", "place") and self.t - self._mode_t0 > self.settings.dock.timeout \
-                and self.docker.phase not in ("back", "done", "failed"):
-            self.docker.abort(pose)  # back out first, then the failure comes through the docker
+        if self.mode in ("pick", "place", "floor_pick") and self.t - self._mode_t0 > self.settings.dock.timeout \
+                and self._docking().phase not in ("back", "done", "failed"):
+            self._docking().abort(pose)  # back out first, then the failure comes through the docker
         if self.mode in ("to_pick", "to_place", "to_floor"):
             if self.stuck.update(self.t, pose, self._v, self._w):
                 if self._leg_replans < self.settings.recovery.replans:
@@ -310,22 +283,11 @@ class RoundAgent:
             if o.done:
                 self._start_dock(pose)
             return self._cmd(o.v, o.w)
-        if self.mode == "floor_pick":
-            dk = self.floor_docker
-            if self.t - self._mode_t0 > self.settings.dock.timeout and dk.phase not in ("back", "done", "failed"):
-                dk.abort(pose)
-            if self.t - self._mode_t0 > 2 * self.settings.dock.timeout:  # not even backing out gets anywhere
-                self._floor_failed("timeout", pose)
-                return self._brake()
-            o = dk.step(pose, contact)
-            self.magnet = o.magnet
-            if o.failed:
-                self._floor_failed(o.failed, pose)
-            elif o.done:
-                self._floor_picked(pose)
-            return self._cmd(o.v, o.w)
-        if self.mode in ("pick", "place"):
-            o = self.docker.step(pose, contact)
+        if self.mode == "floor_pick" and self.t - self._mode_t0 > FLOOR_PICK_GIVE_UP * self.settings.dock.timeout:
+            self._floor_failed("timeout", pose)  # not even backing out gets anywhere
+            return self._brake()
+        if self.mode in ("pick", "place", "floor_pick"):
+            o = self._docking().step(pose, contact)
             self.magnet = o.magnet
             if self.mode == "place" and not o.magnet and self._released_t is None:
                 self._released_t = self.t  # the part is free from now: the delay is measured from here
@@ -339,14 +301,8 @@ class RoundAgent:
     # ------------------------------------------------------------------------------------------ decisions
     def _decide(self, pose) -> None:
         st = self.state
-        if self._pick_lost is not None:  # a state seen since a pick let its part go: is it still in its slot?
-            lost, self._pick_lost = self._pick_lost, None
-            if isinstance(self.task, Move) and st.at(self.task.source) is None:
-                self.counters.parts_lost += 1
-                self._event(self.t, f"lost the {lost.part.label} part picking it at {self.task.source}: the server "
-                                    f"no longer lists it there; looking for it near ({lost.spot.x:.3f}, "
-                                    f"{lost.spot.y:.3f})")
-                self.lost = lost
+        if self.floor.pick_lost is not None:  # a state seen since a pick let its part go: is it still in its slot?
+            if self.floor.let_go_missing(self.t, self.task, st):
                 self._start_search()
                 return
         if self.carrying is not None:  # a place failed or the destination changed: find a new one
@@ -376,9 +332,7 @@ class RoundAgent:
         self.attempts = 0
         self._leg_replans = 0
         if leg is not None:
-            self._no_path.pop(self.target, None)
-            self._escapes = 0
-            self._start_leg("to_pick", leg)
+            self._start_planned("to_pick", leg)
             return
         self._go("to_pick", pose)
 
@@ -420,18 +374,13 @@ class RoundAgent:
         blocked spots still remembered (those past their time are forgotten here) and the parts lying on the
         floor."""
         self.blocked_spots = [b for b in self.blocked_spots if b[2] > self.t]
-        return self.legs.obstacles(self.state, self.blocked_spots, exclude, self._floor_obstacles())
+        return self.legs.obstacles(self.state, self.blocked_spots, exclude,
+                                   self.floor.obstacles(self.carrying is not None))
 
-    def _floor_obstacles(self, target: bool = True) -> list[PartObstacle]:
-        """The parts lying on the floor that legs keep clear of: those left there while a part is carried (a
-        carried part that hits one is knocked off; the empty robot may push one aside: kept clear of always, a part
-        left in front of the incoming warehouse closed its slots, 12 points against 19 in the four runs where a
-        part was left), and (``target``) the one being recovered."""
-        out = list(self.floor_parts) if self.carrying is not None else []
-        if target and self._floor_slot is not None:
-            fs = self._floor_slot
-            out.append(PartObstacle(fs.xy[0], fs.xy[1], fs.plate))
-        return out
+    def _mapped(self, floor: list[PartObstacle]) -> FieldObstacles:
+        """The last state's parts, the blocked spots as remembered (:meth:`_obstacles` forgets those past their
+        time) and ``floor``, parts lying on the floor (the floor recovery's checks of a turn and a straight line)."""
+        return self.legs.obstacles(self.state, self.blocked_spots, None, floor)
 
     def _can_turn(self, pose) -> bool:
         """The exact outline (carrying or not, 5 mm margin) at ``pose`` touches nothing."""
@@ -465,9 +414,7 @@ class RoundAgent:
         if abs(self._v) > 1e-9:  # stop first
             return self._brake()
         w = self.relocalizer.step(pose, self.dt) if self.carrying is None else 0.0  # no spin with a part on
-        al = self.limits.alpha_max * self.dt
-        self._w += max(-al, min(al, w - self._w))
-        return self._cmd(0.0, self._w)
+        return self._cmd(0.0, ramp(self._w, w, self.limits.alpha_max * self.dt))
 
     def _blocked(self, pose, why: str) -> None:
         """Something the map lacks blocks the leg: remember the spot ahead of the robot as an obstacle for
@@ -492,224 +439,56 @@ class RoundAgent:
         self.follower.stop()
         self.mode, self.need_state_after = "decide", self.t
         if self.settings.recovery.refind and self._held_pose is not None:
-            spot = lost_spot(self._held_pose, self.docker.magnet_x, self.field.part)
-            self.lost = LostPart(part, spot, self.t, self.target, self.state)
-            self._event(self.t, f"looking for it: it fell near ({spot.x:.3f}, {spot.y:.3f})")
+            self.floor.fell(self.t, part, self._held_pose, self.target, self.state)
             self._start_search()
 
     # ------------------------------------------------------------------------------------------ a part on the floor
     def _start_search(self) -> None:
-        """Stop, then look for the lost part (:meth:`_search_step`); a fresh server state is asked for (did it
-        land in a slot?)."""
+        """Stop, then look for the lost part (mode ``search``, :meth:`_search_step`); a fresh server state is asked
+        for (did it land in a slot?)."""
         self.follower.stop()
         self.mode, self.need_state_after = "search", self.t
-        self._search = _Search()
-        self._floor_slot = None
-        if self.lost is not None:
-            self.lost.where = None  # until this search says
+        self.floor.start_search()
 
     def _search_step(self, pose) -> AgentCommand:
-        """One cycle of looking for the lost part: brake to a stop; take the first LIDAR sweep measured since
-        the robot stands (waiting at most ``refind_scan_wait`` s; none given: at once); the part seen far to the
-        side (where the robot's own wheels hide part of it), turn towards it once and look again. Then
-        :meth:`_found`."""
-        s, rc = self._search, self.settings.recovery
-        if s.phase == "stop":
-            if abs(self._v) > 1e-9 or abs(self._w) > 1e-9:
-                return self._brake()
-            s.phase, s.still = "look", self.t
-        if s.phase == "turn":
-            err = wrap(s.heading - pose[2])
-            if (abs(err) < 0.05 and abs(self._w) < 0.2) or self.t - s.still > 6.0:
-                s.phase = "stop"
-                return self._brake()
-            al = self.limits.alpha_max * self.dt
-            w_max = min(self.limits.w_max, 1.2)
-            want = math.copysign(min(w_max, math.sqrt(2 * 0.7 * self.limits.alpha_max * abs(err)), 4.0 * abs(err)), err)
-            self._w += max(-al, min(al, want - self._w))
-            return self._cmd(0.0, self._w)
-        # look: a sweep measured after the robot stood still (its commands act command_latency later)
-        since = s.still + self.settings.command_latency + self.dt
-        sc = self.scan
-        fresh = sc is not None and sc.t0 >= since - 1e-9
-        waited = self.t - s.still
-        state_new = self.state_time >= self.lost.t
-        if (not fresh or not state_new) and waited < rc.refind_scan_wait and (sc is not None or not state_new):
+        """One cycle of the search (:meth:`.FloorRecovery.look`): braking or standing, a turn on the spot, or its
+        outcome carried out (:meth:`_floor_next`)."""
+        out = self.floor.look(self.t, pose, self._v, self._w, self.scan, self.state, self.state_time)
+        if isinstance(out, Next):
+            self._floor_next(out, pose)
             return self._brake()
-        found = None
-        if fresh:
-            found = find_part(sc, pose, self._lidar_mount(), self.lost.spot, self._obstacles_for_scan(),
-                              self.field.part, self.legs.footprint(False), self._search_radius(), rc.refind_margin)
-            if found is not None and not s.turned:
-                bearing = wrap(math.atan2(found.y - pose[1], found.x - pose[0]) - pose[2])
-                if abs(bearing) > rc.refind_turn and self._can_turn_to(pose, pose[2] + bearing, found):
-                    s.turned, s.phase, s.heading, s.still = True, "turn", wrap(pose[2] + bearing), self.t
-                    self._event(self.t, f"LIDAR: something at ({found.x:.3f}, {found.y:.3f}), "
-                                        f"{math.degrees(bearing):.0f} deg off the heading: turning to look at it")
-                    return self._brake()
-            if found is None and not s.turned:  # a part beside the robot may lie in its wheels' shadow
-                for turn in (math.pi / 2, -math.pi / 2):
-                    if self._can_turn_to(pose, pose[2] + turn, None):  # (not ahead, where the LIDAR sees)
-                        s.turned, s.phase, s.heading, s.still = True, "turn", wrap(pose[2] + turn), self.t
-                        self._event(self.t, "LIDAR: nothing near where it fell: a quarter turn to look past the "
-                                            "wheels")
-                        return self._brake()
-        why = "no LIDAR" if sc is None else ("no sweep since it stopped" if not fresh else "nothing there")
-        self._found(pose, found, why, seen_empty=fresh)
-        return self._brake()
+        return self._brake() if out is None else self._cmd(0.0, out)
 
-    def _search_radius(self) -> float:
-        """m around where the part fell that a search looks: ``refind_radius``, wider on each later try (a part
-        slides far on a smooth floor, or was pushed)."""
-        return self.settings.recovery.refind_radius * (1 + self.lost.tries)
-
-    def _lidar_mount(self) -> tuple[float, float]:
-        xyz = self.robot.lidar.xyz
-        return float(xyz[0]), float(xyz[1])
-
-    def _obstacles_for_scan(self) -> FieldObstacles:
-        """What the map explains in a sweep: walls, ribs, the parts the server lists and those left on the
-        floor (not the blocked spots: something the map lacks, which may be the part itself)."""
-        st = self.state if self.state is not None else FactoryState.from_letters("XXXX")
-        return self.legs.obstacles(st, (), None, self.floor_parts)
-
-    def _can_turn_to(self, pose, heading: float, part: FoundPart | None) -> bool:
-        """The outline (5 mm margin) clears everything, ``part`` on the floor included (the lost part where the
-        LIDAR saw it), at every 0.1 rad of the turn in place from ``pose`` to ``heading``."""
-        seen = [PartObstacle(part.x, part.y, part.facings[0])] if part is not None else []
-        ob = self.legs.obstacles(self.state, self.blocked_spots, None, self._floor_obstacles() + seen)
-        fp = self.legs.footprint(False).inflated(0.005)
-        d = wrap(heading - pose[2])
-        n = max(1, int(abs(d) / 0.1))
-        return not any(ob.collides(fp, (pose[0], pose[1], pose[2] + d * k / n)) for k in range(n + 1))
-
-    def _found(self, pose, found: FoundPart | None, why: str, seen_empty: bool = False) -> None:
-        """The search's outcome: the part where the LIDAR saw it; a part the server lists in a slot near where it
-        fell is left to the next decision; not seen in a sweep (``seen_empty``): a failed try (the next looks
-        farther); no sweep at all: where it fell, both faces of the plate possible. Then a leg to pick it up."""
-        lost = self.lost
-        landed = self._landed_in(found or lost.spot)
-        if landed is not None:
-            self._event(self.t, f"the lost {lost.part.label} part is in {landed} (the server lists it): deciding "
-                                "again")
-            self.lost = None
+    def _floor_next(self, nxt: Next, pose) -> None:
+        """Do what the floor recovery answered (:class:`.floor.Next`) in the state machine's modes."""
+        if nxt.to == "search":
+            self._start_search()
+        elif nxt.to == "decide":
             self.mode, self.need_state_after = "decide", self.t
-            return
-        if found is not None:
-            self.counters.parts_refound += 1
-            d = math.hypot(found.x - lost.spot.x, found.y - lost.spot.y)
-            self._event(self.t, f"LIDAR: found the lost {lost.part.label} part at ({found.x:.3f}, {found.y:.3f}), "
-                                f"{d * 100:.0f} cm from where it fell ({found.points} returns)")
-        elif seen_empty:
-            self._event(self.t, f"LIDAR: no part within {self._search_radius():.2f} m of where it fell")
-            self._floor_failed("not seen", pose)
-            return
-        else:
-            f0 = lost.spot.facings[0]
-            found = FoundPart(lost.spot.x, lost.spot.y, (f0, wrap(f0 + math.pi)))
-            self._event(self.t, f"LIDAR: {why}: picking it up where it fell ({found.x:.3f}, {found.y:.3f})")
-        lost.where = found
-        self._leg_replans = 0
-        self._go("to_floor", pose)
-
-    def _landed_in(self, found: FoundPart) -> SlotRef | None:
-        """A slot within ``refind_radius`` of where the part fell or was found that the server's state (asked
-        since the loss) shows occupied and that was empty when it fell: the part landed there. Machine
-        outputs are left out (a machine fills them)."""
-        st, before = self.state, self.lost.state
-        if st is None or before is None or self.state_time < self.lost.t:
-            return None
-        r = self.settings.recovery.refind_radius
-        for zone in ("incoming", "machine_A", "machine_B", "outgoing"):
-            for n, (now, then) in enumerate(zip(st.zone(zone), before.zone(zone)), start=1):
-                slot = self.field.slot(zone, n)
-                if now is None or then is not None or slot.role == "output":
-                    continue
-                if min(math.hypot(slot.xy[0] - p.x, slot.xy[1] - p.y) for p in (found, self.lost.spot)) <= r:
-                    return SlotRef(zone, n)
-        return None
+        elif nxt.to == "to_floor":
+            self._leg_replans = 0
+            self._go("to_floor", pose)
+        elif nxt.to == "failed":
+            self._floor_failed(nxt.reason, pose)
+        elif nxt.to == "leg":
+            self._start_planned("to_floor", nxt.leg)
+        elif nxt.to == "escape":
+            self._escapes += 1
+            self.follower.limits = self.limits
+            self._escape(pose, nxt.point, no_spin=True)
+        else:  # no_path
+            self._no_leg(pose)
 
     def _go_floor(self, pose) -> None:
-        """Plan the leg to the lost part's approach pose, facing its plate (tries alternate between the two faces
-        the LIDAR cannot tell apart; a face the magnet did not hold is not tried again), straight along the
-        plate's normal or, where that line is not clear, at :data:`FLOOR_SLANTS` to it; start it. Standing too
-        close to the part to turn, first drive straight away from it. No leg at all: :meth:`_no_leg`."""
-        lost = self.lost
-        facings = lost.where.facings
-        order = [facings[(lost.tries + k) % len(facings)] for k in range(len(facings))]
-        order = [f for f in order if not any(abs(wrap(f - w)) < 0.5 for w in lost.held_not)]
-        if not order:
-            self._leave_floor_part("its plate faces where the robot cannot reach (the other side did not hold)")
-            return
-        xy = (lost.where.x, lost.where.y)
-        self._floor_slot = FloorSlot(xy, order[0], plate=order[0])
-        obstacles = self._obstacles()
-        if self._escapes < self.settings.recovery.escape_tries:
-            # standing next to it (it fell beside the robot): first straight away to where the robot may turn
-            point = self.legs.escape_point(obstacles, pose, False)
-            if point is not None:
-                self._escapes += 1
-                self._event(self.t, f"too close to the part on the floor: driving to ({point[0]:.2f}, "
-                                    f"{point[1]:.2f}) first")
-                behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
-                self.follower.limits = self.limits
-                self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=True)
-                self.mode, self._mode_t0 = "escape", self.t
-                return
-        err = None
-        for plate in order:
-            for slant in FLOOR_SLANTS:
-                self._floor_slot = FloorSlot(xy, wrap(plate + slant), plate=plate)
-                obstacles = self._obstacles()
-                try:
-                    leg = self.legs.plan(obstacles, pose, self._floor_slot, False, "pick")
-                except NoPath as e:
-                    err = e
-                    continue
-                d = math.hypot(leg.goal[0] - xy[0], leg.goal[1] - xy[1])
-                far = max(d, self.d_dock + FLOOR_BACK_OUT)
-                if not self._floor_line_clear(far):  # (a part lying by a wall: the approach pose beyond it)
-                    err = NoPath(f"the straight approach from {far:.2f} m, plate towards "
-                                 f"{math.degrees(plate):.0f} deg, is not clear")
-                    continue
-                self._floor_retreat = far
-                self._escapes = 0
-                self._start_leg("to_floor", leg)
-                return
-        self.counters.no_path += 1
-        self._event(self.t, f"no path to the lost part at ({xy[0]:.3f}, {xy[1]:.3f}): {err}")
-        self._no_leg(pose)
-
-    def _floor_line_clear(self, far: float) -> bool:
-        """The empty outline (5 mm margin) is clear all along the straight line the floor pick drives and backs
-        out on: from ``far`` m in front of the part (``_floor_slot``) to its dock pose, the part itself left out."""
-        fs = self._floor_slot
-        ob = self.legs.obstacles(self.state, self.blocked_spots, None, self._floor_obstacles(target=False))
-        a, b = pose_in_front(fs, far), pose_in_front(fs, self.d_dock)
-        return self.legs.path_planner(ob, False).straight_clear(a[:2], b[:2], self.legs.footprint(False), 0.005) \
-            and not ob.collides(self.legs.footprint(False).inflated(0.005), b)
-
-    def _start_floor_dock(self, pose) -> None:
-        fs = self._floor_slot
-        v0 = self.follower.v
-        self.follower.v = self.follower.w = 0.0
-        # back out along the line it came (checked clear), far enough to tell a held part from one only touched
-        self.floor_docker.start_pick(fs, pose, self._floor_retreat, v0=v0)
-        self._event(self.t, f"docking to pick the lost {self.lost.part.label} part from the floor at "
-                            f"({fs.xy[0]:.3f}, {fs.xy[1]:.3f}), plate towards {math.degrees(fs.plate):.0f} deg"
-                            f"{'' if fs.facing == fs.plate else f', from {math.degrees(wrap(fs.facing - fs.plate)):+.0f} deg'} "
-                            f"(try {self.lost.tries + 1} of {self.settings.recovery.refind_tries})")
-        self.mode, self._mode_t0 = "floor_pick", self.t
+        """Plan the leg to the lost part on the floor and start it (:meth:`.FloorRecovery.plan`); standing too close
+        to it to turn, first drive straight away from it (up to ``escape_tries`` times); no leg: :meth:`_no_leg`."""
+        self._floor_next(self.floor.plan(self.t, pose, self._escapes < self.settings.recovery.escape_tries), pose)
 
     def _floor_picked(self, pose) -> None:
         """Picked up from the floor: on as after any pick, to a destination."""
-        lost = self.lost
-        self.counters.floor_picks += 1
+        lost = self.floor.picked(self.t)
         self.carrying = lost.part
-        self._event(self.t, f"picked the lost {lost.part.label} part up from the floor, {self.t - lost.t:.1f} s after "
-                            "it fell")
-        self.docker.held_offset = self.floor_docker.held_offset  # the place repeats the offset it was held with
-        self.lost, self._floor_slot = None, None
+        self.docker.held_offset = self.floor.docker.held_offset  # the place repeats the offset it was held with
         self._held_pose = tuple(pose[:3])
         dest = self._usable(self.policy.destinations(self.state, self.carrying))
         if not dest:
@@ -720,36 +499,11 @@ class RoundAgent:
         self._go_fastest("to_place", pose, dest)
 
     def _floor_failed(self, reason: str, pose) -> None:
-        """A floor pick (or the leg to it) failed: look again (it may have been pushed; the next try faces its
-        other side), or after ``refind_tries`` leave it where it lies, an obstacle from now on."""
-        lost = self.lost
-        self.counters.floor_pick_failures += 1
-        lost.tries += 1
+        """A floor pick (or the leg to it, or a search) failed (:meth:`.FloorRecovery.failed`): look again, or the
+        part is left where it lies and the round goes on."""
         self.magnet = False
         self.follower.stop()
-        n = self.settings.recovery.refind_tries
-        self._event(self.t, f"picking the lost {lost.part.label} part from the floor failed: {reason} "
-                            f"(try {lost.tries} of {n})")
-        if reason == "part_lost" and self._floor_slot is not None:  # touched, not held: the plate is not there
-            lost.held_not.append(self._floor_slot.plate)
-        if lost.tries < n:
-            self._start_search()
-            return
-        self._leave_floor_part(f"after {lost.tries} tries")
-
-    def _leave_floor_part(self, why: str) -> None:
-        """Give the lost part up: it stays where it lies, an obstacle from now on for legs with a part on the
-        magnet (:meth:`_floor_obstacles`; planned through, the carried part hit it: a cascade of losses); the
-        round goes on."""
-        lost = self.lost
-        w, fs = lost.where, self._floor_slot
-        if w is not None:  # (where the last search saw it or took it to be; not seen: nowhere known)
-            self.floor_parts.append(PartObstacle(w.x, w.y, fs.plate if fs is not None else w.facings[0]))
-        self.counters.parts_left += 1
-        at = f" at ({w.x:.3f}, {w.y:.3f})" if w is not None else ""
-        self._event(self.t, f"left the lost {lost.part.label} part on the floor{at}: {why}")
-        self.lost, self._floor_slot = None, None
-        self.mode, self.need_state_after = "decide", self.t
+        self._floor_next(self.floor.failed(self.t, reason), pose)
 
     def _go(self, mode: str, pose) -> None:
         """Plan the leg to ``self.target`` from ``pose`` and start it in ``mode`` (``to_pick`` / ``to_place``);
@@ -769,7 +523,14 @@ class RoundAgent:
             self._event(self.t, f"no path to {self.target}: {e}")
             self._no_leg(pose)
             return
-        self._no_path.pop(self.target, None)
+        self._start_planned(mode, leg)
+
+    def _start_planned(self, mode: str, leg: LegPlan) -> None:
+        """Start ``leg``, just planned with a path, in ``mode``: the target's count of legs without a path and the
+        escape drives (:meth:`_no_leg`) start again. A leg to the lost part on the floor (``to_floor``) is not to
+        ``self.target`` (it still names the slot of the task the part fell in): that count is left alone."""
+        if mode != "to_floor":
+            self._no_path.pop(self.target, None)
         self._escapes = 0
         self._start_leg(mode, leg)
 
@@ -785,9 +546,7 @@ class RoundAgent:
             self.counters.escapes += 1
             self._event(self.t, f"too close to an obstacle at ({pose[0]:.2f}, {pose[1]:.2f}): driving to "
                                 f"({point[0]:.2f}, {point[1]:.2f}) first")
-            behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
-            self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=carrying)
-            self.mode, self._mode_t0 = "escape", self.t
+            self._escape(pose, point, no_spin=carrying)
             return
         if self.lost is not None and not carrying:  # on the way to a part on the floor
             self._floor_failed("no path", pose)
@@ -803,6 +562,13 @@ class RoundAgent:
                 self.failures[self.task.source] = max(self.failures.get(self.task.source, 0),
                                                       self.settings.tasks.give_up_after)
         self.mode, self.need_state_after = "decide", self.t + self.settings.tasks.state_period
+
+    def _escape(self, pose, point: tuple[float, float], no_spin: bool) -> None:
+        """Drive straight to ``point`` (mode ``escape``), backwards when it lies behind; then decide again from
+        there, or go on to the part on the floor."""
+        behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
+        self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=no_spin)
+        self.mode, self._mode_t0 = "escape", self.t
 
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
         """Start the leg to the destination of ``dest`` (best first) that takes the least time among those of
@@ -881,12 +647,13 @@ class RoundAgent:
         return True
 
     def _start_dock(self, pose) -> None:
-        if self.mode == "to_floor":
-            self._start_floor_dock(pose)
-            return
-        slot = self.field.slot(self.target.zone, self.target.number)
         v0 = self.follower.v
         self.follower.v = self.follower.w = 0.0  # the docker drives from here (at the speed it arrived with)
+        if self.mode == "to_floor":
+            self.floor.start_dock(self.t, pose, v0)
+            self.mode, self._mode_t0 = "floor_pick", self.t
+            return
+        slot = self.field.slot(self.target.zone, self.target.number)
         if self.mode == "to_pick":
             retreat = self.legs.retreat(self._obstacles(exclude=self.target), self.target, carrying=True)
             self.docker.start_pick(slot, pose, retreat, v0=v0)
@@ -902,6 +669,9 @@ class RoundAgent:
             self._mode_t0 = self.t
 
     def _dock_done(self, pose) -> None:
+        if self.mode == "floor_pick":
+            self._floor_picked(pose)
+            return
         if self.mode == "pick":
             self.counters.picks += 1
             self.carrying = self.task.part
@@ -939,6 +709,9 @@ class RoundAgent:
         self.mode, self.need_state_after = "decide", self.t
 
     def _dock_failed(self, reason: str, pose) -> None:
+        if self.mode == "floor_pick":
+            self._floor_failed(reason, pose)
+            return
         self._event(self.t, f"{self.mode} at {self.target} failed: {reason}")
         if self.mode == "pick":
             self.failures[self.target] = self.failures.get(self.target, 0) + 1
@@ -952,10 +725,8 @@ class RoundAgent:
             if reason == "part_lost" and self.settings.recovery.refind and isinstance(self.task, Move):
                 # held, then let go backing out: if the server no longer lists it in its slot, it lies on the
                 # floor between the slot and the robot (:meth:`_decide` asks)
-                spot = lost_spot(pose, self.docker.magnet_x, self.field.part)
-                slot = self.field.slot(self.target.zone, self.target.number)
-                spot = FoundPart(spot.x, spot.y, (slot.facing,))
-                self._pick_lost = LostPart(self.task.part, spot, self.t, self.task.target, self.state)
+                self.floor.let_go(self.t, self.task.part, pose, self.field.slot(self.target.zone, self.target.number),
+                                  self.task.target, self.state)
         else:
             self.counters.place_failures += 1
             self.place_failed[self.target] = self.place_failed.get(self.target, 0) + 1
@@ -963,6 +734,10 @@ class RoundAgent:
                 self.magnet = False
         self.carrying = None if self.mode == "pick" else self.carrying
         self.mode, self.need_state_after = "decide", self.t
+
+    def _docking(self) -> Docker:
+        """The docker of the docking under way: the floor pick's own (:attr:`.FloorRecovery.docker`), or the slots'."""
+        return self.floor.docker if self.mode == "floor_pick" else self.docker
 
     # ------------------------------------------------------------------------------------------ output
     def _cmd(self, v: float, w: float) -> AgentCommand:

@@ -31,6 +31,25 @@ from .footprint import wrap
 from .smooth import Piece, SmoothPath, smooth_path
 
 
+def spin_rate(err: float, w_max: float, gain: float, offset: float = 0.0, alpha_max: float | None = None,
+              brake: float = 1.0) -> float:
+    """The turn rate (rad/s) of a turn on the spot towards a heading ``err`` rad away (signed as ``err``):
+    ``gain`` x |err| + ``offset`` (the offset keeps the last hundredths of a radian moving), at most ``w_max``
+    and, with ``alpha_max``, no faster than braking at ``brake`` x ``alpha_max`` stops within |err|
+    (sqrt(2 brake alpha_max |err|)). The follower's turns on the spot, the re-localization's and the search for a
+    lost part's (:mod:`.floor`) use it, each with its own figures, ramped by :func:`ramp`."""
+    a = abs(err)
+    cap = min(w_max, gain * a + offset)
+    if alpha_max is not None:
+        cap = min(cap, math.sqrt(2 * brake * alpha_max * a))
+    return math.copysign(cap, err)
+
+
+def ramp(now: float, want: float, step: float) -> float:
+    """``now`` moved towards ``want`` by at most ``step`` (a speed within its acceleration limit times a cycle)."""
+    return now + max(-step, min(step, want - now))
+
+
 @dataclass(frozen=True)
 class DriveLimits:
     """Speed and acceleration limits of the base (m/s, m/s^2, rad/s, rad/s^2) and the profile's settings."""
@@ -297,9 +316,8 @@ class PathFollower:
         else:
             self._spinning = False
         # acceleration limits
-        dv, dw = L.a_max * self.dt, L.alpha_max * self.dt
-        self.v += max(-dv, min(dv, v_t - self.v))
-        self.w += max(-dw, min(dw, w_t - self.w))
+        self.v = ramp(self.v, v_t, L.a_max * self.dt)
+        self.w = ramp(self.w, w_t, L.alpha_max * self.dt)
         if self.phase == "done" and not passed_end and abs(self.v) < 1e-9 and abs(self.w) < 1e-9:
             self.v = self.w = 0.0
         v_out = -self.v if rev else self.v
@@ -327,5 +345,4 @@ class PathFollower:
         if drive:  # a correction on top of the feed-forward
             return math.copysign(min(L.w_max, L.k_drive * abs(err)), err)
         # braking-distance limited so an in-place turn stops on the heading
-        cap = min(L.w_max, math.sqrt(2 * L.alpha_max * abs(err)), L.k_heading * abs(err) + 0.05)
-        return math.copysign(cap, err) if abs(err) > 1e-4 else 0.0
+        return spin_rate(err, L.w_max, L.k_heading, 0.05, L.alpha_max) if abs(err) > 1e-4 else 0.0

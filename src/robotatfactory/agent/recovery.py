@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from .follower import spin_rate
 from .footprint import wrap
 
 
@@ -104,7 +105,7 @@ class Relocalizer:
                 return 0.0
             nxt = th + math.copysign(min(self.settings.step, abs(err)), err)
             if self.can_turn((pose[0], pose[1], nxt)):
-                return math.copysign(min(self.settings.w, 2.0 * abs(err) + 0.05), err)
+                return spin_rate(err, self.settings.w, 2.0, 0.05)
             self.blocked += 1  # this marker cannot be faced from here: the next one
             self.k += 1
             self._dwell = 0.0
