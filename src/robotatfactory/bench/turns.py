@@ -272,40 +272,17 @@ def scripted(field, robot) -> dict:
 
 # ------------------------------------------------------------------------------------------ the agent's turns
 def agent_track(round_no: int, seed: int, limit: float = 300.0) -> Track:
-    """One round of the competition agent on the bare stand-in, ground truth as its pose (the loop of
-    ``raf experiment competition --mode bare_truth``, without its pose noise and delays), every cycle kept."""
-    from ..agent.behaviour import RoundAgent
-    from ..agent.client import FactoryClient
-    from ..agent.settings import agent_settings
-    from ..competition import FactoryServer
-    from ..field import load_field
-    from ..robot import load_robot
-    from ..sim import Simulator
-    from ..sim.config import sim_config
-    from ..simtwo import Command
+    """One round of the competition agent on the bare stand-in, ground truth as its pose (``raf experiment
+    competition --mode bare_truth``'s loop, :func:`~..experiments.competition.play_round`, without pose noise or
+    delays), every cycle kept."""
+    from ..experiments.competition import play_round
 
-    field, robot = load_field(), load_robot()
-    sim = Simulator(field, robot, sim_config({"camera": False, "lidar": False, "round_no": round_no, "seed": seed,
-                                              "start_after": 1.0}))
-    server = FactoryServer(sim.factory, port=0, clock=lambda: sim.time).start()
     rows = []
-    try:
-        with FactoryClient(*server.address, timeout=0.5) as client:
-            client.wait_pong()
-            agent = RoundAgent(field, robot, agent_settings(None))
-            contact = False
-            while sim.time < limit and agent.mode != "done":
-                if agent.wants_state:
-                    st = client.poll_state()
-                    if st is not None:
-                        agent.on_state(st, sim.time)
-                c = agent.step(sim.time, sim.pose, contact)
-                f = sim.step_cycle(Command(c.v, c.w, c.magnet))
-                contact = f.contact
-                rows.append((f.time, *f.enc_total, f.x, f.y, f.theta, c.v, c.w, bool(c.magnet)))
-    finally:
-        server.stop()
-        sim.close()
+
+    def keep(sim, agent, c, f) -> None:
+        rows.append((f.time, *f.enc_total, f.x, f.y, f.theta, c.v, c.w, bool(c.magnet)))
+
+    play_round(round_no, seed, limit, after_cycle=keep)
     a = np.array(rows, dtype=float)
     return Track(a[:, 0], a[:, 1:3], a[:, 3:6], a[:, 6:8], a[:, 8] > 0.5)
 
