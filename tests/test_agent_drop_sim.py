@@ -6,6 +6,7 @@ import math
 
 from robotatfactory.agent.obstacles import FieldObstacles, PartObstacle, part_polygon, polygons_overlap
 from robotatfactory.agent.footprint import robot_footprint
+from robotatfactory.agent.refind import lost_spot
 from robotatfactory.experiments.competition import play_round
 
 
@@ -25,8 +26,8 @@ def test_a_part_knocked_off_the_magnet_is_found_picked_up_and_scored(field, robo
             return
         x, y, th = sim.pose
         pid = sim.held
-        d = 0.1125  # the held part's centre ahead of base_link
-        px, py, f = x + d * math.cos(th) + 0.14 * math.sin(th), y + d * math.sin(th) - 0.14 * math.cos(th), th + math.pi + 0.5
+        held = lost_spot(sim.pose, robot.electromagnet["x"], field.part)  # the held part's centre
+        px, py, f = held.x + 0.14 * math.sin(th), held.y - 0.14 * math.cos(th), th + math.pi + 0.5
         poly = part_polygon(field.part, PartObstacle(px, py, f))
         others = FieldObstacles(field, [PartObstacle(*sim.part_pose(q)) for q in sim.parts.ids if q != pid])
         assert not any(polygons_overlap(poly, p) for p in others.polygons + fp.polygons(x, y, th)), \

@@ -20,7 +20,6 @@ NAME = "drops"
 HELP = ("parts knocked off the magnet on the bare stand-in (LIDAR on): runs at the maximum and points with and "
         "without the agent's recovery (recovery.refind), seconds from the loss to the re-pick")
 TARGETS = {"refind_max_score_runs": "more than without the recovery (refind_off_max_score_runs)"}
-MAGNET_AHEAD_M = 0.1125  # m from base_link to the held part's centre (the magnet's face plus half the part)
 
 
 class KnockOff:
@@ -30,7 +29,7 @@ class KnockOff:
         from ..agent.footprint import robot_footprint
 
         rng = random.Random(seed)
-        self.field, self.fp = field, robot_footprint(robot)
+        self.field, self.fp, self.magnet_x = field, robot_footprint(robot), float(robot.electromagnet["x"])
         self.after, self.side = rng.uniform(0.6, 2.5), rng.choice((-1, 1))
         self.lateral, self.turn = rng.uniform(0.13, 0.17), rng.uniform(-0.8, 0.8)
         self.picked_t: float | None = None
@@ -43,11 +42,14 @@ class KnockOff:
             self.picked_t = sim.time
         if sim.time - self.picked_t <= self.after:
             return
-        x, y, th = sim.pose
+        from ..agent.refind import lost_spot
+
+        th = sim.pose[2]
         pid = sim.held
+        held = lost_spot(sim.pose, self.magnet_x, self.field.part)  # the held part's centre
         for side in (self.side, -self.side):
-            px = x + MAGNET_AHEAD_M * math.cos(th) - side * self.lateral * math.sin(th)
-            py = y + MAGNET_AHEAD_M * math.sin(th) + side * self.lateral * math.cos(th)
+            px = held.x - side * self.lateral * math.sin(th)
+            py = held.y + side * self.lateral * math.cos(th)
             facing = th + math.pi + self.turn
             if self._free(sim, pid, px, py, facing):
                 sim.place_part(pid, px, py, facing)
