@@ -1,6 +1,7 @@
 """The path follower: its rules on a kinematic robot, and in closed loop on the bare stand-in simulator
 (SimTwo's speed PID, no ramp). The simulator's ground-truth pose stands in for the EKF only here."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -175,3 +176,23 @@ def test_a_long_turn_on_the_spot_runs_at_the_long_spin_rate(robot):
     f = PathFollower(DriveLimits.from_robot(robot, w_max=1.5, alpha_max=6.0), dt)  # without it: the normal rate
     f.start([(0.0, 0.0)], final_heading=2.6)
     assert max(abs(o.w) for o in drive_kinematic(f, (0.0, 0.0, 0.0), dt)[0]) > 1.4
+
+
+def test_with_spin_settle_a_turn_on_the_spot_stops_on_the_heading_before_driving_off(robot):
+    """DriveLimits.spin_settle: the turn at a corner ends standing within spin_settle of the aim before the robot
+    speeds up (carrying, driving off a turn with the heading feedback turning back slips the wheels under the part,
+    docs/localization.md); without it the robot drives off while still turning (within heading_tolerance / 2)."""
+    dt = robot.control_period
+    base = DriveLimits.from_robot(robot, w_max=1.5, alpha_max=6.0)
+    drive_off = {}
+    for settle in (0.0, 0.03):
+        f = PathFollower(replace(base, spin_settle=settle), dt)
+        f.start([(0.0, 0.0), (0.0, 0.5)])  # a quarter turn left on the spot, then half a metre straight
+        outs, poses = drive_kinematic(f, (0.0, 0.0, 0.0), dt)
+        assert outs[-1].done and math.hypot(poses[-1][0], poses[-1][1] - 0.5) < 0.01
+        first = next(i for i, o in enumerate(outs) if o.v > 0)  # the first cycle that moves forward
+        drive_off[settle] = (abs(outs[first].w), abs(wrap(poses[first - 1][2] - math.pi / 2)))
+    w_on, err_on = drive_off[0.03]
+    assert w_on <= 6.0 * dt + 1e-9 and err_on <= 0.03  # stopped on the heading
+    w_off, err_off = drive_off[0.0]
+    assert w_off > 0.5 and err_off > 0.03  # still turning fast, the heading not yet reached

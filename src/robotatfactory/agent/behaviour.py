@@ -101,9 +101,13 @@ class RoundAgent:
         self.follower = PathFollower(self.limits, self.dt)
         c = self.settings.carry
         cl = {k: v for k, v in (("w_max", c.w_max), ("alpha_max", c.alpha_max), ("v_max", c.v_max),
-                                ("long_spin", c.long_spin), ("w_long_spin", c.w_long_spin)) if v > 0}
+                                ("long_spin", c.long_spin), ("w_long_spin", c.w_long_spin),
+                                ("spin_settle", c.spin_settle), ("spin_settle_within", c.spin_settle_within))
+              if v > 0}
         self.carry_limits = replace(self.limits, **cl)
-        dock = DockSettings(v_dock=self.settings.dock.approach_speed, v_place=self.settings.dock.place_speed,
+        ds = self.settings.dock
+        dock = DockSettings(v_dock=ds.approach_speed, v_place=ds.place_speed, magnet_early=ds.magnet_early,
+                            press_time=ds.press_time,
                             v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part, dock)
         # the place approach steers with a part on the magnet: no faster turning than carrying allows

@@ -52,6 +52,10 @@ class DockSettings:
     # the predicted pose by the loop's latency (80 ms on SimTwo and raf sim)
     confirm: float = 0.2
     compensate_offset: bool = True  # place with the robot as far off the slot's normal as it was at the pick  # the magnet on during the pick approach: it takes the plate within its beam
+    # picking, after the contact the robot drives on to the dock pose (at most press_time s): a part standing out of
+    # its slot, turned, is squared against the slot's back wall between it and the magnet's face instead of
+    # pivoting on the face's edge (0: it stops at the contact)
+    press_time: float = 0.4
 
 
 @dataclass(frozen=True)
@@ -124,6 +128,7 @@ class Docker:
         self._failing = None
         self.stuck.reset()
         self._steps = 0
+        self._pressing: float | None = None
         self._shift = self.held_offset if mode == "place" and self.settings.compensate_offset else 0.0
         self._lateral = []
         target = self._shifted(pose_in_front(slot, distance))
@@ -149,6 +154,11 @@ class Docker:
         s = self._slot
         return (pose[0] - s.xy[0]) * math.sin(s.facing) - (pose[1] - s.xy[1]) * math.cos(s.facing)
 
+    def _along(self, pose) -> float:
+        """base_link's distance from the slot's centre along its normal (m)."""
+        s = self._slot
+        return (pose[0] - s.xy[0]) * math.cos(s.facing) + (pose[1] - s.xy[1]) * math.sin(s.facing)
+
     def _on_normal(self, pose, ahead: float = 0.01) -> tuple[float, float]:
         s = self._slot
         u = (math.cos(s.facing), math.sin(s.facing))
@@ -168,7 +178,14 @@ class Docker:
             out = self.follower.step(pose)
             if self.mode == "pick":
                 self._lateral = (self._lateral + [self._lateral_offset(pose)])[-6:]
-            if self.mode == "pick" and contact:
+            if self.mode == "pick" and contact and self.settings.press_time > 0 and self._pressing is None:
+                self._pressing = 0.0
+            if self._pressing is not None:
+                self._pressing += self.dt
+                along = self._along(pose)
+                if along > self.dock_distance() and self._pressing < self.settings.press_time and not out.done:
+                    return self._out(out.v, out.w)  # on towards the wall
+            if self.mode == "pick" and (contact or self._pressing is not None):
                 # the magnet holds the part where it met it: the robot's offset from the slot's normal now is
                 # the part's from the magnet's centre line, to be repeated at the place (mean of 6 cycles)
                 self.held_offset = sum(self._lateral) / len(self._lateral)

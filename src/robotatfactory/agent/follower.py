@@ -80,6 +80,14 @@ class DriveLimits:
     # the other way after a long fast one pivots it off (docs/agent.md, "The carry envelope")
     long_spin: float = 0.0
     w_long_spin: float = 0.0
+    # rad (0: off): a turn on the spot ends standing within this of the heading before the robot drives off
+    # (off: it drives off still turning once within heading_tolerance / 2). Carrying, driving off a turn while
+    # the heading feedback turns back slips the wheels under the part where the encoders cannot see it
+    # (docs/localization.md, "Turning with a part")
+    spin_settle: float = 0.0
+    # m (0: every turn): spin_settle only for a turn with at most this much path left after it (a short
+    # approach, where no camera fix comes in time to correct the heading; on a longer leg the overlap saves time)
+    spin_settle_within: float = 0.0
 
     @classmethod
     def from_robot(cls, robot, fraction: float = 0.45, a_max: float = 0.8, **kw) -> DriveLimits:
@@ -274,7 +282,7 @@ class PathFollower:
                 _, _, psi, _ = p.at(s)
                 aim = psi + math.atan2(-cross, L.lookahead)
                 herr = wrap(aim - th)
-                if self.phase == "turn" and abs(herr) <= L.heading_tolerance / 2:
+                if self.phase == "turn" and self._turned(herr, remaining):
                     self.phase = "drive"
                 # driving, only a heading far off the path's stops it (the cross-track aim alone does not)
                 if abs(herr) > L.heading_tolerance and not self.no_spin and (
@@ -339,6 +347,15 @@ class PathFollower:
             return p.at(c)[3]
         ss = np.linspace(c - window / 2, c + window / 2, 7)
         return float(np.mean(np.interp(ss, p.s, p.kappa)))
+
+    def _turned(self, herr: float, remaining: float) -> bool:
+        """A turn on the spot is over: within ``heading_tolerance`` / 2 of the aim, or with ``spin_settle``
+        (and at most ``spin_settle_within`` m of path left) within that and stopped (the turn rate down to one
+        cycle's ramp)."""
+        L = self.limits
+        if L.spin_settle > 0 and (L.spin_settle_within <= 0 or remaining <= L.spin_settle_within):
+            return abs(herr) <= L.spin_settle and abs(self.w) <= L.alpha_max * self.dt
+        return abs(herr) <= L.heading_tolerance / 2
 
     def _turn_rate(self, err: float, drive: bool = False) -> float:
         L = self.limits

@@ -30,6 +30,11 @@ class Docking:
     timeout: float = setting(20.0, "s for one docking manoeuvre before it backs out", lo=0.0, hi=600.0,
                              lo_open=True)
     retries: int = setting(2, "docking attempts per pick before the task is decided again", lo=0, hi=20)
+    magnet_early: bool = setting(False, "the magnet on from the start of the pick approach (false: at the grip, "
+                                        "after the press)")
+    press_time: float = setting(0.4, "s: picking, after the contact the robot drives on to the dock pose for at "
+                                     "most this long, squaring a part that stands out of its slot against the "
+                                     "slot's back wall (0: it stops at the contact)", lo=0.0, hi=2.0)
 
 
 @dataclass(frozen=True)
@@ -74,6 +79,11 @@ class Carrying:
     long_spin: float = setting(2.4, "rad: a turn on the spot with a part longer than this runs at "
                                     "carry.w_long_spin (0: off)", lo=0.0, hi=2 * math.pi)
     w_long_spin: float = setting(1.1, "rad/s of those long turns", lo=0.0, hi=10.0)
+    spin_settle: float = setting(0.03, "rad: a turn on the spot with a part ends standing within this of the "
+                                       "heading before the robot drives off (0: it drives off still turning)",
+                                 lo=0.0, hi=0.5)
+    spin_settle_within: float = setting(0.3, "m: carry.spin_settle only for a turn with at most this much path "
+                                              "left after it (0: every turn)", lo=0.0, hi=5.0)
     margin: float = setting(0.01, "m kept clear around the carrying turning circle (0.02: outgoing 4 has no "
                                   "approach pose)", lo=0.0, hi=0.2)
     inflate: float = setting(0.015, "m around the loaded outline (the part swings on the face)", lo=0.0, hi=0.2)

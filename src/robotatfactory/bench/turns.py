@@ -271,7 +271,7 @@ def scripted(field, robot) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ the agent's turns
-def agent_track(round_no: int, seed: int, limit: float = 300.0) -> Track:
+def agent_track(round_no: int, seed: int, limit: float = 300.0, agent: dict | None = None) -> Track:
     """One round of the competition agent on the bare stand-in, ground truth as its pose (``raf experiment
     competition --mode bare_truth``'s loop, :func:`~..experiments.competition.play_round`, without pose noise or
     delays), every cycle kept."""
@@ -282,7 +282,7 @@ def agent_track(round_no: int, seed: int, limit: float = 300.0) -> Track:
     def keep(sim, agent, c, f) -> None:
         rows.append((f.time, *f.enc_total, f.x, f.y, f.theta, c.v, c.w, bool(c.magnet)))
 
-    play_round(round_no, seed, limit, after_cycle=keep)
+    play_round(round_no, seed, limit, agent=agent, after_cycle=keep)
     a = np.array(rows, dtype=float)
     return Track(a[:, 0], a[:, 1:3], a[:, 3:6], a[:, 6:8], a[:, 8] > 0.5)
 
@@ -359,7 +359,7 @@ def fit_carry_sigma(rows: list[dict], var_key: str) -> float:
     return (lo + hi) / 2
 
 
-def agent_figures(robot, rounds, seeds) -> dict:
+def agent_figures(robot, rounds, seeds, agent: dict | None = None) -> dict:
     from ..localization.ekf import EkfConfig
 
     base = EkfConfig(track_m=robot.odometry_track)
@@ -367,7 +367,7 @@ def agent_figures(robot, rounds, seeds) -> dict:
     rows, runs = [], [(r, s) for r in rounds for s in (seeds[:1] if r == 1 else seeds)]
     for r, s in runs:
         print(f"[bench turns] the agent: round {r}, seed {s}", flush=True)
-        rows += episode_errors(agent_track(r, s), robot, cfgs)
+        rows += episode_errors(agent_track(r, s, agent=agent), robot, cfgs)
     out = {"agent_runs": len(runs)}
     for carry in (False, True):
         sel = [x for x in rows if x["carrying"] == carry]
@@ -398,6 +398,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 of rounds 2 and 3 (round 1: once, its "
                                                               "draw does not depend on the seed; default 10)")
     parser.add_argument("--no-scripted", action="store_true", help="only the agent's turns")
+    parser.add_argument("--agent", metavar="NAME=VALUE", action="append", default=[],
+                        help="an agent setting for the agent's rounds (as raf experiment competition's --agent), e.g. "
+                             "carry.spin_settle=0 (repeatable)")
 
 
 def run(args) -> dict:
@@ -410,7 +413,12 @@ def run(args) -> dict:
     if not args.no_scripted:
         print("[bench turns] scripted manoeuvres", flush=True)
         out.update(scripted(field, robot))
+    from ..experiments.competition import parse_agent
+
+    agent = parse_agent(getattr(args, "agent", None))
     rounds = [int(r) for r in str(args.rounds).split(",") if r.strip()]
     if rounds and args.seeds > 0:
-        out.update(agent_figures(robot, rounds, list(range(args.seeds))))
+        if agent:
+            out["agent_settings"] = ",".join(getattr(args, "agent"))
+        out.update(agent_figures(robot, rounds, list(range(args.seeds)), agent))
     return out
