@@ -149,6 +149,7 @@ class RoundAgent:
         self._escapes = 0  # escape drives since the last leg that started
         self.scan: Scan | None = None  # the latest LIDAR sweep (on_scan), None: never given one
         self._held_pose = None  # the pose at the last cycle the contact switch showed the carried part
+        self._held_state = None  # ... and the factory's state as the agent knew it then
 
     @property
     def d_dock(self) -> float:
@@ -239,7 +240,7 @@ class RoundAgent:
             # the contact switch stays pressed while a part hangs on the magnet
             self._no_contact = 0 if contact else self._no_contact + 1
             if contact:
-                self._held_pose = tuple(pose[:3])
+                self._held_pose, self._held_state = tuple(pose[:3]), self.state
             if self._no_contact >= self.settings.recovery.lost_cycles:
                 self._part_lost()
                 return self._brake()
@@ -443,7 +444,9 @@ class RoundAgent:
         self.follower.stop()
         self.mode, self.need_state_after = "decide", self.t
         if self.settings.recovery.refind and self._held_pose is not None:
-            self.floor.fell(self.t, part, self._held_pose, self.target, self.state)
+            # the state as the agent knew it while the part was still held: one polled between the fall and the
+            # noticing may already list it in the slot it landed in
+            self.floor.fell(self.t, part, self._held_pose, self.target, self._held_state or self.state)
             self._start_search()
 
     # ------------------------------------------------------------------------------------------ a part on the floor
@@ -493,7 +496,7 @@ class RoundAgent:
         lost = self.floor.picked(self.t)
         self.carrying = lost.part
         self.docker.held_offset = self.floor.docker.held_offset  # the place repeats the offset it was held with
-        self._held_pose = tuple(pose[:3])
+        self._held_pose, self._held_state = tuple(pose[:3]), self.state
         dest = self._usable(self.policy.destinations(self.state, self.carrying))
         if not dest:
             self.mode, self.need_state_after = "decide", self.t
@@ -682,6 +685,7 @@ class RoundAgent:
             self._held_pose = tuple(pose[:3])
             self._event(self.t, f"picked the {self.carrying.label} part from {self.target}")
             self.state = self.state.with_slot(self.task.source, None)  # expected until the server says
+            self._held_state = self.state
             self.target = self.task.target
             dest = self._usable(self.policy.destinations(self.state.with_slot(self.task.source, None), self.carrying))
             if not self.settings.tasks.choose_by_time and self.target not in dest:  # the planned place was taken
