@@ -23,39 +23,54 @@ TARGETS = {"refind_max_score_runs": "more than without the recovery (refind_off_
 
 
 class KnockOff:
-    """The ``on_cycle`` hook of one run: knocks the carried part off once, ``after`` s after the first pick."""
+    """The ``on_cycle`` hook of one run: knocks the carried part off once, ``after`` s after the first pick: it comes
+    to rest ``lateral`` m to the robot's left (``side`` 1) or right (-1) of where it was held, turned by ``turn``
+    rad (the simulator's place_part: off the magnet, at rest on the floor). Where that spot is not free floor it
+    tries the other side, then waits for the next pick (``fallback`` False: neither, it knocks nothing)."""
 
-    def __init__(self, field, robot, seed: int):
+    def __init__(self, field, robot, after: float, side: int, lateral: float, turn: float, fallback: bool = True):
         from ..agent.footprint import robot_footprint
 
-        rng = random.Random(seed)
         self.field, self.fp, self.magnet_x = field, robot_footprint(robot), float(robot.electromagnet["x"])
-        self.after, self.side = rng.uniform(0.6, 2.5), rng.choice((-1, 1))
-        self.lateral, self.turn = rng.uniform(0.13, 0.17), rng.uniform(-0.8, 0.8)
+        self.after, self.side, self.lateral, self.turn = float(after), int(side), float(lateral), float(turn)
+        self.fallback = fallback
         self.picked_t: float | None = None
         self.t: float | None = None  # when it was knocked off
+        self.pid: int | None = None  # ... which part
+        self.at: tuple[float, float] | None = None  # ... and where it came to rest
+        self.refused: float | None = None  # when it gave up (fallback False): the spot was not free floor
+
+    @classmethod
+    def drawn(cls, field, robot, seed: int) -> KnockOff:
+        """The bench's seeded knock: 0.6-2.5 s after the pick, 13-17 cm to either side, turned up to 0.8 rad."""
+        rng = random.Random(seed)
+        after, side = rng.uniform(0.6, 2.5), rng.choice((-1, 1))
+        return cls(field, robot, after, side, rng.uniform(0.13, 0.17), rng.uniform(-0.8, 0.8))
 
     def __call__(self, sim, agent) -> None:
-        if self.t is not None or agent.mode != "to_place" or sim.held is None:
+        if self.t is not None or self.refused is not None or agent.mode != "to_place" or sim.held is None:
             return
         if self.picked_t is None:
             self.picked_t = sim.time
-        if sim.time - self.picked_t <= self.after:
+        if sim.time - self.picked_t < self.after:
             return
         from ..agent.refind import lost_spot
 
         th = sim.pose[2]
         pid = sim.held
         held = lost_spot(sim.pose, self.magnet_x, self.field.part)  # the held part's centre
-        for side in (self.side, -self.side):
+        for side in ((self.side, -self.side) if self.fallback else (self.side,)):
             px = held.x - side * self.lateral * math.sin(th)
             py = held.y + side * self.lateral * math.cos(th)
             facing = th + math.pi + self.turn
             if self._free(sim, pid, px, py, facing):
                 sim.place_part(pid, px, py, facing)
-                self.t = sim.time
+                self.t, self.pid, self.at = sim.time, pid, (px, py)
                 return
-        self.picked_t = None  # no free floor there: after the next pick
+        if self.fallback:
+            self.picked_t = None  # no free floor there: after the next pick
+        else:
+            self.refused = sim.time  # not knocked: its spot was not free floor
 
     def _free(self, sim, pid, px, py, facing) -> bool:
         """On the floor, clear of the fixtures, the other parts and the robot."""
@@ -91,7 +106,7 @@ def run(args) -> dict:
         for seed in range(args.seeds):
             base = play_round(rnd, seed, lidar=True)
             for way, agent in ways.items():
-                hook = KnockOff(field, robot, seed * 10 + rnd)
+                hook = KnockOff.drawn(field, robot, seed * 10 + rnd)
                 r = play_round(rnd, seed, record_path=True, agent=agent, lidar=True, on_cycle=hook)
                 rows[way].append(r)
                 ev = r.get("events", [])
