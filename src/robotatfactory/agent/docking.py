@@ -5,9 +5,11 @@ there again after backing out. Each control cycle :meth:`Docker.step` takes the 
 field frame, m, rad) and the contact switch, and returns body speeds and the electromagnet state.
 
 **Pick:** drive straight along the slot's normal at ``v_dock`` towards the plate (aiming
-``overshoot`` m past the dock pose so the contact is reached even with a pose error); when the contact
+``overshoot`` m past the dock pose so the contact is reached even with a pose error); once the contact
 switch is pressed (the part's front face within its 1 cm beam, the magnet face within ~1 cm of the plate)
-stop, switch the electromagnet on, wait ``settle`` s, and back out to ``retreat`` m from the slot centre.
+drive on to the dock pose for at most ``press_time`` s (a part standing out of its slot is pushed square
+against the slot's back wall), stop, switch the electromagnet on, wait ``settle`` s, and back out to
+``retreat`` m from the slot centre.
 The contact switch stays pressed while a part hangs on the magnet (the part's body is in its beam), so it
 is also the confirmation that the part came along: released after backing out = the part was lost.
 No contact by the end of the approach: the robot backs out, then reports ``no_contact`` (the caller
@@ -47,11 +49,11 @@ class DockSettings:
     a_back_carrying: float = 0.4
     v_back_carrying_final: float = 0.03
     lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
-    magnet_early: bool = True
+    magnet_early: bool = False  # the magnet on from the approach's start (false: at the grip, after the press)
     # s the contact switch may take after backing out to show the outcome (part along / part left): it lags
     # the predicted pose by the loop's latency (80 ms on SimTwo and raf sim)
     confirm: float = 0.2
-    compensate_offset: bool = True  # place with the robot as far off the slot's normal as it was at the pick  # the magnet on during the pick approach: it takes the plate within its beam
+    compensate_offset: bool = True  # place with the robot as far off the slot's normal as it was at the pick
     # picking, after the contact the robot drives on to the dock pose (at most press_time s): a part standing out of
     # its slot, turned, is squared against the slot's back wall between it and the magnet's face instead of
     # pivoting on the face's edge (0: it stops at the contact)
