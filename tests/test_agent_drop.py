@@ -341,3 +341,43 @@ def test_a_part_let_go_at_the_pick_that_stays_in_its_slot_is_picked_there_again(
     bot.state = bot.state.with_slot(SlotRef("incoming", 2), PartType.BLUE)
     assert run(agent, bot, lambda a: a.counters.pick_failures >= 1 and a.mode == "to_pick", limit=bot.t + 5.0)
     assert agent.counters.parts_lost == 0 and agent.lost is None and str(agent.target) == "incoming 2"
+
+
+def test_a_part_the_server_does_not_list_after_its_place_is_found_and_placed_again(field, robot):
+    """A place that went wrong (the part met the slot's wall and ended out of it): the robot placed and backed out
+    as usual, but the first state after the place does not list the part there. The agent looks for it near the
+    slot, picks it up from the floor and places it again; the second place is listed, and nothing more happens.
+    With ``recovery.check_place`` off the agent goes on as if it had scored."""
+    for check in (True, False):
+        agent = RoundAgent(field, robot, agent_settings({"recovery": {"check_place": check}}))
+        bot = FloorBot(field, robot)
+        assert run(agent, bot, lambda a: a.mode == "place" and a.docker.phase == "back" and not a.magnet)
+        t0 = bot.t
+        dest = agent.target
+        # it came to rest 4 cm to the side of the slot's centre and 1 cm out, turned by 0.3 rad (caught on a rib)
+        s = field.slot(dest.zone, dest.number)
+        side = (math.sin(s.facing), -math.cos(s.facing))
+        bot.floor = (s.xy[0] + 0.04 * side[0] + 0.01 * math.cos(s.facing),
+                     s.xy[1] + 0.04 * side[1] + 0.01 * math.sin(s.facing), wrap(s.facing + 0.3))
+        if not check:
+            assert run(agent, bot, lambda a: a.counters.places >= 1 and a.mode != "place", limit=t0 + 5.0)
+            assert run(agent, bot, lambda a: a.mode == "done", limit=t0 + 10.0)
+            assert agent.counters.parts_lost == 0 and not any("after the place" in t for t in events_after(agent, t0))
+            continue
+        assert run(agent, bot, lambda a: a.mode == "search", limit=t0 + 5.0)
+        assert agent.counters.parts_lost == 1
+        assert any(t.startswith(f"the blue part is not in {dest} after the place: the server does not list it")
+                   for t in events_after(agent, t0)), events_after(agent, t0)
+
+        listed = []
+
+        def listed_after_second_place(a):  # the second place goes right: the server lists it where it went
+            if a.counters.places >= 2 and not listed:
+                listed.append(a.target)
+                bot.state = bot.state.with_slot(a.target, PartType.BLUE)
+            return a.mode == "done"
+
+        assert run(agent, bot, listed_after_second_place, limit=t0 + 60.0), events_after(agent, t0)
+        c = agent.counters
+        assert (c.parts_lost, c.floor_picks, c.places) == (1, 1, 2) and c.parts_refound >= 1, events_after(agent, t0)
+        assert bot.floor is None and agent.lost is None

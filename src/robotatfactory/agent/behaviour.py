@@ -134,6 +134,7 @@ class RoundAgent:
         self._mode_t0 = 0.0
         self._budget = math.inf  # s the current leg may take before it is abandoned
         self._released_t: float | None = None  # when the magnet let go of the part being placed
+        self._release_pose = None  # ... and where the robot was then
         self._v = self._w = 0.0
         self.t = 0.0
         self.relocalizer = Relocalizer(f, self._can_turn)
@@ -296,6 +297,7 @@ class RoundAgent:
             self.magnet = o.magnet
             if self.mode == "place" and not o.magnet and self._released_t is None:
                 self._released_t = self.t  # the part is free from now: the delay is measured from here
+                self._release_pose = tuple(pose[:3])
             if o.failed:
                 self._dock_failed(o.failed, pose)
             elif o.done:
@@ -308,6 +310,10 @@ class RoundAgent:
         st = self.state
         if self.floor.pick_lost is not None:  # a state seen since a pick let its part go: is it still in its slot?
             if self.floor.let_go_missing(self.t, self.task, st):
+                self._start_search()
+                return
+        if self.floor.place_lost is not None:  # the first state since a place: is the part in its slot?
+            if self.floor.place_missing(self.t, st):
                 self._start_search()
                 return
         if self.carrying is not None:  # a place failed or the destination changed: find a new one
@@ -671,7 +677,7 @@ class RoundAgent:
             retreat = self.legs.retreat(self._obstacles(exclude=self.target), self.target, carrying=False)
             self.docker.start_place(slot, pose, retreat, v0=v0)
             self._event(self.t, f"docking to place the {self.carrying.label} part in {self.target}")
-            self._released_t = None
+            self._released_t = self._release_pose = None
             self.mode = "place"
             self._mode_t0 = self.t
 
@@ -698,6 +704,10 @@ class RoundAgent:
             return
         self.counters.places += 1
         self._event(self.t, f"placed the {self.carrying.label} part in {self.target}")
+        if self.settings.recovery.check_place and self.settings.recovery.refind:
+            slot = self.field.slot(self.target.zone, self.target.number)
+            self.floor.placed(self.t, self.carrying, self._release_pose or tuple(pose[:3]), slot, self.target,
+                              self._held_state or self.state)
         if self.target.zone.startswith("machine"):  # from the release: t_seen - t_placed bounds the delay from above
             self.delays.placed(self.target, self.carrying, self._released_t if self._released_t is not None else self.t)
         self.state = self.state.with_slot(self.target, self.carrying)

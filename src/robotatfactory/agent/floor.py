@@ -131,6 +131,7 @@ class FloorRecovery:
         self.lost: LostPart | None = None  # a part that fell off the magnet, being recovered
         self.left: list[PartObstacle] = []  # lost parts left on the floor: obstacles while carrying
         self.pick_lost: LostPart | None = None  # a pick that let its part go: on the floor if not in its slot
+        self.place_lost: LostPart | None = None  # a place just done: near its slot if the server does not list it
         self._slot: FloorSlot | None = None  # the floor part being picked, as a slot
         self._search = _Search()
         self._retreat = 0.0  # m from the floor part's centre the floor pick backs out to
@@ -161,6 +162,26 @@ class FloorRecovery:
         self.counters.parts_lost += 1
         self._event(t, f"lost the {lost.part.label} part picking it at {task.source}: the server no longer lists "
                        f"it there; looking for it near ({lost.spot.x:.3f}, {lost.spot.y:.3f})")
+        self.lost = lost
+        return True
+
+    def placed(self, t: float, part: PartType, pose, slot, dest: SlotRef, state: FactoryState | None) -> None:
+        """``part`` was placed in ``dest`` (the field's ``slot``), the magnet letting go at ``pose``: if the next state
+        does not list it there (:meth:`place_missing`), it lies near the slot (turned in it, or out of it on the
+        floor), its plate towards where the robot was. ``state``: the state as the agent knew it before."""
+        spot = lost_spot(pose, self.docker.magnet_x, self.field.part)
+        self.place_lost = LostPart(part, FoundPart(spot.x, spot.y, (slot.facing,)), t, dest, state)
+
+    def place_missing(self, t: float, state: FactoryState) -> bool:
+        """The first state seen since a place (:meth:`placed`): True when the server does not list the part in the
+        slot it was placed in (the search starts next); False when it does. (A machine takes a part from its input
+        only after processing it, seconds later: the first state after the place still shows it there.)"""
+        lost, self.place_lost = self.place_lost, None
+        if lost is None or state.at(lost.dest) is not None:
+            return False
+        self.counters.parts_lost += 1
+        self._event(t, f"the {lost.part.label} part is not in {lost.dest} after the place: the server does not list "
+                       f"it; looking for it near ({lost.spot.x:.3f}, {lost.spot.y:.3f})")
         self.lost = lost
         return True
 

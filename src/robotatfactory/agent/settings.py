@@ -126,6 +126,9 @@ class Recovery:
     refind: bool = setting(True, "a part lost on the way is looked for (LIDAR; else where it fell) and picked up "
                                  "from the floor again (false: forgotten; the server does not list a part on "
                                  "the floor, so it never scores)")
+    check_place: bool = setting(True, "the first server state after a place must list the part in its slot; if it "
+                                      "does not, the part is looked for near the slot as a lost one (with "
+                                      "recovery.refind)")
     refind_tries: int = setting(3, "floor picks of a lost part before it is left where it lies", lo=1, hi=20)
     refind_radius: float = setting(0.35, "m around where the part fell within which a LIDAR return may be it",
                                    lo=0.05, hi=2.0)
