@@ -148,9 +148,7 @@ class FloorRecovery:
         """A pick of ``part`` from ``slot`` (the field's) held it, then let it go backing out to ``pose``: if the
         server no longer lists it in its slot (:meth:`let_go_missing`), it lies on the floor between the slot and
         the robot, its plate towards the robot."""
-        spot = lost_spot(pose, self.docker.magnet_x, self.field.part)
-        spot = FoundPart(spot.x, spot.y, (slot.facing,))
-        self.pick_lost = LostPart(part, spot, t, dest, state)
+        self.pick_lost = LostPart(part, self._let_go_at(pose, slot), t, dest, state)
 
     def let_go_missing(self, t: float, task, state: FactoryState) -> bool:
         """A state seen since a pick let its part go (:meth:`let_go`): True when the server no longer lists it in
@@ -159,18 +157,14 @@ class FloorRecovery:
         lost, self.pick_lost = self.pick_lost, None
         if not (isinstance(task, Move) and state.at(task.source) is None):
             return False
-        self.counters.parts_lost += 1
-        self._event(t, f"lost the {lost.part.label} part picking it at {task.source}: the server no longer lists "
-                       f"it there; looking for it near ({lost.spot.x:.3f}, {lost.spot.y:.3f})")
-        self.lost = lost
-        return True
+        return self._missing(t, lost, f"lost the {lost.part.label} part picking it at {task.source}: the server no "
+                                      f"longer lists it there")
 
     def placed(self, t: float, part: PartType, pose, slot, dest: SlotRef, state: FactoryState | None) -> None:
         """``part`` was placed in ``dest`` (the field's ``slot``), the magnet letting go at ``pose``: if the next state
         does not list it there (:meth:`place_missing`), it lies near the slot (turned in it, or out of it on the
         floor), its plate towards where the robot was. ``state``: the state as the agent knew it before."""
-        spot = lost_spot(pose, self.docker.magnet_x, self.field.part)
-        self.place_lost = LostPart(part, FoundPart(spot.x, spot.y, (slot.facing,)), t, dest, state)
+        self.place_lost = LostPart(part, self._let_go_at(pose, slot), t, dest, state)
 
     def place_missing(self, t: float, state: FactoryState) -> bool:
         """The first state seen since a place (:meth:`placed`): True when the server does not list the part in the
@@ -179,9 +173,19 @@ class FloorRecovery:
         lost, self.place_lost = self.place_lost, None
         if lost is None or state.at(lost.dest) is not None:
             return False
+        return self._missing(t, lost, f"the {lost.part.label} part is not in {lost.dest} after the place: the server "
+                                      f"does not list it")
+
+    def _let_go_at(self, pose, slot) -> FoundPart:
+        """Where a part the magnet let go of at a slot lies: in front of the magnet at ``pose``, its plate facing
+        as the slot's."""
+        spot = lost_spot(pose, self.docker.magnet_x, self.field.part)
+        return FoundPart(spot.x, spot.y, (slot.facing,))
+
+    def _missing(self, t: float, lost: LostPart, what: str) -> bool:
+        """``lost`` is on the floor (``what`` says why): counted, logged, and the part the search looks for."""
         self.counters.parts_lost += 1
-        self._event(t, f"the {lost.part.label} part is not in {lost.dest} after the place: the server does not list "
-                       f"it; looking for it near ({lost.spot.x:.3f}, {lost.spot.y:.3f})")
+        self._event(t, f"{what}; looking for it near ({lost.spot.x:.3f}, {lost.spot.y:.3f})")
         self.lost = lost
         return True
 
