@@ -183,7 +183,7 @@ class RoundAgent:
             ph = self.follower.phase
             return "drive" if ph in ("drive", "done") else ph
         ph = self._docking().phase
-        return {"approach": "dock_approach", "grip": "dock_wait", "release": "dock_wait",
+        return {"approach": "dock_approach", "press": "dock_approach", "grip": "dock_wait", "release": "dock_wait",
                 "back": "dock_back"}.get(ph, "dock_back")
 
     @property
@@ -705,8 +705,7 @@ class RoundAgent:
         self.counters.places += 1
         self._event(self.t, f"placed the {self.carrying.label} part in {self.target}")
         if self.settings.recovery.check_place and self.settings.recovery.refind:
-            slot = self.field.slot(self.target.zone, self.target.number)
-            self.floor.placed(self.t, self.carrying, self._release_pose or tuple(pose[:3]), slot, self.target,
+            self.floor.placed(self.t, self.carrying, self._release_pose or tuple(pose[:3]), self.target,
                               self._held_state or self.state)
         if self.target.zone.startswith("machine"):  # from the release: t_seen - t_placed bounds the delay from above
             self.delays.placed(self.target, self.carrying, self._released_t if self._released_t is not None else self.t)

@@ -27,14 +27,16 @@ from dataclasses import dataclass, replace
 from .follower import DriveLimits, PathFollower
 from .footprint import HOLD_GAP, PLATE_THICKNESS, pose_in_front, wrap
 from .recovery import StuckDetector
+from .settings import Docking
 
 
 @dataclass(frozen=True)
 class DockSettings:
-    """Speeds (m/s), distances (m), times (s) of the final approach."""
+    """Speeds (m/s), distances (m), times (s) of the final approach. What the agent's settings also name
+    (``dock.*``, :class:`~.settings.Docking`) takes its default from there: one default per setting."""
 
-    v_dock: float = 0.1  # pick approach (the contact switch stops it; braking from there takes ~6 mm)
-    v_place: float = 0.12  # place approach (to a pose, no contact needed; the part enters between ribs)
+    v_dock: float = Docking.approach_speed  # pick approach (the contact switch stops it)
+    v_place: float = Docking.place_speed  # place approach (to a pose, no contact needed; the part enters between ribs)
     overshoot: float = 0.01  # m past the dock pose the pick approach aims at (the contact stops it first)
     gap: float = 0.003  # m between the magnet face and the plate at the nominal dock pose
     settle: float = 0.1  # s standing still with the magnet switched on/off
@@ -49,7 +51,7 @@ class DockSettings:
     a_back_carrying: float = 0.4
     v_back_carrying_final: float = 0.03
     lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
-    magnet_early: bool = False  # the magnet on from the approach's start (false: at the grip, after the press)
+    magnet_early: bool = Docking.magnet_early  # the magnet on from the approach's start (false: at the grip)
     # s the contact switch may take after backing out to show the outcome (part along / part left): it lags
     # the predicted pose by the loop's latency (80 ms on SimTwo and raf sim)
     confirm: float = 0.2
@@ -57,7 +59,7 @@ class DockSettings:
     # picking, after the contact the robot drives on to the dock pose (at most press_time s): a part standing out of
     # its slot, turned, is squared against the slot's back wall between it and the magnet's face instead of
     # pivoting on the face's edge (0: it stops at the contact)
-    press_time: float = 0.4
+    press_time: float = Docking.press_time
 
 
 @dataclass(frozen=True)
@@ -67,7 +69,7 @@ class DockOutput:
     v: float
     w: float
     magnet: bool
-    phase: str  # approach, grip, release, back, confirm, done, failed
+    phase: str  # approach, press (picking), grip, release, back, confirm, done, failed
     done: bool = False
     failed: str | None = None  # no_contact, part_lost, still_held, blocked, timeout
 
@@ -130,7 +132,6 @@ class Docker:
         self._failing = None
         self.stuck.reset()
         self._steps = 0
-        self._pressing: float | None = None
         self._shift = self.held_offset if mode == "place" and self.settings.compensate_offset else 0.0
         self._lateral = []
         target = self._shifted(pose_in_front(slot, distance))
@@ -162,9 +163,10 @@ class Docker:
         return (pose[0] - s.xy[0]) * math.cos(s.facing) + (pose[1] - s.xy[1]) * math.sin(s.facing)
 
     def _on_normal(self, pose, ahead: float = 0.01) -> tuple[float, float]:
+        """``pose`` brought onto the slot's normal, at least ``ahead`` m out from the dock pose."""
         s = self._slot
         u = (math.cos(s.facing), math.sin(s.facing))
-        along = (pose[0] - s.xy[0]) * u[0] + (pose[1] - s.xy[1]) * u[1]
+        along = self._along(pose)
         if ahead:
             along = max(along, self.dock_distance() + ahead)
         return (s.xy[0] + along * u[0], s.xy[1] + along * u[1])
@@ -172,7 +174,7 @@ class Docker:
     # ------------------------------------------------------------------------------------------ step
     def step(self, pose, contact: bool) -> DockOutput:
         """One control cycle from the pose estimate and the contact switch."""
-        if self.phase == "approach":
+        if self.phase in ("approach", "press"):
             if self.stuck.update(self._steps * self.dt, pose, self.follower.v, 0.0):
                 self.abort(pose, "blocked")  # driving, not moving: something is in the way (a rib, a part)
                 return self._out(0.0, 0.0)
@@ -180,14 +182,14 @@ class Docker:
             out = self.follower.step(pose)
             if self.mode == "pick":
                 self._lateral = (self._lateral + [self._lateral_offset(pose)])[-6:]
-            if self.mode == "pick" and contact and self.settings.press_time > 0 and self._pressing is None:
-                self._pressing = 0.0
-            if self._pressing is not None:
-                self._pressing += self.dt
-                along = self._along(pose)
-                if along > self.dock_distance() and self._pressing < self.settings.press_time and not out.done:
-                    return self._out(out.v, out.w)  # on towards the wall
-            if self.mode == "pick" and (contact or self._pressing is not None):
+            if self.phase == "approach" and self.mode == "pick" and contact and self.settings.press_time > 0:
+                self.phase, self._wait = "press", 0.0
+            if self.phase == "press":  # on towards the wall, at most press_time s
+                self._wait += self.dt
+                if self._along(pose) > self.dock_distance() and self._wait < self.settings.press_time \
+                        and not out.done:
+                    return self._out(out.v, out.w)
+            if self.mode == "pick" and (contact or self.phase == "press"):
                 # the magnet holds the part where it met it: the robot's offset from the slot's normal now is
                 # the part's from the magnet's centre line, to be repeated at the place (mean of 6 cycles)
                 self.held_offset = sum(self._lateral) / len(self._lateral)

@@ -160,10 +160,11 @@ class FloorRecovery:
         return self._missing(t, lost, f"lost the {lost.part.label} part picking it at {task.source}: the server no "
                                       f"longer lists it there")
 
-    def placed(self, t: float, part: PartType, pose, slot, dest: SlotRef, state: FactoryState | None) -> None:
-        """``part`` was placed in ``dest`` (the field's ``slot``), the magnet letting go at ``pose``: if the next state
+    def placed(self, t: float, part: PartType, pose, dest: SlotRef, state: FactoryState | None) -> None:
+        """``part`` was placed in ``dest``, the magnet letting go at ``pose``: if the next state
         does not list it there (:meth:`place_missing`), it lies near the slot (turned in it, or out of it on the
         floor), its plate towards where the robot was. ``state``: the state as the agent knew it before."""
+        slot = self.field.slot(dest.zone, dest.number)
         self.place_lost = LostPart(part, self._let_go_at(pose, slot), t, dest, state)
 
     def place_missing(self, t: float, state: FactoryState) -> bool:
