@@ -27,6 +27,7 @@ def test_referee_scores_runs_the_machines_and_serves_the_factory(middleware, ros
     from robotatfactory.ros import messages as rm
     from robotatfactory.ros.referee_node import RefereeConfig, RefereeNode
     from robotatfactory.sim.trace import read_trace
+    from robotatfactory.simtwo.teleport import part_heading
 
     field = load_field("simtwo2022")
     tnode = test_node()
@@ -47,6 +48,7 @@ def test_referee_scores_runs_the_machines_and_serves_the_factory(middleware, ros
     host, port = node.server.address
     robot = (0.0, -0.35, math.pi / 2)
     part = list(field.slot("incoming", 1).xy)
+    facing = field.slot("incoming", 1).facing  # the plate towards the slot's facing: SimTwo's heading is 90 deg more
     k = [0]
 
     def cycle(n=1):
@@ -55,7 +57,7 @@ def test_referee_scores_runs_the_machines_and_serves_the_factory(middleware, ros
             stamp = rm.stamp_ms(40 * k[0])
             pub_gt.publish(rm.odometry(stamp, "map", "base_link", *robot, 0.0, 0.0, np.zeros((3, 3)), np.zeros((2, 2))))
             time.sleep(0.002)
-            pub_parts.publish(rm.planar_poses(stamp, "map", [(part[0], part[1], 0.0)]))
+            pub_parts.publish(rm.planar_poses(stamp, "map", [(part[0], part[1], part_heading(facing))]))
             time.sleep(0.008)
 
     try:
@@ -85,3 +87,5 @@ def test_referee_scores_runs_the_machines_and_serves_the_factory(middleware, ros
     trace = read_trace(tmp_path / "trace.jsonl")
     assert trace.head["round"] == 2 and len(trace.records) >= 250
     assert trace.records[-1].pose == pytest.approx(robot, abs=1e-4)
+    # the trace's parts in raf sim's trace's terms: the plate's facing, not SimTwo's heading of the body
+    assert trace.records[0].parts[1][2] == pytest.approx(facing, abs=1e-4)

@@ -86,7 +86,8 @@ class LiveReferee:
     def cycle(self, t: float, seq: int, pose, parts, magnet: bool, contact: bool = False,
               enc=(0, 0), cmd=(0.0, 0.0, False)) -> list[Teleport]:
         """One reported control cycle at simulation time ``t``: ``pose`` (x, y, theta) of the robot, ``parts``
-        the (x, y, theta) of part 1..N (SensorFrame.parts) or {id: (x, y, theta)}; ``magnet`` as applied.
+        the (x, y, theta) of part 1..N or {id: (x, y, theta)}, theta the plate's facing (SensorFrame.parts'
+        heading less pi/2, :func:`~..simtwo.teleport.plate_facing`); ``magnet`` as applied.
         Starts the run when its time has come, steps the factory and writes the trace. Returns the
         teleports the simulator must apply."""
         t = float(t)

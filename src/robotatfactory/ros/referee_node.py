@@ -30,6 +30,7 @@ from ..errors import ConfigError
 from ..field import load_field
 from ..robot import load_robot
 from ..simtwo.ports import SERVER_UDP_PORT
+from ..simtwo.teleport import plate_facing
 from .messages import quaternion_yaw
 from .mw import QoS, api
 from .mw.base import Node, stamp_ns
@@ -159,7 +160,9 @@ class RefereeNode:
     def on_parts(self, msg: PoseArray) -> None:
         ns = stamp_ns(msg.header.stamp)
         t = ns * 1e-9
-        parts = tuple((p.position.x, p.position.y, quaternion_yaw(p.orientation)) for p in msg.poses)
+        # ground_truth/parts carries the simulator's heading of each part's body (SimTwo's: the plate's + pi/2,
+        # docs/protocol.md); the referee and its trace speak of the plate's facing, as raf sim's trace does
+        parts = tuple((p.position.x, p.position.y, plate_facing(quaternion_yaw(p.orientation))) for p in msg.poses)
         with self.lock:
             pose = self.gt.get(ns)
             if pose is None:  # the same frame's ground truth not here yet: the latest one

@@ -7,7 +7,8 @@ One JSON object per line (JSON Lines, flushed as it goes, so a run that is kille
   "round": N, "seed": S}``;
 - then one line per control cycle, after the cycle: ``{"t": s, "seq": n, "pose": [x, y, theta],
   "held": part id or null, "cmd": [v, w, magnet], "contact": bool, "enc": [left, right] (encoder totals),
-  "parts": [[id, x, y, theta], ...]}`` (field frame, metres, radians).
+  "parts": [[id, x, y, theta], ...]}`` (field frame, metres, radians; a part's theta is its plate's facing, as
+  a field slot's, not SimTwo's heading of the part's body).
 
 Nothing here is sent to the robot's side: ground truth is the simulator's, for measuring only
 (``raf experiment competition`` compares the agent's pose with it and counts collisions and pushed parts).
