@@ -184,6 +184,35 @@ def test_machines_do_nothing_before_the_start_or_after_the_end():
     assert w2.teleports == [] and w2.factory.over(w2.t)
 
 
+def test_a_teleport_the_simulator_applies_late_shows_at_the_output_at_once():
+    """The real SimTwo applies a machine's teleport through the bridge a few cycles after the factory asked for
+    it (raf referee). Meanwhile the positions still show the finished part in the input slot; the state must not
+    (a robot sent there found nothing: SimTwo round 2 seed 101, two failed picks)."""
+    from robotatfactory.competition.factory import TELEPORT_GRACE
+
+    for applied_after in (3, None):  # cycles until the simulator moves the part; None: never
+        w = world("GXXX", delay=1.0)
+        w.pick(1); w.place(1, "machine_B", 1)
+        t_out = None
+        for _ in range(60):  # 2.4 s: the machine finishes at ~1 s
+            w.t = round(w.t + w.dt, 9)
+            out = w.factory.step(w.t, dict(w.part_xy), w.robot_xy, set(w.held))
+            if out:
+                t_out = w.t
+            if t_out is not None and applied_after is not None and w.t >= t_out + applied_after * w.dt - 1e-9:
+                w.part_xy[1] = w.slot("machine_B", 2).xy
+            if t_out is not None and w.t < t_out + TELEPORT_GRACE - 1e-9:
+                # the input's position is stale (or the part arrived): the state has it at the output, once
+                assert w.factory.letters("machine_B") == "XBXX", (applied_after, w.t)
+        assert t_out is not None
+        if applied_after is None:  # never moved: after the grace the positions count again, and it is said
+            assert w.factory.letters("machine_B") == "BXXX"
+            assert w.factory.counters["teleports_late"] == 1
+        else:
+            assert w.factory.letters("machine_B") == "XBXX"
+            assert w.factory.counters["teleports_late"] == 0
+
+
 def test_zero_delay_processes_in_the_same_cycle():
     w = world("RXXX", delay=0.0)
     w.pick(1); w.place(1, "machine_A", 1)

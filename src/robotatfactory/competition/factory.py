@@ -3,7 +3,11 @@
 The simulator owns the physics; each control cycle it calls :meth:`Factory.step` with the parts' positions
 (world x, y in metres), the robot's position and the parts the electromagnet holds. The factory decides
 which slot each part is in and runs the machines; a machine that finishes a part returns a
-:class:`Teleport`, which the simulator must apply (move and recolour the part) before the next step.
+:class:`Teleport`, which the simulator must apply (move and recolour the part). The stand-in applies it before
+the next step; the real SimTwo, through the bridge (``raf referee``), a few cycles later. Until the positions show
+the part at its output slot (at most ``TELEPORT_GRACE`` s), the state counts it there and its input slot empty,
+as a simulator that moves it at once would: a robot told that the input slot holds a finished part would go there
+for a part that is no longer there.
 
 Thread-safe: the simulator steps while the factory-state server's thread reads (one re-entrant lock).
 Times are simulation seconds; the run starts when the organiser calls :meth:`Factory.start`.
@@ -26,6 +30,7 @@ log = logging.getLogger(__name__)
 DEFAULT_TOLERANCE = 0.03  # m: a part is in a slot when its centre is this close (SimTwo's Lite scene)
 DEFAULT_ROBOT_CLEARANCE = 0.17  # m: a machine starts only when the robot is farther from the input slot
 FALSE_START_DISTANCE = 0.02  # m: the robot moving farther than this before the start is a false start
+TELEPORT_GRACE = 1.0  # s of simulation time a teleport may take to show in the positions (SimTwo: 0.1-0.2 s)
 
 ZONES = ("incoming", "outgoing", "machine_A", "machine_B")
 MACHINE_ACCEPTS = {"machine_A": PartType.RED, "machine_B": PartType.GREEN}
@@ -165,6 +170,7 @@ class Factory:
         self._where: dict[int, Slot] = {pid: slot for pid, _, slot in self._initial}
         self._held: set[int] = set()
         self._jobs: dict[Slot, Job] = {}
+        self._moving: dict[int, tuple[Slot, float]] = {}  # teleports not yet seen in the positions: slot, until t
         self._events: list[FactoryEvent] = []
         self._start: float | None = None
         self._last_t: float | None = None
@@ -172,7 +178,7 @@ class Factory:
         self._false_start = False
         self._robot_checked = False
         self._counters = dict(steps=0, bad_time=0, bad_positions=0, bad_held=0, unknown_parts=0, missing_parts=0,
-                              bad_robot=0, processing=0, processed=0, cancelled=0,
+                              bad_robot=0, processing=0, processed=0, cancelled=0, teleports_late=0,
                               internal_errors=0)
         self._rlog = RateLimitedLog(log)
         self._warned_unknown: set = set()
@@ -272,7 +278,8 @@ class Factory:
     @property
     def counters(self) -> dict[str, int]:
         """steps, rejected inputs (bad_time, bad_positions, bad_held, unknown_parts, missing_parts, bad_robot),
-        machine activity (processing, processed, cancelled) and internal_errors (bugs caught in step)."""
+        machine activity (processing, processed, cancelled), teleports_late (a teleport not seen in the positions
+        within TELEPORT_GRACE) and internal_errors (bugs caught in step)."""
         with self._lock:
             return dict(self._counters)
 
@@ -412,8 +419,9 @@ class Factory:
     def _update_slots(self, t: float, positions: dict[int, tuple[float, float]], held: set[int]) -> None:
         # each free part goes to its nearest slot within tolerance; a slot keeps only its nearest claimant
         claims: dict[Slot, tuple[float, int]] = {}
+        moving = self._teleports_in_flight(t, positions)
         for pid, (x, y) in positions.items():
-            if pid in held:
+            if pid in held or pid in moving:
                 continue
             best = None
             for s in self._slots:
@@ -426,6 +434,9 @@ class Factory:
             if s not in claims or (d, pid) < claims[s]:
                 claims[s] = (d, pid)
         where = {pid: s for s, (_, pid) in claims.items()}
+        for pid, slot in moving.items():  # on its way to the output: there already, unless another part is
+            if slot not in claims:
+                where[pid] = slot
         for pid in self.part_ids:
             old, new = self._where.get(pid), where.get(pid)
             if old == new:
@@ -436,6 +447,23 @@ class Factory:
             if new is not None:
                 self._events.append(FactoryEvent(t, "placed", pid, ptype, new, self._placement_note(ptype, new)))
         self._where = where
+
+    def _teleports_in_flight(self, t: float, positions: dict[int, tuple[float, float]]) -> dict[int, Slot]:
+        """The parts a machine has sent to its output whose positions do not show them there yet, within
+        ``TELEPORT_GRACE``; a teleport seen in the positions, or late, is forgotten (late: counted, logged)."""
+        out = {}
+        for pid, (slot, until) in list(self._moving.items()):
+            xy = positions.get(pid)
+            if xy is not None and math.hypot(xy[0] - slot.xy[0], xy[1] - slot.xy[1]) <= self.tolerance:
+                del self._moving[pid]
+            elif t > until:
+                del self._moving[pid]
+                self._counters["teleports_late"] += 1
+                self._rlog.warn("teleport_late", "part %d not at %s %.1f s after its teleport: its position "
+                                "counts again", pid, slot_label(slot), TELEPORT_GRACE)
+            else:
+                out[pid] = slot
+        return out
 
     @staticmethod
     def _placement_note(ptype: PartType, slot: Slot) -> str:
@@ -473,8 +501,9 @@ class Factory:
             del self._jobs[lane.input]
             new_type = self._types[job.part_id].next()
             self._types[job.part_id] = new_type
-            # the simulator applies the teleport before the next step: the state shows it at once
+            # the state shows it at its output at once, and until the positions do (TELEPORT_GRACE)
             self._where[job.part_id] = lane.output
+            self._moving[job.part_id] = (lane.output, t + TELEPORT_GRACE)
             occupied.pop(lane.input, None)
             occupied[lane.output] = job.part_id
             self._counters["processed"] += 1
