@@ -213,6 +213,20 @@ def test_a_teleport_the_simulator_applies_late_shows_at_the_output_at_once():
             assert w.factory.counters["teleports_late"] == 0
 
 
+def test_a_part_held_while_its_teleport_is_in_flight_is_in_no_slot():
+    w = world("GXXX", delay=1.0)
+    w.pick(1); w.place(1, "machine_B", 1)
+    for _ in range(60):
+        w.t = round(w.t + w.dt, 9)
+        if w.factory.step(w.t, dict(w.part_xy), w.robot_xy, set(w.held)):
+            break
+    assert w.factory.letters("machine_B") == "XBXX"  # the teleport not applied yet: at the output already
+    w.held.add(1)  # a magnet takes it from the input before the simulator moves it
+    w.t = round(w.t + w.dt, 9)
+    w.factory.step(w.t, dict(w.part_xy), w.robot_xy, set(w.held))
+    assert w.factory.slot_of(1) is None and w.factory.letters("machine_B") == "XXXX"
+
+
 def test_zero_delay_processes_in_the_same_cycle():
     w = world("RXXX", delay=0.0)
     w.pick(1); w.place(1, "machine_A", 1)

@@ -434,8 +434,8 @@ class Factory:
             if s not in claims or (d, pid) < claims[s]:
                 claims[s] = (d, pid)
         where = {pid: s for s, (_, pid) in claims.items()}
-        for pid, slot in moving.items():  # on its way to the output: there already, unless another part is
-            if slot not in claims:
+        for pid, slot in moving.items():  # on its way to the output: there already, unless another part is or
+            if slot not in claims and pid not in held:  # a magnet has it meanwhile (a held part is in no slot)
                 where[pid] = slot
         for pid in self.part_ids:
             old, new = self._where.get(pid), where.get(pid)
