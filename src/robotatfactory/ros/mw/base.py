@@ -191,6 +191,13 @@ class Node(ABC):
         ``timeout`` s for the service to be offered and for its answer (``TimeoutError``). Call it from a
         thread of your own, never from a callback (on ROS 2 the answer comes through this node's executor)."""
 
+    def sibling(self, name: str) -> "Node":
+        """Another node ``name`` (same namespace) in this process, beside this one: composed with it as
+        :func:`~robotatfactory.ros.cli.run_nodes` composes (its messages to this process's other nodes go
+        in-process). ROS 1 only (rospy has one node per process: the new node is a component of it);
+        NotImplementedError elsewhere."""
+        raise NotImplementedError(f"{self.middleware}: no second node in this process (ROS 1 only)")
+
     def action_server(self, name: str, action_type, execute: Callable[[Any, Callable, Callable], tuple]):
         """Serve the action ``name``: ``execute(goal, publish_feedback, cancel_requested)`` runs each accepted
         goal in a thread of its own and returns ``(outcome, result)``, outcome one of ``succeeded``,

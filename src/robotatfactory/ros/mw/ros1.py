@@ -3,6 +3,7 @@
 too: ROS 2 has no master."""
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import threading
@@ -13,6 +14,7 @@ from typing import Any, Callable
 import rospy
 
 from .base import Node, Publisher, QoS, RawTopic, flatten, throttled
+from .local import LocalBus, LocalPublisher, LocalSubscription
 
 NAME = "ros1"
 MASTER_RESTARTED = 4  # exit code of a node whose ROS master restarted under it
@@ -52,6 +54,36 @@ def serialize(msg) -> bytes:
     return buf.getvalue()
 
 
+_BUILTIN_EXACT = {"bool", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float64",
+                  "string", "time", "duration", "byte", "char"}
+
+
+@functools.lru_cache(maxsize=None)
+def wire_exact(type_name: str) -> bool:
+    """True when a message of this type comes out of rospy's serialization as it went in: no ``float32``
+    anywhere in it (a Python float is a float64; the wire rounds it to 32 bits)."""
+    import roslib.message
+
+    base = type_name.split("[", 1)[0]
+    if base in _BUILTIN_EXACT:
+        return True
+    if base == "float32":
+        return False
+    if base == "Header":
+        base = "std_msgs/Header"
+    cls = roslib.message.get_message_class(base)
+    return cls is not None and all(wire_exact(t) for t in cls._slot_types)
+
+
+def wire_copy(msg_type) -> Callable | None:
+    """For the in-process path (:mod:`.local`): a function giving a message as a subscriber in another process
+    would receive it (serialized and read back) when that differs from the object itself (``float32`` fields,
+    e.g. LaserScan's ranges), else None: composed nodes see the values separate nodes see."""
+    if wire_exact(msg_type._type):
+        return None
+    return lambda msg: msg_type().deserialize(serialize(msg))
+
+
 def require_master(hint: str) -> str:
     """The ROS master's URI; ConfigError ``no ROS master at URI: <hint>`` when none answers."""
     import rosgraph
@@ -74,25 +106,48 @@ class _Pub(Publisher):
         return self._pub.get_num_connections()
 
 
+class _Both:
+    """A composed node's subscription: rospy's (other processes' publishers) and the bus's (this process's)."""
+
+    def __init__(self, sub: rospy.Subscriber, local: LocalSubscription):
+        self.sub, self.local = sub, local
+
+
 class Ros1Node(Node):
+    """The process's rospy node, or (``component``) one of the nodes composed in it (:func:`run_nodes`): then
+    the name, the private namespace (parameters, ``~`` topics) and the logs are the component's, and its
+    topics between the components of the process go through ``bus`` (:mod:`.local`). ``tf`` shares the TF
+    publishers of the process (rospy has one publisher per topic and process: one latched ``/tf_static``)."""
+
     middleware = NAME
 
-    def __init__(self):
+    def __init__(self, component: str | None = None, bus: LocalBus | None = None, tf: "Ros1Node | None" = None):
         self._static: dict[str, Any] = {}
         self._static_pub = None
         self._tf_pub = None
         self._lock = threading.Lock()
+        self._bus = bus
+        self._tf = tf
+        self._name = None
+        if component is not None:
+            ns = self.namespace.rstrip("/")
+            self._name = f"{ns}/{component}"
 
     @property
     def name(self) -> str:
-        return rospy.get_name()
+        return self._name or rospy.get_name()
 
     @property
     def namespace(self) -> str:
         return rospy.get_namespace().rstrip("/") or "/"
 
     def resolve(self, name: str) -> str:
+        if self._name is not None and name.startswith("~"):  # the component's private name, not the process's
+            return f"{self._name}/{name[1:].lstrip('/')}"
         return rospy.resolve_name(name)
+
+    def sibling(self, name: str) -> "Ros1Node":
+        return Ros1Node(name, self._bus, tf=self._tf or self)
 
     def publisher(self, topic, msg_type, qos=QoS.RELIABLE, depth=10) -> Publisher:
         kw: dict = {"queue_size": depth}
@@ -102,15 +157,23 @@ class Ros1Node(Node):
             kw.update(queue_size=1, tcp_nodelay=True)
         elif qos is QoS.SYNCHRONOUS:
             kw.update(queue_size=None)  # written in the publishing thread: the control path
+        topic = self.resolve(topic)
         with warnings.catch_warnings():  # rospy warns about queue_size=None: here it is deliberate
             warnings.simplefilter("ignore", SyntaxWarning)
-            return _Pub(rospy.Publisher(topic, msg_type, **kw))
+            pub = _Pub(rospy.Publisher(topic, msg_type, **kw))
+        return pub if self._bus is None else self._bus.publisher(topic, pub, qos, wire_copy(msg_type))
 
     def subscribe(self, topic, msg_type, callback, qos=QoS.RELIABLE, depth=10, large=False):
         kw: dict = {"queue_size": depth, "tcp_nodelay": qos in (QoS.CONTROL, QoS.SENSOR, QoS.SYNCHRONOUS)}
         if large:
             kw["buff_size"] = 1 << 24
-        return rospy.Subscriber(topic, msg_type, callback, **kw)
+        topic = self.resolve(topic)
+        # composed: the other processes' publishers through rospy (the process's own are left out: _own_uri_out),
+        # the components' through the bus
+        sub = rospy.Subscriber(topic, msg_type, callback, **kw)
+        if self._bus is None:
+            return sub
+        return _Both(sub, self._bus.subscribe(topic, callback, 1 if qos is QoS.CONTROL else depth))
 
     def service(self, name, srv_type, handler):
         resp_cls = srv_type._response_class
@@ -147,6 +210,11 @@ class Ros1Node(Node):
     def close(self, handle) -> None:
         if handle is None:
             return
+        if isinstance(handle, _Both):
+            handle.local.close()
+            handle = handle.sub
+        if isinstance(handle, LocalPublisher):
+            handle = handle.inner
         inner = handle._pub if isinstance(handle, _Pub) else handle
         if isinstance(inner, (rospy.Timer, rospy.Service)):
             stop = inner.shutdown
@@ -162,6 +230,8 @@ class Ros1Node(Node):
     def send_tf(self, transforms) -> None:
         from tf2_msgs.msg import TFMessage
 
+        if self._tf is not None:
+            return self._tf.send_tf(transforms)
         if self._tf_pub is None:
             with self._lock:
                 if self._tf_pub is None:
@@ -171,6 +241,8 @@ class Ros1Node(Node):
     def send_static_tf(self, transforms) -> None:
         from tf2_msgs.msg import TFMessage
 
+        if self._tf is not None:
+            return self._tf.send_static_tf(transforms)
         with self._lock:
             if self._static_pub is None:
                 self._static_pub = rospy.Publisher("/tf_static", TFMessage, queue_size=100, latch=True)
@@ -182,7 +254,7 @@ class Ros1Node(Node):
         return rospy.Time.now()
 
     def params(self, defaults=None, describe=None, given=None) -> dict:
-        p = rospy.get_param("~", {})
+        p = rospy.get_param(self._name or "~", {})
         return p if isinstance(p, dict) else {}
 
     def log(self, level, text, throttle=0.0) -> None:
@@ -353,6 +425,66 @@ def spin_node(name: str, make_node: Callable[[Node], object], argv: list[str] | 
     watch = watch_master(name, pid0=pid0)
     rospy.spin()
     obj.stop()
+    return MASTER_RESTARTED if watch["restarted"] else 0
+
+
+def _own_uri_out() -> None:
+    """rospy connects a subscriber to every publisher of its topic, its own process's too (through a socket,
+    the message serialized and read back). In a composed process the components' messages go through the
+    bus (:mod:`.local`): leave this process out of every publisher list rospy acts on (the initial one and the
+    master's updates both pass ``RegManager.publisher_update``)."""
+    from rospy.impl.registration import RegManager
+
+    if getattr(RegManager.publisher_update, "_raf_own_out", False):
+        return
+    original = RegManager.publisher_update
+
+    def publisher_update(self, resolved_name, uris):
+        own = rospy.core.get_node_uri()
+        return original(self, resolved_name, [u for u in uris if u != own])
+
+    publisher_update._raf_own_out = True
+    RegManager.publisher_update = publisher_update
+
+
+def run_nodes(args, plans: list) -> int:
+    """Several nodes as components of one process (see :func:`robotatfactory.ros.cli.run_nodes`): one rospy
+    node (``args.name``), each plan's node a :class:`Ros1Node` component of it with the plan's name and
+    parameters, messages between them in-process (:mod:`.local`)."""
+    from ..master import ensure_master
+
+    master = ensure_master(args.roscore, "compose")
+    import rosgraph
+
+    ns = args.ns.strip("/")
+    m = rosgraph.Master("/raf_compose_cli")
+    if not args.no_sim_time:
+        m.setParam("/use_sim_time", True)
+    for plan in plans:
+        path = f"/{ns}/{plan.name}" if ns else f"/{plan.name}"
+        for key, value in plan.params.items():
+            m.setParam(f"{path}/{key}" if key else path, list(value) if isinstance(value, tuple) else value)
+    loopback_ros_default()
+    pid0 = master_pid()
+    _own_uri_out()
+    process = init_node(args.name, argv=[sys.argv[0]], namespace=ns)
+    bus = LocalBus(on_error=lambda text: rospy.logerr(f"{args.name}: {text}"))
+    objs = []
+    try:
+        for plan in plans:
+            obj = plan.make_node(Ros1Node(plan.name, bus, tf=process))
+            objs.append(obj)
+            print(f"raf {plan.who}: {plan.started(obj)}", flush=True)
+        watch = watch_master(f"raf compose {args.name}", pid0=pid0)
+        rospy.spin()
+    finally:
+        for obj in reversed(objs):
+            obj.stop()
+        c = bus.counts()
+        print(f"raf compose: {len(plans)} nodes; in-process messages {c['delivered']} delivered, "
+              f"{c['dropped']} dropped (a full queue)", flush=True)
+        if master is not None:
+            master.stop()
     return MASTER_RESTARTED if watch["restarted"] else 0
 
 

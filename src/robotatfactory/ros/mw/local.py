@@ -1,0 +1,143 @@
+"""The in-process message path of composed nodes (``raf compose``): what nodelets are to ROS 1 and composable
+nodes with intra-process communication are to ROS 2, for the nodes of this project.
+
+Several nodes (components) in one process each publish and subscribe as usual through their
+:class:`~.base.Node`; the implementation routes a topic's messages between the components of the process
+through one :class:`LocalBus`: a published message is handed, as the same object, to every local subscription
+of its topic (no serialization, no socket; a type the wire would change, one with ``float32`` fields, is first
+made what the wire makes of it: ``wire``), and goes over the middleware only to other processes'
+subscribers. A local subscription is served as the middleware serves one: by a thread of its own, from a
+queue of ``depth`` messages (the oldest dropped when it is full, and counted), so a slow subscriber never
+holds up the publisher. A latched topic's last message (per publisher) reaches a local subscription made
+later, as a latched connection gives it.
+
+The rules for a composed node: a received message is shared with the other local subscribers and must not be
+modified; a published message must not be modified after ``publish``. The nodes of this project build each
+message anew.
+
+Plain Python, no middleware import: :mod:`.ros1` wires it in.
+"""
+from __future__ import annotations
+
+import threading
+from collections import deque
+from typing import Any, Callable
+
+from .base import Publisher, QoS
+
+
+class LocalSubscription:
+    """One component's subscription to a topic of the bus: a queue and the thread that calls ``callback``."""
+
+    def __init__(self, bus: "LocalBus", topic: str, callback: Callable[[Any], None], depth: int,
+                 on_error: Callable[[str], None]):
+        self.bus, self.topic, self.callback = bus, topic, callback
+        self.queue: deque = deque()
+        self.depth = max(1, int(depth))
+        self.dropped = 0  # messages dropped because the queue was full (the oldest first, as rospy does)
+        self.delivered = 0
+        self._cv = threading.Condition()
+        self._closed = False
+        self._on_error = on_error
+        self._thread = threading.Thread(target=self._serve, name=f"raf-local{topic}", daemon=True)
+        self._thread.start()
+
+    def put(self, msg) -> None:
+        with self._cv:
+            if self._closed:
+                return
+            if len(self.queue) >= self.depth:
+                self.queue.popleft()
+                self.dropped += 1
+            self.queue.append(msg)
+            self._cv.notify()
+
+    def _serve(self) -> None:
+        while True:
+            with self._cv:
+                while not self.queue and not self._closed:
+                    self._cv.wait()
+                if self._closed:
+                    return
+                msg = self.queue.popleft()
+            try:
+                self.callback(msg)
+                self.delivered += 1
+            except Exception as e:  # noqa: BLE001 - a callback's error is logged, as the middleware does
+                self._on_error(f"{self.topic}: callback error: {type(e).__name__}: {e}")
+
+    def close(self) -> None:
+        with self._cv:
+            self._closed = True
+            self.queue.clear()
+            self._cv.notify_all()
+        self.bus._remove(self)
+
+    def join(self, timeout: float | None = None) -> None:
+        self._thread.join(timeout)
+
+
+class LocalPublisher(Publisher):
+    """A component's publisher: every local subscription of the topic gets the message, and ``inner`` (the
+    middleware's publisher) sends it to the subscribers of other processes."""
+
+    def __init__(self, bus: "LocalBus", topic: str, inner: Publisher, latched: bool,
+                 wire: Callable[[Any], Any] | None = None):
+        self.bus, self.topic, self.inner, self.latched, self.wire = bus, topic, inner, latched, wire
+        self.last = None  # a latched topic's last message
+
+    def publish(self, msg) -> None:
+        subs = self.bus.subscriptions(self.topic)
+        local = self.wire(msg) if self.wire is not None and (subs or self.latched) else msg
+        if self.latched:
+            self.last = local
+        for sub in subs:
+            sub.put(local)
+        self.inner.publish(msg)
+
+    def subscriber_count(self) -> int:
+        return len(self.bus.subscriptions(self.topic)) + self.inner.subscriber_count()
+
+
+class LocalBus:
+    """The topics of one process's components, by resolved name."""
+
+    def __init__(self, on_error: Callable[[str], None] = lambda text: None):
+        self._lock = threading.Lock()
+        self._subs: dict[str, tuple[LocalSubscription, ...]] = {}
+        self._pubs: dict[str, list[LocalPublisher]] = {}
+        self.on_error = on_error
+
+    def publisher(self, topic: str, inner: Publisher, qos: QoS,
+                  wire: Callable[[Any], Any] | None = None) -> LocalPublisher:
+        """``wire(msg)``: the message as the middleware would deliver it, when that differs from the object
+        (the middleware's ``wire_copy``), so that a local subscriber sees what a remote one sees."""
+        pub = LocalPublisher(self, topic, inner, latched=qos is QoS.LATCHED, wire=wire)
+        with self._lock:
+            self._pubs.setdefault(topic, []).append(pub)
+        return pub
+
+    def subscribe(self, topic: str, callback: Callable[[Any], None], depth: int) -> LocalSubscription:
+        sub = LocalSubscription(self, topic, callback, depth, self.on_error)
+        with self._lock:
+            self._subs[topic] = self._subs.get(topic, ()) + (sub,)
+            latched = [p.last for p in self._pubs.get(topic, ()) if p.latched and p.last is not None]
+        for msg in latched:
+            sub.put(msg)
+        return sub
+
+    def subscriptions(self, topic: str) -> tuple[LocalSubscription, ...]:
+        return self._subs.get(topic, ())  # (a tuple replaced whole under the lock: read without it)
+
+    def publishes(self, topic: str) -> bool:
+        """True when a component of this process publishes ``topic``."""
+        return bool(self._pubs.get(topic))
+
+    def _remove(self, sub: LocalSubscription) -> None:
+        with self._lock:
+            self._subs[sub.topic] = tuple(s for s in self._subs.get(sub.topic, ()) if s is not sub)
+
+    def counts(self) -> dict[str, int]:
+        """Messages delivered and dropped over every local subscription."""
+        subs = [s for group in self._subs.values() for s in group]
+        return {"delivered": sum(s.delivered for s in subs), "dropped": sum(s.dropped for s in subs)}
