@@ -59,17 +59,23 @@ def settings_tree(args) -> dict:
 
 
 def run(args) -> int:
-    from ..agent.settings import agent_settings
-
-    params = {} if args.defaults else settings_tree(args)
-    cfg = agent_settings(params)  # a bad name or value: a clear error before the middleware starts
     if getattr(args, "print_params", False):
-        from ..agent.settings import HEADER
+        from ..agent.settings import HEADER, agent_settings
         from ..settings import to_yaml
 
+        cfg = agent_settings({} if args.defaults else settings_tree(args))
         print(to_yaml(cfg, HEADER if args.defaults else ""), end="")
         return 0
-    from ..ros.cli import run_node
+    return plan(args).run(args)
+
+
+def plan(args):
+    """The node this command line makes (:class:`~robotatfactory.ros.cli.NodePlan`), not yet started."""
+    from ..agent.settings import agent_settings
+    from ..ros.cli import NodePlan
+
+    params = settings_tree(args)
+    cfg = agent_settings(params)  # a bad name or value: a clear error before the middleware starts
 
     def make_node(node):
         from ..ros.agent_node import AgentNode, config_from_params, node_params
@@ -77,5 +83,5 @@ def run(args) -> int:
         # the settings read back as the node's parameters (ROS 2 declares every one: ros2 param list)
         return AgentNode(config_from_params(node_params(node, params)), node).start()
 
-    return run_node(args, "agent", params, make_node, lambda n: f"{args.name} running (field {n.field.name}, "
-                                                           f"server udp {cfg.server.host}:{cfg.server.port})")
+    return NodePlan("agent", args.name, params, make_node, lambda n: f"{args.name} running (field {n.field.name}, "
+                                                                f"server udp {cfg.server.host}:{cfg.server.port})")

@@ -69,18 +69,23 @@ def build_params(args) -> dict:
 
 
 def run(args) -> int:
-    from ..ros.config import load_config
-
-    params = {} if args.defaults else build_params(args)
-    cfg = load_config(params)  # a bad name or value: a clear error before the middleware starts
     if args.print_params:
-        from ..ros.config import HEADER
+        from ..ros.config import HEADER, load_config
         from ..settings import to_yaml
 
+        cfg = load_config({} if args.defaults else build_params(args))
         # --defaults: the settings as config/bridge.yaml holds them (the robot file's unset); else every value
         print(to_yaml(cfg.given, HEADER) if args.defaults else to_yaml(cfg.settings), end="")
         return 0
-    from ..ros.cli import run_node
+    return plan(args).run(args)
+
+
+def plan(args):
+    """The node this command line makes (:class:`~robotatfactory.ros.cli.NodePlan`), not yet started."""
+    from ..ros.cli import NodePlan
+    from ..ros.config import load_config
+
+    cfg = load_config(build_params(args))  # a bad name or value: a clear error before the middleware starts
 
     def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.bridge_node import Bridge
@@ -90,5 +95,5 @@ def run(args) -> int:
         return Bridge(cfg, node).start()
 
     # the resolved settings as the node's parameters (ROS 1: rosparam shows them; ROS 2: overrides)
-    return run_node(args, "bridge", cfg.flat_params(), make_node,
+    return NodePlan("bridge", args.name, cfg.flat_params(), make_node,
                     lambda b: f"{args.name} listening on udp {cfg.bind_host}:{b.bound_port}")

@@ -56,17 +56,23 @@ def build_settings(args) -> dict:
 
 
 def run(args) -> int:
-    from ..localization.config import from_dict
-
-    settings = {} if args.defaults else build_settings(args)
-    cfg = from_dict(settings)  # a bad name or value: a clear error before the middleware starts
     if args.print_params:
-        from ..localization.config import HEADER
+        from ..localization.config import HEADER, from_dict
         from ..settings import to_yaml
 
+        cfg = from_dict({} if args.defaults else build_settings(args))
         print(to_yaml(cfg, HEADER if args.defaults else ""), end="")
         return 0
-    from ..ros.cli import run_node
+    return plan(args).run(args)
+
+
+def plan(args):
+    """The node this command line makes (:class:`~robotatfactory.ros.cli.NodePlan`), not yet started."""
+    from ..localization.config import from_dict
+    from ..ros.cli import NodePlan
+
+    settings = build_settings(args)
+    from_dict(settings)  # a bad name or value: a clear error before the middleware starts
 
     def make_node(node):
         from ..ros.localization_node import LocalizationNode, node_params
@@ -74,5 +80,5 @@ def run(args) -> int:
         # the settings read back as the node's parameters (ROS 2 declares every one: ros2 param list)
         return LocalizationNode(from_dict(node_params(node, settings)), node).start()
 
-    return run_node(args, "localize", {"": settings}, make_node,
+    return NodePlan("localize", args.name, {"": settings}, make_node,
                     lambda n: f"{args.name} running (field {n.field.name})")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import dataclass, field
 from typing import Callable
 
 
@@ -36,6 +37,35 @@ def run_node(args, who: str, params: dict, make_node: Callable, started: Callabl
     from .mw import api
 
     return api().run_node(args, who, params, make_node, started)
+
+
+@dataclass
+class NodePlan:
+    """A node as a command line makes it, not yet started: what :func:`run_node` runs alone and
+    :func:`run_nodes` runs with others in one process (``raf compose``)."""
+
+    who: str  #: the command (``bridge``): names the node in messages
+    name: str  #: the node's name (``raf_bridge``)
+    params: dict = field(default_factory=dict)  #: as :func:`run_node`'s ``params``
+    make_node: Callable = None  #: ``make_node(node) -> obj`` (obj has ``stop()``)
+    started: Callable = None  #: ``started(obj) -> str``, the line printed once it runs
+
+    def run(self, args) -> int:
+        return run_node(args, self.who, self.params, self.make_node, self.started)
+
+
+def run_nodes(args, plans: list[NodePlan]) -> int:
+    """Run ``plans`` as components of one process until Ctrl-C (``raf compose``): ``args`` as for
+    :func:`run_node`, its ``name`` the process's node. Messages between the components go in-process
+    (:mod:`.mw.local`). ROS 1 only: rospy has one node per process (ConfigError on ROS 2)."""
+    from .mw import api
+
+    impl = api()
+    if not hasattr(impl, "run_nodes"):
+        from ..errors import ConfigError
+
+        raise ConfigError(f"raf compose: not on {impl.NAME} (ROS 1 only); run the nodes one by one")
+    return impl.run_nodes(args, plans)
 
 
 def spin_node(name: str, make_node: Callable, argv: list[str] | None = None) -> int:
