@@ -171,7 +171,16 @@ class Bridge:
         if cfg.camera.enabled:
             from .camera_node import CameraLink
 
-            self.camera = CameraLink(cfg.given_params(), f"{node.name.rsplit('/', 1)[-1]}_camera", node.namespace)
+            name = f"{node.name.rsplit('/', 1)[-1]}_camera"
+            here = None
+            if cfg.camera.process == "bridge":
+                try:
+                    here = node.sibling(name)
+                except NotImplementedError as e:
+                    from ..errors import ConfigError
+
+                    raise ConfigError(f"camera.process: bridge: {e}") from None
+            self.camera = CameraLink(cfg.given_params(), name, node.namespace, node=here)
         self._spawn(self._udp_loop, "udp")
         self._spawn(self._diag_loop, "diagnostics")
         from .sim_services import SimServices

@@ -328,14 +328,23 @@ class CameraBridge:
 
 
 class CameraLink:
-    """The bridge's side: starts the camera process and sends it the SensorFrame timing (non-blocking)."""
+    """The bridge's side: starts the camera process and sends it the SensorFrame timing (non-blocking).
 
-    def __init__(self, params: dict, name: str, namespace: str):
+    ``node`` (``camera.process: bridge``): run the camera half in this process instead, on ``node`` (the
+    bridge's :meth:`~.mw.base.Node.sibling`), fed through the same socket pair."""
+
+    def __init__(self, params: dict, name: str, namespace: str, node=None):
         import subprocess
 
         self.parent_sock, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         self.parent_sock.setblocking(False)
         self.dropped = 0
+        self.proc = self.cam = None
+        if node is not None:
+            from .config import load_config
+
+            self.cam = CameraBridge(load_config(params), node, child).start()
+            return
         args = [sys.executable, "-m", "robotatfactory.ros.camera_node", "--fd", str(child.fileno()),
                 "--params", json.dumps(params), "--name", name, "--ns", namespace or "/"]
         self.proc = subprocess.Popen(args, pass_fds=[child.fileno()])
@@ -357,6 +366,10 @@ class CameraLink:
         import subprocess
 
         self.parent_sock.close()  # the camera process sees EOF and exits
+        if self.cam is not None:
+            self.cam.stop()
+            self.cam.timing_sock.close()
+            return
         try:
             self.proc.wait(timeout)
         except subprocess.TimeoutExpired:

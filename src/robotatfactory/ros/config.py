@@ -148,6 +148,9 @@ class Camera(overlay(CameraSpec)):
                              hi=0.1)
     max_wait: float = setting(0.02, "s (wall): nearest only: longest wait for the SensorFrame after a frame",
                               lo=0.0, hi=1.0)
+    process: str = setting("own", "where the camera half runs: own (a process of its own: 1.2 MB frames never "
+                                  "hold the bridge's GIL) | bridge (the bridge's process, ROS 1: composed with raf "
+                                  "compose, its images reach the other nodes in-process)", choices=("own", "bridge"))
 
 
 @dataclass(frozen=True)
