@@ -125,7 +125,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                     field_name: str | None = None, simulator: str = "standin", localize: tuple[str, ...] = (),
                     agent: tuple[str, ...] = (), sim_set: tuple[str, ...] = (),
                     loss: tuple[float, float, float] = (0.0, 0.0, 0.0), calibration: str | None = None,
-                    log_dir: Path | None = None, paced: bool = False) -> dict:
+                    log_dir: Path | None = None, paced: bool = False, compose: bool = False) -> dict:
     """One round over the whole stack (see the module docstring); a flat dict of the run's figures, as
     :func:`.competition.play_round` gives (plus ``pose_error_*`` keys and ``logs``).
 
@@ -139,7 +139,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     camera calibration YAML given to ``raf bridge --calibration`` and ``raf localize --calibration`` (None: the
     robot file's nominal camera; :mod:`._competition_calibration` makes it); ``log_dir``: the run's directory
     (default :func:`run_dir`); ``paced``: the whole loop paced by simulation time instead of the wall clock
-    (``raf sim --paced --pace-hold 2`` and every node's ``pace.enabled``: docs/pacing.md), the stand-in only."""
+    (``raf sim --paced --pace-hold 2`` and every node's ``pace.enabled``: docs/pacing.md), the stand-in only;
+    ``compose``: the bridge, the localization and the agent as components of one process (``raf compose``,
+    ROS 1), their messages in-process, instead of a process each."""
     from ..ros.master import private_graph
     from ..ros.mw import bag_format
     from ..ros.mw import name as middleware
@@ -168,7 +170,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     wall0 = time.perf_counter()
     phases: dict[str, float] = {}  # wall s of starting the processes, the run, stopping them (and analysing)
     graph = private_graph(mw).start()
-    procs = Procs(log_dir, watch=("bridge", "localize", "agent", "record"))
+    nodes = ("stack",) if compose else ("bridge", "localize", "agent")  # the processes of the robot's nodes
+    agent_log = nodes[-1]  # the process whose log holds the agent's lines
+    procs = Procs(log_dir, watch=(*nodes, "record"))
     proxy = None
     frames_to = bridge_port  # where the simulator sends its frames: the bridge, or the lossy link to it
     try:
@@ -179,10 +183,13 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             proxy.set_faults(*loss)
             frames_to = proxy.port
         env = graph.env(**RUN_ENV)
-        procs.raf("bridge", *field_args, "bridge", "--port", str(bridge_port), "--camera",
-                  f"tcp://127.0.0.1:{cam_port}", "--sim-host", "127.0.0.1", *calib_args, *pace, env=env)
-        procs.raf("localize", *field_args, "localize", *calib_args, *pace,
-                  *[a for s in localize for a in ("--set", s)], env=env)
+        bridge_cmd = ["bridge", "--port", str(bridge_port), "--camera", f"tcp://127.0.0.1:{cam_port}", "--sim-host",
+                      "127.0.0.1", *calib_args, *pace, *(["--set", "camera.process=bridge"] if compose else [])]
+        localize_cmd = ["localize", *calib_args, *pace, *[a for s in localize for a in ("--set", s)]]
+        agent_cmd = ["agent", "--set", f"server.port={server_port}", *pace, *[a for s in agent for a in ("--set", s)]]
+        if not compose:
+            procs.raf("bridge", *field_args, *bridge_cmd, env=env)
+            procs.raf("localize", *field_args, *localize_cmd, env=env)
         procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
                   "--format", fmt, env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
@@ -191,9 +198,12 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
                       "--server-port", str(server_port), "--trace", str(trace_path), "--end-after-max",
                       str(END_AFTER_MAX), "--status-every", "5", env=env, may_exit=True)
             _wait_logged(procs, "referee", "running", 60.0)
-        procs.raf("agent", *field_args, "agent", "--set", f"server.port={server_port}", *pace,
-                  *[a for s in agent for a in ("--set", s)], env=env)
-        _wait_logged(procs, "agent", "running", 60.0)
+        if compose:
+            procs.raf("stack", *field_args, "compose", "--", *bridge_cmd, "--", *localize_cmd, "--", *agent_cmd,
+                      env=env)
+        else:
+            procs.raf("agent", *field_args, *agent_cmd, env=env)
+        _wait_logged(procs, agent_log, "raf agent: raf_agent running", 60.0)
         if simtwo:
             procs.raf("sim", *field_args, "simtwo", "run", "--port", str(sim_port), "--bridge",
                       f"127.0.0.1:{frames_to}", "--camera-port", str(cam_port), "--round", str(round_no), "--seed",
@@ -214,7 +224,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         done_at = None
         while sim.poll() is None and time.monotonic() < limit:
             procs.check()
-            if done_at is None and "task: done" in _read(log_dir / "agent.log"):
+            if done_at is None and "task: done" in _read(log_dir / f"{agent_log}.log"):
                 done_at = time.monotonic()  # the agent has nothing left to do: no need to wait out the round
             if done_at is not None and time.monotonic() - done_at > DONE_GRACE:
                 break
@@ -231,7 +241,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             proxy.close()
     phases["stop_s"] = time.perf_counter() - wall0 - phases.get("start_s", 0.0) - phases.get("run_s", 0.0)
     out = analyse(round_no, seed, log_dir, trace_path, bag_path, record_path, field_name,
-                  wall_s=time.perf_counter() - wall0, middleware=mw, report_log=f"{ender}.log")
+                  wall_s=time.perf_counter() - wall0, middleware=mw, report_log=f"{ender}.log",
+                  agent_log=f"{agent_log}.log")
     out.update({f"wall_{k}": round(v, 3) for k, v in phases.items()})
     out["wall_analyse_s"] = round(time.perf_counter() - wall0 - sum(phases.values()), 3)
     if proxy is not None:  # what the lossy link did (both directions)
@@ -263,7 +274,8 @@ def _wait_logged(procs, name: str, text: str, timeout: float) -> None:
 
 
 def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path: Path, record_path: bool,
-            field_name: str | None, wall_s: float, middleware: str, report_log: str = "sim.log") -> dict:
+            field_name: str | None, wall_s: float, middleware: str, report_log: str = "sim.log",
+            agent_log: str = "agent.log") -> dict:
     """The run's figures from its logs, trace and bag (separate from running it, so a kept run's
     directory can be analysed again)."""
     from ..field import load_field
@@ -273,7 +285,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     from ._competition_log import notes_of, parse_sim_report, points_lost
 
     text = _read(log_dir / report_log)
-    agent_log = _read(log_dir / "agent.log")
+    agent_log = _read(log_dir / agent_log)
     points, max_points, last, found = parse_sim_report(text)
     notes = notes_of(text)
     world = re.findall(r"raf sim: world perturbed: .*?; offsets (\{.*\})", text)

@@ -70,6 +70,7 @@ HELP = ("the autonomous robot plays rounds 1-3 over seeds on the whole stack (or
         "last-delivery time, failures, pose error while docking, per-round success rate and median time")
 MODES = ("bare_truth", "full_stack")
 PACES = ("realtime", "paced")  # full_stack's clock: the wall clock, or simulation time (docs/pacing.md)
+NODES = ("processes", "composed")  # full_stack's nodes: a process each, or one process (raf compose, ROS 1)
 SIMTWO_MODE = "simtwo_full_stack"  # full_stack on the real SimTwo (--simulator simtwo): the keys' prefix
 TIME_TARGETS = {1: 60.0, 2: 80.0, 3: 120.0}  # s, median time of the last scoring delivery (issue 11)
 #: the seeds the agent was tuned on (issues 11-19) and a held-out set it never saw (issue 20): every result key
@@ -140,6 +141,10 @@ def add_arguments(parser) -> None:
                              "SimTwo) or paced: by simulation time, each cycle as soon as every node has finished "
                              "the one before, with real time's loop latency (raf sim --paced and every node's "
                              "pace.enabled: faster than real time and reproducible; docs/pacing.md)")
+    parser.add_argument("--nodes", choices=NODES, default="processes",
+                        help="full_stack: the bridge, the localization and the agent each in a process of its own "
+                             "(processes, default) or composed in one, their messages in-process (composed: raf "
+                             "compose, ROS 1 only)")
     parser.add_argument("--analyse", metavar="DIR", default=None,
                         help="full_stack: do not run; measure again the runs an earlier --out DIR kept (logs, trace, "
                              "pose bag) with this code, for --rounds and --seeds")
@@ -410,10 +415,10 @@ def _job(spec, out_dir: Path | None = None):
 def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, field_name: str | None,
               simulator: str = "standin", localize: tuple[str, ...] = (), agent: tuple[str, ...] = (),
               sim_set: tuple[str, ...] = (), loss: tuple[float, float, float] = (0.0, 0.0, 0.0),
-              calibration: str = "none", paced: bool = False) -> dict:
+              calibration: str = "none", paced: bool = False, compose: bool = False) -> dict:
     """One whole-stack run: its camera calibration first (``calibration``: what
     :func:`._competition_calibration.resolve` gave; a drive with ``auto``), then the round on it (``paced``: by
-    simulation time, docs/pacing.md)."""
+    simulation time, docs/pacing.md; ``compose``: the robot's nodes in one process)."""
     from ._competition_calibration import prepare
     from ._competition_full import SimStartError, play_full_stack, run_dir
 
@@ -427,7 +432,7 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
         tries -= 1
         try:
             out = play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set,
-                                  loss, calibration=calib, log_dir=log_dir, paced=paced)
+                                  loss, calibration=calib, log_dir=log_dir, paced=paced, compose=compose)
             break
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
@@ -482,7 +487,8 @@ def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: 
     bag = d / "pose.bag" if (d / "pose.bag").exists() else d / "pose_bag"
     out = analyse(round_no, seed, d, d / "trace.jsonl", bag, record, field_name,
                   wall_s=float(before.get("wall_s", math.nan)), middleware=before.get("middleware", "unknown"),
-                  report_log="referee.log" if simtwo else "sim.log")
+                  report_log="referee.log" if simtwo else "sim.log",
+                  agent_log="stack.log" if (d / "stack.log").exists() else "agent.log")  # (a composed run)
     out.update({k: v for k, v in before.items() if k.startswith("calibration")})  # how its camera was calibrated
     return out
 
@@ -785,6 +791,13 @@ def run(args, out_dir: Path | None) -> dict:
     if pace == "paced" and (simulator == "simtwo" or not mode.endswith("full_stack")):
         raise ConfigError("--pace paced: the whole stack on the stand-in only (SimTwo runs in real time; bare_truth "
                           "has no wall clock to drop)")
+    nodes = getattr(args, "nodes", "processes")
+    if nodes not in NODES:
+        raise ConfigError(f"--nodes {nodes!r}: choose one of {', '.join(NODES)}")
+    from ..ros.mw import name as middleware_name
+
+    if nodes == "composed" and (not mode.endswith("full_stack") or middleware_name() != "ros1"):
+        raise ConfigError("--nodes composed: the whole stack on ROS 1 (raf compose; rospy's node per process)")
     ray = getattr(args, "ray", None)
     inputs = []  # files a run reads, shipped to Ray workers (_batch.py): a --field file, a --calibration YAML
     if ray and field_name and Path(field_name).is_file():
@@ -815,7 +828,7 @@ def run(args, out_dir: Path | None) -> dict:
         else:  # a thread per run locally (each run is its own processes), or a Ray task per run
             job = functools.partial(_full_item, field_name=field_name, simulator=simulator, localize=localize,
                                     agent=agent_items, sim_set=tuple(sim_items), loss=loss, calibration=calibration,
-                                    paced=pace == "paced")
+                                    paced=pace == "paced", compose=nodes == "composed")
             runs, batch = run_batch(job, [(sp[0], sp[1], sp[4]) for sp in specs], local="threads")
     else:  # the bare stand-in in a process: spawned processes (serially with one job), or a Ray task per run
         runs, batch = run_batch(_job, specs, local="processes")
@@ -854,6 +867,8 @@ def run(args, out_dir: Path | None) -> dict:
     out["pose_predicted"] = bool(getattr(args, "pose_predict", False)) and (delay > 0 or cmd_delay > 0)
     out["wall_s"] = round(wall, 1)
     out["pace"] = pace if mode.endswith("full_stack") else "none: bare_truth runs in-process, as fast as it can"
+    if mode.endswith("full_stack"):
+        out["nodes"] = nodes
     sim_s = [r.get("sim_s") for r in runs if isinstance(r.get("sim_s"), (int, float))]
     if sim_s and wall > 0:  # the batch's simulated seconds per wall second (all runs, at --jobs at once)
         out["sim_s_per_wall_s"] = round(sum(sim_s) / wall, 3)
