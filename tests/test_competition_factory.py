@@ -15,8 +15,8 @@ R, G, B = PartType.RED, PartType.GREEN, PartType.BLUE
 FAR = (-0.725, -0.4)  # the start pose: far from every machine
 
 
-def world(parts="RGBX", delay=2.0, duration=600.0, start=True):
-    w = KinematicWorld(FIELD, RoundSetup.make(3, parts=parts, processing_delay=delay, duration=duration))
+def world(parts="RGBX", delay=2.0, duration=600.0, start=True, **kw):
+    w = KinematicWorld(FIELD, RoundSetup.make(3, parts=parts, processing_delay=delay, duration=duration), **kw)
     if start:
         w.start()
     return w
@@ -191,16 +191,12 @@ def test_a_teleport_the_simulator_applies_late_shows_at_the_output_at_once():
     from robotatfactory.competition.factory import TELEPORT_GRACE
 
     for applied_after in (3, None):  # cycles until the simulator moves the part; None: never
-        w = world("GXXX", delay=1.0)
+        w = world("GXXX", delay=1.0, teleport_delay=applied_after)
         w.pick(1); w.place(1, "machine_B", 1)
         t_out = None
         for _ in range(60):  # 2.4 s: the machine finishes at ~1 s
-            w.t = round(w.t + w.dt, 9)
-            out = w.factory.step(w.t, dict(w.part_xy), w.robot_xy, set(w.held))
-            if out:
+            if w.step():
                 t_out = w.t
-            if t_out is not None and applied_after is not None and w.t >= t_out + applied_after * w.dt - 1e-9:
-                w.part_xy[1] = w.slot("machine_B", 2).xy
             if t_out is not None and w.t < t_out + TELEPORT_GRACE - 1e-9:
                 # the input's position is stale (or the part arrived): the state has it at the output, once
                 assert w.factory.letters("machine_B") == "XBXX", (applied_after, w.t)
@@ -214,17 +210,36 @@ def test_a_teleport_the_simulator_applies_late_shows_at_the_output_at_once():
 
 
 def test_a_part_held_while_its_teleport_is_in_flight_is_in_no_slot():
-    w = world("GXXX", delay=1.0)
+    w = world("GXXX", delay=1.0, teleport_delay=None)
     w.pick(1); w.place(1, "machine_B", 1)
     for _ in range(60):
-        w.t = round(w.t + w.dt, 9)
-        if w.factory.step(w.t, dict(w.part_xy), w.robot_xy, set(w.held)):
+        if w.step():
             break
     assert w.factory.letters("machine_B") == "XBXX"  # the teleport not applied yet: at the output already
     w.held.add(1)  # a magnet takes it from the input before the simulator moves it
-    w.t = round(w.t + w.dt, 9)
-    w.factory.step(w.t, dict(w.part_xy), w.robot_xy, set(w.held))
+    w.step()
     assert w.factory.slot_of(1) is None and w.factory.letters("machine_B") == "XXXX"
+
+
+def test_the_kinematic_world_applies_teleports_after_teleport_delay_cycles():
+    out_xy = FIELD.slot("machine_B", 2).xy
+    for delay in (0, 1, 3):
+        w = world("GXXX", delay=1.0, teleport_delay=delay)
+        w.pick(1); w.place(1, "machine_B", 1)
+        while not w.step():
+            pass
+        (t_asked, tp), = w.teleports  # recorded when the factory asked, applied or not
+        assert t_asked == w.t and tp.slot.xy == out_xy
+        for k in range(delay):  # still at the input after the cycle it was asked in and the next delay - 1
+            assert w.part_xy[1] != out_xy and len(w.in_flight) == 1, (delay, k)
+            w.step()
+        assert w.part_xy[1] == out_xy and w.in_flight == [], delay
+    w = world("GXXX", delay=1.0, teleport_delay=None)  # never applied
+    w.pick(1); w.place(1, "machine_B", 1)
+    w.advance(3.0)
+    assert len(w.teleports) == 1 and w.in_flight == [] and w.part_xy[1] == FIELD.slot("machine_B", 1).xy
+    with pytest.raises(ConfigError):
+        world(teleport_delay=-1)
 
 
 def test_zero_delay_processes_in_the_same_cycle():

@@ -11,8 +11,9 @@ FIELD = load_field()
 R, G, B = PartType.RED, PartType.GREEN, PartType.BLUE
 
 
-def world(parts, round_no=3, delay=1.0, duration=600.0):
-    w = KinematicWorld(FIELD, RoundSetup.make(round_no, parts=parts, processing_delay=delay, duration=duration))
+def world(parts, round_no=3, delay=1.0, duration=600.0, **kw):
+    w = KinematicWorld(FIELD, RoundSetup.make(round_no, parts=parts, processing_delay=delay, duration=duration),
+                       **kw)
     w.start()
     return w
 
@@ -310,3 +311,24 @@ def test_the_experiments_read_the_same_score_from_the_report_text():
     assert last == pytest.approx(rep.last_score_time, abs=0.01) and points_lost(str(rep)) == rep.lost == 1
     fetch(w, 2, "outgoing", 2)
     assert points_lost(str(w.report())) == 1 and parse_sim_report(str(w.report()))[0] == 2
+
+
+def test_the_report_has_the_factorys_counters():
+    """The final report (raf sim, raf referee) says what the machines did and whether a teleport never showed in
+    the positions (on SimTwo: the bridge lost it), which the score alone does not."""
+    from robotatfactory.competition.factory import TELEPORT_GRACE
+    from robotatfactory.experiments._competition_log import notes_of, parse_sim_report, points_lost
+
+    w = world("GRXX", delay=1.0, teleport_delay=None)  # the simulator never applies a teleport
+    fetch(w, 2, "machine_A", 1)
+    w.advance(0.2)  # the machine took it
+    w.pick(2)  # and it is taken back before the machine finished: cancelled
+    w.place(2, "incoming", 2)
+    fetch(w, 1, "machine_B", 1)
+    w.advance(1.0 + TELEPORT_GRACE + 0.5)  # processed, then late: the positions count again
+    rep = w.report()
+    assert (rep.processed, rep.cancelled, rep.teleports_late) == (1, 1, 1)
+    text = str(rep)
+    assert "  factory counters: processed 1, cancelled 1, teleports_late 1" in text.splitlines()
+    assert parse_sim_report(text)[:2] == (rep.points, rep.max_points) and points_lost(text) == rep.lost
+    assert notes_of(text) == []

@@ -192,6 +192,7 @@ def test_raf_sim_runs_and_prints_the_score(raf_cmd, tmp_path):
     assert p.returncode == 0, p.stderr
     assert "duration at t = 1.20 s" in p.stdout
     assert "Round 2, incoming" in p.stdout and "total: 0 of" in p.stdout
+    assert "factory counters: processed 0, cancelled 0, teleports_late 0" in p.stdout
     assert "rtf" in p.stdout  # the status line
 
 

@@ -11,6 +11,7 @@ import re
 import socket
 import subprocess
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -445,9 +446,12 @@ def test_standard_services_with_the_stand_in(middleware, ros_graph, field, tmp_p
         clock.clear()
         assert _call("step_simulation", steps=5).result.result == ok
         assert sim_time() == pytest.approx(t0 + 0.2, abs=1e-6)
-        # /clock reaches the stepped time (the five steps' clocks may arrive one by one) and goes no further: paused
+        # /clock reaches the stepped time (the five steps' clocks may arrive one by one) and goes no further: paused.
+        # The wait returns at the first clock that reaches it; a clock running on would come after, so listen on
         reached = clock.wait(1, timeout=5, pred=lambda c: stamp_to_s(c.clock) >= t0 + 0.2 - 1e-6)
         assert max(stamp_to_s(c.clock) for c in reached) == pytest.approx(t0 + 0.2, abs=1e-6)
+        time.sleep(0.4)  # ten control cycles (0.04 s) of wall time more
+        assert max(stamp_to_s(c.clock) for c in clock.wait(1, timeout=1)) == pytest.approx(t0 + 0.2, abs=1e-6)
         action = ActionClient()
         status, result, fb = action.send(10)
         assert status == 4 and result.result.result == ok, result.result.error_message  # STATUS_SUCCEEDED

@@ -1,6 +1,7 @@
 """A kinematic stand-in for the simulator's side of the factory: parts are points, the robot is a point,
 picking and placing are instant. It steps a :class:`Factory` exactly as the simulator does and applies its
-teleports. For tests, scripted demonstrations and planners that need the factory without physics.
+teleports: at once by default, or ``teleport_delay`` cycles later (or never), as the real SimTwo does through the
+referee's bridge. For tests, scripted demonstrations and planners that need the factory without physics.
 
 >>> from robotatfactory.field import load_field
 >>> from robotatfactory.competition import RoundSetup
@@ -14,6 +15,7 @@ teleports. For tests, scripted demonstrations and planners that need the factory
 """
 from __future__ import annotations
 
+from ..errors import ConfigError
 from ..field.model import Field, Slot
 from .factory import Factory, Teleport
 from .referee import Referee, ScoreReport
@@ -21,9 +23,20 @@ from .rounds import RoundSetup
 
 
 class KinematicWorld:
-    """Parts at slot centres (or anywhere), a robot position, a set of held parts, a clock in seconds."""
+    """Parts at slot centres (or anywhere), a robot position, a set of held parts, a clock in seconds.
 
-    def __init__(self, field: Field, setup: RoundSetup, *, dt: float = 0.04, robot_xy=(-0.725, -0.4), **factory_kw):
+    ``teleport_delay``: control cycles between the factory asking for a teleport and the part's position showing
+    it. 0 (the default): applied at the end of the same cycle, so the factory's next step sees the part at its
+    output; n: applied at the end of the n-th cycle after, as the real SimTwo does through the referee's bridge
+    (a few cycles; the factory copes, see ``TELEPORT_GRACE``); None: never applied (a lost teleport).
+    ``teleports`` records every teleport the factory asked for, with the time it asked, applied or not;
+    ``in_flight`` holds those still to be applied, with the cycles until they are.
+    """
+
+    def __init__(self, field: Field, setup: RoundSetup, *, dt: float = 0.04, robot_xy=(-0.725, -0.4),
+                 teleport_delay: int | None = 0, **factory_kw):
+        if teleport_delay is not None and (not isinstance(teleport_delay, int) or teleport_delay < 0):
+            raise ConfigError(f"teleport_delay must be a number of cycles >= 0 or None, got {teleport_delay!r}")
         self.field = field
         self.factory = Factory(field, setup, **factory_kw)
         self.referee = Referee(self.factory)
@@ -32,7 +45,9 @@ class KinematicWorld:
         self.robot_xy = tuple(robot_xy)
         self.part_xy: dict[int, tuple[float, float]] = {pid: slot.xy for pid, _, slot in self.factory.initial_parts()}
         self.held: set[int] = set()
+        self.teleport_delay = teleport_delay
         self.teleports: list[tuple[float, Teleport]] = []
+        self.in_flight: list[tuple[int, Teleport]] = []  # (cycles until applied, teleport); never applied: not kept
 
     def start(self) -> None:
         self.factory.start(self.t)
@@ -60,16 +75,24 @@ class KinematicWorld:
         self.part_xy[part_id] = (float(xy[0]), float(xy[1]))
 
     def step(self) -> list[Teleport]:
-        """One control cycle: advance the clock by ``dt``, step the factory, apply its teleports."""
+        """One control cycle: advance the clock by ``dt``, step the factory, apply the teleports that are due
+        (see ``teleport_delay``). Returns the teleports the factory asked for in this cycle."""
         self.t = round(self.t + self.dt, 9)
         out = self.factory.step(self.t, dict(self.part_xy), self.robot_xy, set(self.held))
+        due = [tp for left, tp in self.in_flight if left <= 1]  # asked for in an earlier cycle
+        self.in_flight = [(left - 1, tp) for left, tp in self.in_flight if left > 1]
         for tp in out:
-            self.part_xy[tp.part_id] = tp.slot.xy
             self.teleports.append((self.t, tp))
+            if self.teleport_delay == 0:
+                due.append(tp)
+            elif self.teleport_delay is not None:
+                self.in_flight.append((self.teleport_delay, tp))
+        for tp in due:  # moved even if a magnet took it meanwhile (it stays in held)
+            self.part_xy[tp.part_id] = tp.slot.xy
         return out
 
     def advance(self, seconds: float) -> list[Teleport]:
-        """Run cycles for ``seconds`` of simulation time; returns the teleports that happened."""
+        """Run cycles for ``seconds`` of simulation time; returns the teleports the factory asked for."""
         out = []
         n = max(1, round(seconds / self.dt))
         for _ in range(n):

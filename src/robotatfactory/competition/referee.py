@@ -64,7 +64,9 @@ class ScoreReport:
     from the start to when the final score was reached and held (second tie-break, None when nothing
     scored); ``events``: every change of the score in time order (+1 deliveries, -1 points lost);
     ``notes``: rule breaches seen (a false start, the robot outside the start area), which do not change the
-    score.
+    score. ``processed``, ``cancelled``, ``teleports_late``: the factory's counters of those names when the
+    report was made (parts its machines gave back, jobs cancelled, teleports not seen in the positions within
+    ``TELEPORT_GRACE``), not at ``t``: diagnostics, no part of the score.
     """
 
     points: int
@@ -78,6 +80,9 @@ class ScoreReport:
     layout: str
     max_points: int
     notes: tuple[str, ...] = ()
+    processed: int = 0
+    cancelled: int = 0
+    teleports_late: int = 0
 
     @property
     def started(self) -> bool:
@@ -122,6 +127,8 @@ class ScoreReport:
         lost = f"; {self.lost} point(s) lost on the way" if self.lost else ""
         lines.append(f"  total: {self.points} of {self.max_points} points; {self.outgoing} part(s) in the "
                      f"outgoing warehouse; time of the last score {last}{lost}")
+        lines.append(f"  factory counters: processed {self.processed}, cancelled {self.cancelled}, "
+                     f"teleports_late {self.teleports_late}")
         lines.extend(f"  note: {n}" for n in self.notes)
         return "\n".join(lines)
 
@@ -140,8 +147,10 @@ class Referee:
         start = f.start_time
         events = f.events
         setup = f.setup
+        counters = f.counters
         base = dict(t=t, start_time=start, time_left=f.time_left(t), round_no=setup.round_no,
-                    layout=setup.letters, max_points=setup.max_points, notes=tuple(f.rule_notes()))
+                    layout=setup.letters, max_points=setup.max_points, notes=tuple(f.rule_notes()),
+                    **{k: counters[k] for k in ("processed", "cancelled", "teleports_late")})
         if start is None:
             return ScoreReport(0, 0, None, (), **base)
         end = min(t, start + setup.duration)
