@@ -170,6 +170,8 @@ class Ros1Node(Node):
         topic = self.resolve(topic)
         # composed: the other processes' publishers through rospy (the process's own are left out: _own_uri_out),
         # the components' through the bus
+        if self._bus is not None:
+            _BUS_TOPICS.add(topic)
         sub = rospy.Subscriber(topic, msg_type, callback, **kw)
         if self._bus is None:
             return sub
@@ -428,11 +430,18 @@ def spin_node(name: str, make_node: Callable[[Node], object], argv: list[str] | 
     return MASTER_RESTARTED if watch["restarted"] else 0
 
 
+#: topics a component of this process subscribes to through the bus (:mod:`.local`): rospy leaves this
+#: process's own publishers of them out (:func:`_own_uri_out`)
+_BUS_TOPICS: set[str] = set()
+
+
 def _own_uri_out() -> None:
     """rospy connects a subscriber to every publisher of its topic, its own process's too (through a socket,
     the message serialized and read back). In a composed process the components' messages go through the
-    bus (:mod:`.local`): leave this process out of every publisher list rospy acts on (the initial one and the
-    master's updates both pass ``RegManager.publisher_update``)."""
+    bus (:mod:`.local`): for the topics the bus carries (:data:`_BUS_TOPICS`), leave this process out of every
+    publisher list rospy acts on (the initial one and the master's updates both pass
+    ``RegManager.publisher_update``). rospy's own subscriptions (``/clock`` under ``use_sim_time``) keep it:
+    the process's clock is the bridge's."""
     from rospy.impl.registration import RegManager
 
     if getattr(RegManager.publisher_update, "_raf_own_out", False):
@@ -440,8 +449,10 @@ def _own_uri_out() -> None:
     original = RegManager.publisher_update
 
     def publisher_update(self, resolved_name, uris):
-        own = rospy.core.get_node_uri()
-        return original(self, resolved_name, [u for u in uris if u != own])
+        if resolved_name in _BUS_TOPICS:
+            own = rospy.core.get_node_uri()
+            uris = [u for u in uris if u != own]
+        return original(self, resolved_name, uris)
 
     publisher_update._raf_own_out = True
     RegManager.publisher_update = publisher_update

@@ -1,0 +1,197 @@
+"""The in-process message path of composed nodes (``ros/mw/local.py``, ``raf compose``; issue 23).
+
+Plain: the bus hands a message to every local subscription and to the middleware's publisher; a latched
+topic's last message reaches a later subscription; a full queue drops the oldest and counts it; a closed
+subscription hears nothing more; a callback that raises is reported and the next message still arrives; the
+``wire`` copy is what local subscribers get, the object itself what the middleware sends.
+
+ROS 1 (a child process composing two components on a private master): a message between the components
+arrives once (in-process, not also through rospy's socket to itself), a ``float32`` field arrives as the wire
+makes it (32 bits), a publisher in another process still reaches the component through rospy, and rospy's
+own clock (``use_sim_time``) still hears the ``/clock`` a component publishes.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import pytest
+
+from robotatfactory.ros.mw.base import Publisher, QoS
+from robotatfactory.ros.mw.local import LocalBus
+from rosutil import ros_master, test_node  # noqa: F401
+
+
+class _Inner(Publisher):
+    def __init__(self):
+        self.sent = []
+
+    def publish(self, msg) -> None:
+        self.sent.append(msg)
+
+    def subscriber_count(self) -> int:
+        return 0
+
+
+def _until(pred, timeout=5.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.005)
+    return pred()
+
+
+def test_the_bus_delivers_to_every_local_subscription_and_to_the_middleware():
+    bus = LocalBus()
+    inner = _Inner()
+    pub = bus.publisher("/a", inner, QoS.RELIABLE)
+    got1, got2, other = [], [], []
+    s1 = bus.subscribe("/a", got1.append, 10)
+    bus.subscribe("/a", got2.append, 10)
+    bus.subscribe("/b", other.append, 10)
+    for i in range(5):
+        pub.publish(i)
+    assert _until(lambda: len(got1) == 5 and len(got2) == 5)
+    assert got1 == got2 == [0, 1, 2, 3, 4] and inner.sent == [0, 1, 2, 3, 4] and other == []
+    assert pub.subscriber_count() == 2
+    s1.close()
+    pub.publish(5)
+    assert _until(lambda: len(got2) == 6)
+    time.sleep(0.05)
+    assert got1 == [0, 1, 2, 3, 4], "a closed subscription still hears"
+    assert pub.subscriber_count() == 1
+    assert bus.counts() == {"delivered": 6, "dropped": 0}  # (s1's count went with it)
+
+
+def test_a_latched_topic_reaches_a_later_subscription_once_per_publisher():
+    bus = LocalBus()
+    p1, p2 = bus.publisher("/l", _Inner(), QoS.LATCHED), bus.publisher("/l", _Inner(), QoS.LATCHED)
+    plain = bus.publisher("/p", _Inner(), QoS.RELIABLE)
+    p1.publish("a1")
+    p1.publish("a2")
+    p2.publish("b1")
+    plain.publish("x")
+    late, late_plain = [], []
+    bus.subscribe("/l", late.append, 10)
+    bus.subscribe("/p", late_plain.append, 10)
+    assert _until(lambda: len(late) == 2)
+    time.sleep(0.05)
+    assert sorted(late) == ["a2", "b1"] and late_plain == []
+
+
+def test_a_full_queue_drops_the_oldest_and_counts_it():
+    bus = LocalBus()
+    pub = bus.publisher("/q", _Inner(), QoS.RELIABLE)
+    gate, got = threading.Event(), []
+
+    def slow(msg):
+        gate.wait(5.0)
+        got.append(msg)
+
+    bus.subscribe("/q", slow, 2)
+    pub.publish(0)
+    assert _until(lambda: not bus.subscriptions("/q")[0].queue)  # 0 is being handled
+    for i in range(1, 6):
+        pub.publish(i)  # the queue holds 2: 1, 2, 3 are dropped
+    gate.set()
+    assert _until(lambda: len(got) == 3)
+    assert got == [0, 4, 5]
+    assert bus.counts() == {"delivered": 3, "dropped": 3}
+
+
+def test_a_callback_that_raises_is_reported_and_the_next_message_arrives():
+    errors = []
+    bus = LocalBus(on_error=errors.append)
+    pub = bus.publisher("/e", _Inner(), QoS.RELIABLE)
+    got = []
+
+    def cb(msg):
+        if msg == "bad":
+            raise ValueError("no good")
+        got.append(msg)
+
+    bus.subscribe("/e", cb, 10)
+    pub.publish("bad")
+    pub.publish("good")
+    assert _until(lambda: got == ["good"])
+    assert len(errors) == 1 and "/e" in errors[0] and "ValueError: no good" in errors[0]
+
+
+def test_local_subscribers_get_the_wire_copy_and_the_middleware_the_object():
+    bus = LocalBus()
+    inner = _Inner()
+    pub = bus.publisher("/w", inner, QoS.LATCHED, wire=lambda m: round(m, 2))
+    got = []
+    bus.subscribe("/w", got.append, 10)
+    pub.publish(1.23456)
+    assert _until(lambda: got == [1.23])
+    assert inner.sent == [1.23456]
+    later = []
+    bus.subscribe("/w", later.append, 10)  # the latched message as the wire made it
+    assert _until(lambda: later == [1.23])
+
+
+CHILD = textwrap.dedent("""
+    import json, sys, time
+    from robotatfactory.ros.mw import ros1
+    from robotatfactory.ros.mw.base import QoS
+    from robotatfactory.ros.mw.local import LocalBus
+    from sensor_msgs.msg import LaserScan
+    from std_msgs.msg import String
+    import rosgraph, rospy
+    from rosgraph_msgs.msg import Clock
+    rosgraph.Master("/raf_local_test_cli").setParam("/use_sim_time", True)
+    ros1._own_uri_out()
+    ros1.init_node("raf_local_test", argv=["x"], signals=False)
+    bus = LocalBus()
+    a, b = ros1.Ros1Node("comp_a", bus), ros1.Ros1Node("comp_b", bus)
+    got = []
+    b.subscribe("scan", LaserScan, lambda m: got.append(["scan", m.ranges[0], type(m.ranges).__name__]))
+    b.subscribe("chat", String, lambda m: got.append(["chat", m.data]))
+    scan, chat = a.publisher("scan", LaserScan), a.publisher("chat", String)
+    clock = a.publisher("/clock", Clock)  # as the bridge publishes it: the process's own clock
+    print("ready", flush=True)
+    sys.stdin.readline()  # the parent's publisher is up and latched its message
+    time.sleep(1.0)  # time for rospy to connect to it (and, were it not left out, to this process itself)
+    scan.publish(LaserScan(ranges=[0.1]))
+    chat.publish(String(data="inside"))
+    for i in range(20):
+        clock.publish(Clock(clock=rospy.Time(12, 500000000)))
+        time.sleep(0.05)
+    time.sleep(0.5)
+    print(json.dumps({"got": got, "names": [a.name, b.name], "private": a.resolve("~x"), "now": rospy.get_time()}),
+          flush=True)
+""")
+
+
+@pytest.mark.ros
+def test_composed_components_hear_each_other_once_as_the_wire_gives_it_and_other_processes_too(ros_master):
+    from std_msgs.msg import String
+
+    child = subprocess.Popen([sys.executable, "-c", CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "ready", child.stderr.read()[-2000:]
+        outside = test_node().publisher("/chat", String, QoS.LATCHED, 1)  # another process's publisher
+        outside.publish(String(data="outside"))
+        child.stdin.write("go\n")
+        child.stdin.flush()
+        out, err = child.communicate(timeout=60)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    assert child.returncode == 0, err[-2000:]
+    res = json.loads(out.strip().splitlines()[-1])
+    got = res["got"]
+    assert sorted(m[1] for m in got if m[0] == "chat") == ["inside", "outside"], got  # each once
+    scans = [m for m in got if m[0] == "scan"]
+    assert len(scans) == 1, got
+    assert scans[0][1] == pytest.approx(0.1, rel=1e-7) and scans[0][1] != 0.1  # float32, as over the wire
+    assert scans[0][2] == "tuple"  # what rospy's deserialization makes of an array
+    assert res["names"] == ["/comp_a", "/comp_b"] and res["private"] == "/comp_a/x"
+    assert res["now"] == 12.5  # rospy's clock (use_sim_time) hears the process's own /clock
