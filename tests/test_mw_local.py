@@ -65,7 +65,9 @@ def test_the_bus_delivers_to_every_local_subscription_and_to_the_middleware():
     time.sleep(0.05)
     assert got1 == [0, 1, 2, 3, 4], "a closed subscription still hears"
     assert pub.subscriber_count() == 1
-    assert bus.counts() == {"delivered": 6, "dropped": 0}  # (s1's count went with it)
+    assert bus.counts() == {"delivered": 11, "dropped": 0}  # (closed subscriptions' included)
+    s1.close()  # twice: counted once
+    assert bus.counts() == {"delivered": 11, "dropped": 0}
 
 
 def test_a_latched_topic_reaches_a_later_subscription_once_per_publisher():

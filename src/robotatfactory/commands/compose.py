@@ -1,12 +1,12 @@
-"""``raf compose``: several nodes (bridge, localize, agent) as components of one process (ROS 1)."""
+"""``raf compose``: several nodes (bridge, localize, agent, record) as components of one process (ROS 1)."""
 from __future__ import annotations
 
 import argparse
 
 NAME = "compose"
-HELP = "run several nodes (bridge, localize, agent) in one process, their messages in-process (ROS 1)"
+HELP = "run several nodes (bridge, localize, agent, record) in one process, their messages in-process (ROS 1)"
 ORDER = 39
-COMPOSABLE = ("bridge", "localize", "agent")
+COMPOSABLE = ("bridge", "localize", "agent", "record")
 DESCRIPTION = f"""\
 Run several nodes as components of one process, as nodelets do in ROS 1: each keeps its name, its parameters
 and its topics, and the messages between them are handed over in-process (no serialization, no socket);
@@ -17,7 +17,7 @@ has one node per process; on ROS 2 run the nodes one by one). docs/pacing.md say
 
 examples:
   raf compose -- bridge -- localize -- agent
-  raf --field simtwo2022 compose --roscore -- bridge --port 9811 -- localize --set pace.enabled=true -- agent
+  raf --field simtwo2022 compose --roscore -- bridge --port 9811 -- localize -- agent -- record -o run.bag
 """
 
 

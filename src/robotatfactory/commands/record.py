@@ -44,11 +44,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    rec_plan, writer = _plan(args)
+    ns = argparse.Namespace(ns=args.ns, name=args.name, no_sim_time=args.no_sim_time, roscore=args.roscore)
+    try:
+        return rec_plan.run(ns)
+    finally:
+        writer.close()
+
+
+def plan(args):
+    """The node this command line makes (:class:`~robotatfactory.ros.cli.NodePlan`), not yet started; it
+    closes its bag and prints what it wrote when it stops (``raf compose``: the robot's nodes' topics reach it
+    in-process)."""
+    return _plan(args)[0]
+
+
+def _plan(args):
     import threading
     import time
 
     from ..errors import ConfigError
     from ..ros import mw
+    from ..ros.cli import NodePlan
     from ..ros.recorder import DEFAULT_TOPICS, IMAGE_TOPICS
 
     middleware = mw.name()
@@ -72,6 +89,22 @@ def run(args) -> int:
 
     writer = BagWriter(out, fmt, custom={"recorded_by": "raf record (robotatfactory)", "middleware": middleware})
 
+    class Recording:
+        """The recorder, and what it wrote printed once it stops."""
+
+        def __init__(self, rec):
+            self.rec = rec
+
+        def stop(self) -> None:
+            self.rec.stop()  # (closes the bag)
+            counts = writer.counts
+            print(f"raf record: wrote {sum(counts.values())} messages on {len(counts)} topics to {out}", flush=True)
+            for topic in sorted(counts):
+                print(f"  {topic:<28} {counts[topic]}", flush=True)
+            missing = [t for t in self.rec.topics if t not in counts]
+            if missing:
+                print(f"  not published during the recording: {' '.join(missing)}", flush=True)
+
     def make_node(node):
         from ..ros.recorder import Recorder
 
@@ -83,26 +116,10 @@ def run(args) -> int:
                     time.sleep(0.05)
                 node.shutdown("--duration reached")
             threading.Thread(target=stop_later, name="raf-record-duration", daemon=True).start()
-        return rec
+        return Recording(rec)
 
-    done: dict = {}
-
-    def started(rec) -> str:
-        done["rec"] = rec
-        return (f"recording {len(rec.topics)} topics into {out} ({fmt}); "
+    def started(r) -> str:
+        return (f"recording {len(r.rec.topics)} topics into {out} ({fmt}); "
                 + (f"{args.duration:g} s" if args.duration else "Ctrl-C stops"))
 
-    ns = argparse.Namespace(ns=args.ns, name=args.name, no_sim_time=args.no_sim_time, roscore=args.roscore)
-    try:
-        code = mw.api().run_node(ns, "record", {}, make_node, started)
-    finally:
-        writer.close()
-    counts = writer.counts
-    total = sum(counts.values())
-    print(f"raf record: wrote {total} messages on {len(counts)} topics to {out}", flush=True)
-    for topic in sorted(counts):
-        print(f"  {topic:<28} {counts[topic]}", flush=True)
-    missing = [t for t in done["rec"].topics if t not in counts] if "rec" in done else []
-    if missing:
-        print(f"  not published during the recording: {' '.join(missing)}", flush=True)
-    return code
+    return NodePlan("record", args.name, {}, make_node, started), writer

@@ -170,9 +170,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     wall0 = time.perf_counter()
     phases: dict[str, float] = {}  # wall s of starting the processes, the run, stopping them (and analysing)
     graph = private_graph(mw).start()
-    nodes = ("stack",) if compose else ("bridge", "localize", "agent")  # the processes of the robot's nodes
-    agent_log = nodes[-1]  # the process whose log holds the agent's lines
-    procs = Procs(log_dir, watch=(*nodes, "record"))
+    nodes = ("stack",) if compose else ("bridge", "localize", "agent", "record")  # the processes of the nodes
+    agent_log = "stack" if compose else "agent"  # the process whose log holds the agent's lines
+    procs = Procs(log_dir, watch=nodes)
     proxy = None
     frames_to = bridge_port  # where the simulator sends its frames: the bridge, or the lossy link to it
     try:
@@ -190,8 +190,9 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         if not compose:
             procs.raf("bridge", *field_args, *bridge_cmd, env=env)
             procs.raf("localize", *field_args, *localize_cmd, env=env)
-        procs.raf("record", "record", "-o", str(bag_path), "--topics", "pose", "cmd_vel",
-                  "--format", fmt, env=env)
+        record_cmd = ["record", "-o", str(bag_path), "--topics", "pose", "cmd_vel", "--format", fmt]
+        if not compose:
+            procs.raf("record", *record_cmd, env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
             procs.raf("referee", *field_args, "referee", "--round", str(round_no), "--seed", str(seed),
                       "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
@@ -200,7 +201,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             _wait_logged(procs, "referee", "running", 60.0)
         if compose:
             procs.raf("stack", *field_args, "compose", "--", *bridge_cmd, "--", *localize_cmd, "--", *agent_cmd,
-                      env=env)
+                      "--", *record_cmd, env=env)
         else:
             procs.raf("agent", *field_args, *agent_cmd, env=env)
         _wait_logged(procs, agent_log, "raf agent: raf_agent running", 60.0)

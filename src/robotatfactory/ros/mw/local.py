@@ -107,6 +107,7 @@ class LocalBus:
         self._subs: dict[str, tuple[LocalSubscription, ...]] = {}
         self._pubs: dict[str, list[LocalPublisher]] = {}
         self.on_error = on_error
+        self._closed = {"delivered": 0, "dropped": 0}  # the counts of the subscriptions closed so far
 
     def publisher(self, topic: str, inner: Publisher, qos: QoS,
                   wire: Callable[[Any], Any] | None = None) -> LocalPublisher:
@@ -135,9 +136,14 @@ class LocalBus:
 
     def _remove(self, sub: LocalSubscription) -> None:
         with self._lock:
-            self._subs[sub.topic] = tuple(s for s in self._subs.get(sub.topic, ()) if s is not sub)
+            group = self._subs.get(sub.topic, ())
+            if sub in group:
+                self._subs[sub.topic] = tuple(s for s in group if s is not sub)
+                self._closed["delivered"] += sub.delivered
+                self._closed["dropped"] += sub.dropped
 
     def counts(self) -> dict[str, int]:
-        """Messages delivered and dropped over every local subscription."""
-        subs = [s for group in self._subs.values() for s in group]
-        return {"delivered": sum(s.delivered for s in subs), "dropped": sum(s.dropped for s in subs)}
+        """Messages delivered and dropped over every local subscription, closed ones included."""
+        with self._lock:
+            subs = [s for group in self._subs.values() for s in group]
+            return {k: self._closed[k] + sum(getattr(s, k) for s in subs) for k in ("delivered", "dropped")}

@@ -206,8 +206,14 @@ class Ros1Node(Node):
                                 latched=h.get("latching") == "1")
             callback(data, info)
 
-        return rospy.Subscriber(topic, rospy.AnyMsg, on_message, queue_size=1000, buff_size=2 ** 24,
-                                tcp_nodelay=True), None
+        topic = self.resolve(topic)
+        if self._bus is not None:
+            _BUS_TOPICS.add(topic)
+        sub = rospy.Subscriber(topic, rospy.AnyMsg, on_message, queue_size=1000, buff_size=2 ** 24, tcp_nodelay=True)
+        if self._bus is None:
+            return sub, None
+        # composed: a component's messages arrive as objects (serialized here, as for a typed subscription)
+        return _Both(sub, self._bus.subscribe(topic, on_message, 1000)), None
 
     def close(self, handle) -> None:
         if handle is None:
