@@ -13,6 +13,7 @@ own clock (``use_sim_time``) still hears the ``/clock`` a component publishes.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -97,7 +98,7 @@ def test_a_full_queue_drops_the_oldest_and_counts_it():
 
     bus.subscribe("/q", slow, 2)
     pub.publish(0)
-    assert _until(lambda: not bus.subscriptions("/q")[0].queue)  # 0 is being handled
+    assert _until(lambda: not bus.subscriptions("/q")[0].pending())  # 0 is being handled
     for i in range(1, 6):
         pub.publish(i)  # the queue holds 2: 1, 2, 3 are dropped
     gate.set()
@@ -197,3 +198,34 @@ def test_composed_components_hear_each_other_once_as_the_wire_gives_it_and_other
     assert scans[0][2] == "tuple"  # what rospy's deserialization makes of an array
     assert res["names"] == ["/comp_a", "/comp_b"] and res["private"] == "/comp_a/x"
     assert res["now"] == 12.5  # rospy's clock (use_sim_time) hears the process's own /clock
+
+
+@pytest.mark.parametrize("nodes, error", [
+    ([], "no node given"),
+    (["--", "sim"], "'sim' cannot be composed"),
+    (["--", "bridge", "--ns", "robot2"], "share the process's namespace"),
+    (["--", "agent", "--", "agent"], "two nodes named 'raf_agent'"),
+    (["--", "agent", "--set", "no_such_setting=1"], "no_such_setting"),
+])
+def test_raf_compose_refuses_a_bad_command_line_with_a_clear_error(raf_cmd, nodes, error):
+    r = subprocess.run([*raf_cmd, "compose", *nodes], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert error in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_compose_splits_the_command_lines_at_each_double_dash():
+    from robotatfactory.commands.compose import split
+
+    assert split(["--", "bridge", "--port", "1", "--", "--", "agent", "--set", "a=1"]) == [
+        ["bridge", "--port", "1"], ["agent", "--set", "a=1"]]
+
+
+def test_raf_compose_on_ros2_says_it_is_ros1_only():
+    from robotatfactory.ros.processes import interpreter
+
+    py = interpreter("ros2")
+    assert py is not None, "no ROS 2 environment (scripts/bootstrap.sh builds .venv-ros2)"
+    r = subprocess.run([str(py), "-m", "robotatfactory", "compose", "--", "agent"], capture_output=True, text=True,
+                       timeout=120, env={**os.environ, "RAF_MIDDLEWARE": "ros2"})
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "not on ros2 (ROS 1 only)" in r.stderr, r.stderr
