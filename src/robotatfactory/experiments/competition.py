@@ -141,10 +141,11 @@ def add_arguments(parser) -> None:
                              "SimTwo) or paced: by simulation time, each cycle as soon as every node has finished "
                              "the one before, with real time's loop latency (raf sim --paced and every node's "
                              "pace.enabled: faster than real time and reproducible; docs/pacing.md)")
-    parser.add_argument("--nodes", choices=NODES, default="processes",
-                        help="full_stack: the bridge, the localization and the agent each in a process of its own "
-                             "(processes, default) or composed in one, their messages in-process (composed: raf "
-                             "compose, ROS 1 only)")
+    parser.add_argument("--nodes", choices=NODES, default=None,
+                        help="full_stack: the bridge, the localization, the agent and the recorder each in a process "
+                             "of its own (processes) or composed in one, their messages in-process (composed: raf "
+                             "compose, ROS 1 only; the same runs, less CPU: docs/pacing.md); default: composed when "
+                             "paced on ROS 1, else processes")
     parser.add_argument("--analyse", metavar="DIR", default=None,
                         help="full_stack: do not run; measure again the runs an earlier --out DIR kept (logs, trace, "
                              "pose bag) with this code, for --rounds and --seeds")
@@ -445,6 +446,15 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
         cal_keys["calibration_drive_same_camera"] = bool(drive_cam) and drive_cam == round_cam
     out.update(cal_keys)
     return out
+
+
+def default_nodes(pace: str) -> str:
+    """The whole stack's node layout unless ``--nodes`` gives one: composed when paced on ROS 1 (a paced batch is
+    bound by the CPU, and composed nodes give the same runs with less of it), else a process per node (in real
+    time the camera's frames stay off the control path's GIL, as on a robot)."""
+    from ..ros.mw import name as middleware_name
+
+    return "composed" if pace == "paced" and middleware_name() == "ros1" else "processes"
 
 
 def _full_item(item: tuple, out_dir: Path | None = None, **kw) -> dict:
@@ -791,7 +801,7 @@ def run(args, out_dir: Path | None) -> dict:
     if pace == "paced" and (simulator == "simtwo" or not mode.endswith("full_stack")):
         raise ConfigError("--pace paced: the whole stack on the stand-in only (SimTwo runs in real time; bare_truth "
                           "has no wall clock to drop)")
-    nodes = getattr(args, "nodes", "processes")
+    nodes = getattr(args, "nodes", None) or default_nodes(pace)
     if nodes not in NODES:
         raise ConfigError(f"--nodes {nodes!r}: choose one of {', '.join(NODES)}")
     from ..ros.mw import name as middleware_name
