@@ -115,8 +115,9 @@ class _Both:
 
 class Ros1Node(Node):
     """The process's rospy node, or (``component``) one of the nodes composed in it (:func:`run_nodes`): then
-    the name, the private namespace (parameters, ``~`` topics) and the logs are the component's, and its
-    topics between the components of the process go through ``bus`` (:mod:`.local`). ``tf`` shares the TF
+    the name and the private namespace (parameters, ``~`` names) are the component's (its log lines go to the
+    process's log, as rospy has one), and its topics between the components of the process go through ``bus``
+    (:mod:`.local`). ``tf`` shares the TF
     publishers of the process (rospy has one publisher per topic and process: one latched ``/tf_static``)."""
 
     middleware = NAME
