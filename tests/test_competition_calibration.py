@@ -130,8 +130,8 @@ def test_the_whole_stack_run_gets_the_file_and_reports_it(tmp_path, monkeypatch)
                                             "calibration_drive_camera": {"camera_fx_error_pct": 2.6}}
 
     def fake_play(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set, loss,
-                  calibration=None, log_dir=None, paced=False):
-        seen.update(calibration=calibration, log_dir=log_dir, paced=paced)
+                  calibration=None, log_dir=None, paced=False, compose=False):
+        seen.update(calibration=calibration, log_dir=log_dir, paced=paced, compose=compose)
         return {"round": round_no, "seed": seed, "points": 4, "max_points": 4, "max_score": True,
                 "last_score_s": 60.0, "notes": [], "false_start": False, "picks_attempted": 4, "pick_failures": 0,
                 "timeouts": 0, "collision_checks_hit": 0, "parts_pushed": 0, "wall_s": 1.0, "logs": "x",
@@ -143,6 +143,7 @@ def test_the_whole_stack_run_gets_the_file_and_reports_it(tmp_path, monkeypatch)
     assert seen["calibration"] == str(tmp_path / "cal.yaml") and seen["log_dir"] == seen["run_dir"] \
         == tmp_path / "full_r1_s100"
     assert seen["paced"] is False  # the wall clock's pace unless asked (--pace paced)
+    assert seen["compose"] is False  # a process per node unless asked (--nodes composed)
     competition._full_job(1, 100, tmp_path, False, None, sim_set=PERTURB_ITEMS, calibration="auto", paced=True)
     assert seen["paced"] is True
     assert r["calibration_drive_same_camera"] is True and "calibration_drive_camera" not in r
