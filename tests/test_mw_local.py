@@ -8,7 +8,8 @@ subscription hears nothing more; a callback that raises is reported and the next
 ROS 1 (a child process composing two components on a private master): a message between the components
 arrives once (in-process, not also through rospy's socket to itself), a ``float32`` field arrives as the wire
 makes it (32 bits), a publisher in another process still reaches the component through rospy, and rospy's
-own clock (``use_sim_time``) still hears the ``/clock`` a component publishes.
+own clock (``use_sim_time``) still hears the ``/clock`` a component publishes; a recording component gets every
+message once (``/clock`` too, the TF the components send, a latched topic told as latched).
 """
 from __future__ import annotations
 
@@ -125,6 +126,19 @@ def test_a_callback_that_raises_is_reported_and_the_next_message_arrives():
     assert len(errors) == 1 and "/e" in errors[0] and "ValueError: no good" in errors[0]
 
 
+def test_a_closed_publisher_latches_no_more_and_the_bus_tells_a_latched_topic():
+    bus = LocalBus()
+    p = bus.publisher("/l", _Inner(), QoS.LATCHED)
+    bus.publisher("/r", _Inner(), QoS.RELIABLE)
+    p.publish("a")
+    assert bus.latched("/l") and not bus.latched("/r") and not bus.latched("/none")
+    bus.unpublish(p)
+    late = []
+    bus.subscribe("/l", late.append, 10)
+    time.sleep(0.05)
+    assert late == [] and not bus.latched("/l")
+
+
 def test_local_subscribers_get_the_wire_copy_and_the_middleware_the_object():
     bus = LocalBus()
     inner = _Inner()
@@ -149,10 +163,16 @@ CHILD = textwrap.dedent("""
     import rosgraph, rospy
     from rosgraph_msgs.msg import Clock
     rosgraph.Master("/raf_local_test_cli").setParam("/use_sim_time", True)
+    from geometry_msgs.msg import TransformStamped
     ros1._own_uri_out()
-    ros1.init_node("raf_local_test", argv=["x"], signals=False)
+    process = ros1.init_node("raf_local_test", argv=["x"], signals=False)
     bus = LocalBus()
-    a, b = ros1.Ros1Node("comp_a", bus), ros1.Ros1Node("comp_b", bus)
+    process._bus = bus  # as run_nodes makes it: the process's TF publishers on the bus
+    a, b = ros1.Ros1Node("comp_a", bus, tf=process), ros1.Ros1Node("comp_b", bus, tf=process)
+    raw = {}  # a recorder component's raw subscriptions: topic -> [latched flags]
+    for t in ("/tf", "/tf_static", "/clock", "/latched"):
+        b.subscribe_raw(t, "", lambda data, info, t=t: raw.setdefault(t, []).append(info.latched))
+    latched = a.publisher("/latched", String, QoS.LATCHED, 1)
     got = []
     b.subscribe("scan", LaserScan, lambda m: got.append(["scan", m.ranges[0], type(m.ranges).__name__]))
     b.subscribe("chat", String, lambda m: got.append(["chat", m.data]))
@@ -163,12 +183,15 @@ CHILD = textwrap.dedent("""
     time.sleep(1.0)  # time for rospy to connect to it (and, were it not left out, to this process itself)
     scan.publish(LaserScan(ranges=[0.1]))
     chat.publish(String(data="inside"))
+    latched.publish(String(data="l"))
+    a.send_tf([TransformStamped(child_frame_id="x")])
+    b.send_static_tf([TransformStamped(child_frame_id="y")])
     for i in range(20):
         clock.publish(Clock(clock=rospy.Time(12, 500000000)))
         time.sleep(0.05)
     time.sleep(0.5)
-    print(json.dumps({"got": got, "names": [a.name, b.name], "private": a.resolve("~x"), "now": rospy.get_time()}),
-          flush=True)
+    print(json.dumps({"got": got, "names": [a.name, b.name], "private": a.resolve("~x"), "now": rospy.get_time(),
+                      "raw": raw}), flush=True)
 """)
 
 
@@ -198,6 +221,9 @@ def test_composed_components_hear_each_other_once_as_the_wire_gives_it_and_other
     assert scans[0][2] == "tuple"  # what rospy's deserialization makes of an array
     assert res["names"] == ["/comp_a", "/comp_b"] and res["private"] == "/comp_a/x"
     assert res["now"] == 12.5  # rospy's clock (use_sim_time) hears the process's own /clock
+    raw = res["raw"]  # what a recorder among the components gets: each message once, TF included, latching told
+    assert raw.get("/tf") == [False] and raw.get("/tf_static") == [True] and raw.get("/latched") == [True], raw
+    assert len(raw.get("/clock", [])) == 20, raw.get("/clock")  # through rospy only: not twice
 
 
 @pytest.mark.parametrize("nodes, error", [

@@ -86,6 +86,13 @@ def plan(args):
     from ..ros.config import load_config
 
     cfg = load_config(build_params(args))  # a bad name or value: a clear error before the middleware starts
+    if cfg.camera.enabled and cfg.camera.process == "bridge":
+        from ..errors import ConfigError
+        from ..ros.mw import name as middleware
+
+        if middleware() != "ros1":
+            raise ConfigError(f"camera.process: bridge: ROS 1 only (one node per process there); on "
+                              f"{middleware()} the camera runs in a process of its own (camera.process: own)")
 
     def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.bridge_node import Bridge

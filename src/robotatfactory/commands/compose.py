@@ -13,7 +13,8 @@ and its topics, and the messages between them are handed over in-process (no ser
 other processes see the same topics as from separate nodes (rosnode shows the process's node, --name). Each
 node is given as its own command line after `--`, with every option of that command (`raf bridge --help`);
 they share the process's namespace (--ns) and clock. Composable: {', '.join(COMPOSABLE)}. ROS 1 only (rospy
-has one node per process; on ROS 2 run the nodes one by one). docs/pacing.md says what it saves.
+has one node per process; on ROS 2 run the nodes one by one). One process: a node that ends (record
+--duration, a fatal error) ends them all. docs/pacing.md says what it saves.
 
 examples:
   raf compose -- bridge -- localize -- agent

@@ -44,22 +44,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    rec_plan, writer = _plan(args)
+    rec_plan = plan(args)
     ns = argparse.Namespace(ns=args.ns, name=args.name, no_sim_time=args.no_sim_time, roscore=args.roscore)
     try:
         return rec_plan.run(ns)
     finally:
-        writer.close()
+        rec_plan.close()  # (the bag, if the node never started or stopped)
 
 
 def plan(args):
-    """The node this command line makes (:class:`~robotatfactory.ros.cli.NodePlan`), not yet started; it
-    closes its bag and prints what it wrote when it stops (``raf compose``: the robot's nodes' topics reach it
-    in-process)."""
-    return _plan(args)[0]
-
-
-def _plan(args):
+    """The node this command line makes (:class:`~robotatfactory.ros.cli.NodePlan`), not yet started: its bag
+    is opened when the node starts; it closes it and prints what it wrote when it stops (``raf compose``: the
+    robot's nodes' topics reach it in-process)."""
     import threading
     import time
 
@@ -87,7 +83,7 @@ def _plan(args):
 
     from ..ros.bags import BagWriter
 
-    writer = BagWriter(out, fmt, custom={"recorded_by": "raf record (robotatfactory)", "middleware": middleware})
+    opened: list = []  # the bag, once the node starts
 
     class Recording:
         """The recorder, and what it wrote printed once it stops."""
@@ -97,7 +93,7 @@ def _plan(args):
 
         def stop(self) -> None:
             self.rec.stop()  # (closes the bag)
-            counts = writer.counts
+            counts = opened[0].counts
             print(f"raf record: wrote {sum(counts.values())} messages on {len(counts)} topics to {out}", flush=True)
             for topic in sorted(counts):
                 print(f"  {topic:<28} {counts[topic]}", flush=True)
@@ -108,6 +104,8 @@ def _plan(args):
     def make_node(node):
         from ..ros.recorder import Recorder
 
+        writer = BagWriter(out, fmt, custom={"recorded_by": "raf record (robotatfactory)", "middleware": middleware})
+        opened.append(writer)
         rec = Recorder(node, writer, topics, wall_time=args.no_sim_time).start()
         if args.duration is not None:
             def stop_later():
@@ -122,4 +120,10 @@ def _plan(args):
         return (f"recording {len(r.rec.topics)} topics into {out} ({fmt}); "
                 + (f"{args.duration:g} s" if args.duration else "Ctrl-C stops"))
 
-    return NodePlan("record", args.name, {}, make_node, started), writer
+    def close() -> None:
+        for w in opened:
+            w.close()
+
+    p = NodePlan("record", args.name, {}, make_node, started)
+    p.close = close
+    return p

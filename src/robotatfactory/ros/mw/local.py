@@ -78,9 +78,6 @@ class LocalSubscription:
         self.queue.put(_CLOSE)
         self.bus._remove(self)
 
-    def join(self, timeout: float | None = None) -> None:
-        self._thread.join(timeout)
-
 
 class LocalPublisher(Publisher):
     """A component's publisher: every local subscription of the topic gets the message, and ``inner`` (the
@@ -92,12 +89,17 @@ class LocalPublisher(Publisher):
         self.last = None  # a latched topic's last message
 
     def publish(self, msg) -> None:
-        subs = self.bus.subscriptions(self.topic)
-        local = self.wire(msg) if self.wire is not None and (subs or self.latched) else msg
-        if self.latched:
-            self.last = local
-        for sub in subs:
-            sub.put(local)
+        if self.latched:  # the latch and the delivery at once: a subscription made meanwhile gets one or the other
+            local = self.wire(msg) if self.wire is not None else msg
+            with self.bus._lock:
+                self.last = local
+                for sub in self.bus.subscriptions(self.topic):
+                    sub.put(local)
+        else:
+            subs = self.bus.subscriptions(self.topic)
+            local = self.wire(msg) if self.wire is not None and subs else msg
+            for sub in subs:
+                sub.put(local)
         self.inner.publish(msg)
 
     def subscriber_count(self) -> int:
@@ -125,19 +127,24 @@ class LocalBus:
 
     def subscribe(self, topic: str, callback: Callable[[Any], None], depth: int) -> LocalSubscription:
         sub = LocalSubscription(self, topic, callback, depth, self.on_error)
-        with self._lock:
+        with self._lock:  # (a latched publish waits: its message comes either as the latch or live, once)
             self._subs[topic] = self._subs.get(topic, ()) + (sub,)
-            latched = [p.last for p in self._pubs.get(topic, ()) if p.latched and p.last is not None]
-        for msg in latched:
-            sub.put(msg)
+            for p in self._pubs.get(topic, ()):
+                if p.latched and p.last is not None:
+                    sub.put(p.last)
         return sub
 
     def subscriptions(self, topic: str) -> tuple[LocalSubscription, ...]:
         return self._subs.get(topic, ())  # (a tuple replaced whole under the lock: read without it)
 
-    def publishes(self, topic: str) -> bool:
-        """True when a component of this process publishes ``topic``."""
-        return bool(self._pubs.get(topic))
+    def unpublish(self, pub: LocalPublisher) -> None:
+        """``pub`` is closed: its latched message no longer reaches new subscriptions."""
+        with self._lock:
+            self._pubs[pub.topic] = [p for p in self._pubs.get(pub.topic, ()) if p is not pub]
+
+    def latched(self, topic: str) -> bool:
+        """True when a component of this process publishes ``topic`` latched."""
+        return any(p.latched for p in self._pubs.get(topic, ()))
 
     def _remove(self, sub: LocalSubscription) -> None:
         with self._lock:

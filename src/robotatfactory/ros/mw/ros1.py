@@ -171,12 +171,13 @@ class Ros1Node(Node):
         topic = self.resolve(topic)
         # composed: the other processes' publishers through rospy (the process's own are left out: _own_uri_out),
         # the components' through the bus
-        if self._bus is not None:
+        bus = self._bus if topic not in _ROSPY_OWN else None
+        if bus is not None:
             _BUS_TOPICS.add(topic)
         sub = rospy.Subscriber(topic, msg_type, callback, **kw)
-        if self._bus is None:
+        if bus is None:
             return sub
-        return _Both(sub, self._bus.subscribe(topic, callback, 1 if qos is QoS.CONTROL else depth))
+        return _Both(sub, bus.subscribe(topic, callback, depth))
 
     def service(self, name, srv_type, handler):
         resp_cls = srv_type._response_class
@@ -208,13 +209,18 @@ class Ros1Node(Node):
             callback(data, info)
 
         topic = self.resolve(topic)
-        if self._bus is not None:
+        bus = self._bus if topic not in _ROSPY_OWN else None
+        if bus is not None:
             _BUS_TOPICS.add(topic)
         sub = rospy.Subscriber(topic, rospy.AnyMsg, on_message, queue_size=1000, buff_size=2 ** 24, tcp_nodelay=True)
-        if self._bus is None:
+        if bus is None:
             return sub, None
-        # composed: a component's messages arrive as objects (serialized here, as for a typed subscription)
-        return _Both(sub, self._bus.subscribe(topic, on_message, 1000)), None
+
+        def on_local(msg) -> None:  # a component's message, an object: serialized here, its latching the bus's
+            callback(serialize(msg), RawTopic(type=msg._type, definition=msg._full_text, digest=msg._md5sum,
+                                              latched=bus.latched(topic)))
+
+        return _Both(sub, bus.subscribe(topic, on_local, 1000)), None
 
     def close(self, handle) -> None:
         if handle is None:
@@ -223,6 +229,7 @@ class Ros1Node(Node):
             handle.local.close()
             handle = handle.sub
         if isinstance(handle, LocalPublisher):
+            handle.bus.unpublish(handle)
             handle = handle.inner
         inner = handle._pub if isinstance(handle, _Pub) else handle
         if isinstance(inner, (rospy.Timer, rospy.Service)):
@@ -243,8 +250,8 @@ class Ros1Node(Node):
             return self._tf.send_tf(transforms)
         if self._tf_pub is None:
             with self._lock:
-                if self._tf_pub is None:
-                    self._tf_pub = rospy.Publisher("/tf", TFMessage, queue_size=100)
+                if self._tf_pub is None:  # (composed: through the bus too, so a component's recorder has it)
+                    self._tf_pub = self.publisher("/tf", TFMessage, QoS.RELIABLE, 100)
         self._tf_pub.publish(TFMessage(transforms=list(transforms)))
 
     def send_static_tf(self, transforms) -> None:
@@ -254,7 +261,7 @@ class Ros1Node(Node):
             return self._tf.send_static_tf(transforms)
         with self._lock:
             if self._static_pub is None:
-                self._static_pub = rospy.Publisher("/tf_static", TFMessage, queue_size=100, latch=True)
+                self._static_pub = self.publisher("/tf_static", TFMessage, QoS.LATCHED, 100)
             for t in transforms:
                 self._static[t.child_frame_id] = t
             self._static_pub.publish(TFMessage(transforms=list(self._static.values())))
@@ -440,6 +447,10 @@ def spin_node(name: str, make_node: Callable[[Node], object], argv: list[str] | 
 #: topics a component of this process subscribes to through the bus (:mod:`.local`): rospy leaves this
 #: process's own publishers of them out (:func:`_own_uri_out`)
 _BUS_TOPICS: set[str] = set()
+#: topics rospy itself subscribes to in every process (its clock under ``use_sim_time``): never on the bus, a
+#: component hears them through rospy as rospy's own subscription does (one subscription per topic and
+#: process: on the bus as well, a component would hear each message twice)
+_ROSPY_OWN = frozenset({"/clock"})
 
 
 def _own_uri_out() -> None:
@@ -487,22 +498,29 @@ def run_nodes(args, plans: list) -> int:
     _own_uri_out()
     process = init_node(args.name, argv=[sys.argv[0]], namespace=ns)
     bus = LocalBus(on_error=lambda text: rospy.logerr(f"{args.name}: {text}"))
+    process._bus = bus  # the process's TF publishers (every component's send_tf) reach the components too
     objs = []
     try:
         for plan in plans:
             obj = plan.make_node(Ros1Node(plan.name, bus, tf=process))
-            objs.append(obj)
+            objs.append((plan, obj))
             print(f"raf {plan.who}: {plan.started(obj)}", flush=True)
         watch = watch_master(f"raf compose {args.name}", pid0=pid0)
         rospy.spin()
     finally:
-        for obj in reversed(objs):
-            obj.stop()
-        c = bus.counts()
-        print(f"raf compose: {len(plans)} nodes; in-process messages {c['delivered']} delivered, "
-              f"{c['dropped']} dropped (a full queue)", flush=True)
-        if master is not None:
-            master.stop()
+        try:
+            for plan, obj in reversed(objs):  # each one stopped, whatever the one before did
+                try:
+                    obj.stop()
+                except Exception as e:  # noqa: BLE001 - reported; the others still stop
+                    print(f"raf compose: stopping {plan.who} failed: {type(e).__name__}: {e}", file=sys.stderr,
+                          flush=True)
+            c = bus.counts()
+            print(f"raf compose: {len(plans)} nodes; in-process messages {c['delivered']} delivered, "
+                  f"{c['dropped']} dropped (a full queue)", flush=True)
+        finally:
+            if master is not None:
+                master.stop()
     return MASTER_RESTARTED if watch["restarted"] else 0
 
 
