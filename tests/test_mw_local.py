@@ -25,7 +25,6 @@ import pytest
 
 from robotatfactory.ros.mw.base import Publisher, QoS
 from robotatfactory.ros.mw.local import LocalBus
-from rosutil import ros_master, test_node  # noqa: F401
 
 
 class _Inner(Publisher):
@@ -195,22 +194,39 @@ CHILD = textwrap.dedent("""
 """)
 
 
-@pytest.mark.ros
-def test_composed_components_hear_each_other_once_as_the_wire_gives_it_and_other_processes_too(ros_master):
+OUTSIDE = textwrap.dedent("""
+    import sys
+    import rospy
     from std_msgs.msg import String
+    rospy.init_node("raf_local_test_outside", disable_signals=True)
+    rospy.Publisher("/chat", String, latch=True, queue_size=1).publish(String(data="outside"))
+    print("ready", flush=True)
+    sys.stdin.read()  # until the test closes it
+""")
 
-    child = subprocess.Popen([sys.executable, "-c", CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)
-    try:
-        assert child.stdout.readline().strip() == "ready", child.stderr.read()[-2000:]
-        outside = test_node().publisher("/chat", String, QoS.LATCHED, 1)  # another process's publisher
-        outside.publish(String(data="outside"))
-        child.stdin.write("go\n")
-        child.stdin.flush()
-        out, err = child.communicate(timeout=60)
-    finally:
-        if child.poll() is None:
-            child.kill()
+
+@pytest.mark.ros
+def test_composed_components_hear_each_other_once_as_the_wire_gives_it_and_other_processes_too():
+    from robotatfactory.ros.master import PrivateMaster
+
+    # a master of its own: no other test's publishers (a latched /tf_static, a /clock) on the topics it counts
+    with PrivateMaster() as master:
+        env = master.env()
+        outside = subprocess.Popen([sys.executable, "-c", OUTSIDE], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True, env=env)  # another process's publisher
+        child = subprocess.Popen([sys.executable, "-c", CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, env=env)
+        try:
+            assert outside.stdout.readline().strip() == "ready", outside.stderr.read()[-2000:]
+            assert child.stdout.readline().strip() == "ready", child.stderr.read()[-2000:]
+            child.stdin.write("go\n")
+            child.stdin.flush()
+            out, err = child.communicate(timeout=60)
+        finally:
+            for p in (child, outside):
+                if p.poll() is None:
+                    p.kill()
+                p.wait(10)
     assert child.returncode == 0, err[-2000:]
     res = json.loads(out.strip().splitlines()[-1])
     got = res["got"]

@@ -94,6 +94,8 @@ class PrivateMaster(_PrivateGraph):
                     return True
             except OSError:
                 pass
+            except xmlrpc.client.Fault:  # another XML-RPC server on the port (a restart reuses it): not the master
+                pass
             time.sleep(0.1)
         return False
 
