@@ -196,3 +196,18 @@ def test_with_spin_settle_a_turn_on_the_spot_stops_on_the_heading_before_driving
     assert w_on <= 6.0 * dt + 1e-9 and err_on <= 0.03  # stopped on the heading
     w_off, err_off = drive_off[0.0]
     assert w_off > 0.5 and err_off > 0.03  # still turning fast, the heading not yet reached
+
+
+def test_a_given_top_speed_is_taken_as_given(robot):
+    """drive.v_max above the default wheel limit (45 % of the no-load top speed, 0.46 m/s) is driven on a straight:
+    it was capped at 0.46 without a word."""
+    default = DriveLimits.from_robot(robot)
+    assert default.v_max == pytest.approx(0.4) and default.v_wheel == pytest.approx(0.46, abs=0.01)
+    fast = DriveLimits.from_robot(robot, v_max=0.6)
+    assert fast.v_max == pytest.approx(0.6) and fast.v_wheel == pytest.approx(0.6)
+    assert DriveLimits.from_robot(robot, v_max=0.6, v_wheel=0.5).v_wheel == pytest.approx(0.5)
+    dt = robot.control_period
+    f = PathFollower(fast, dt)
+    f.start([(0.0, 0.0), (1.2, 0.0)])
+    outs, _ = drive_kinematic(f, (0.0, 0.0, 0.0), dt)
+    assert max(o.v for o in outs) == pytest.approx(0.6, abs=1e-6)

@@ -96,10 +96,12 @@ class DriveLimits:
         angular acceleration as well (alpha = a_max / (track / 2))."""
         m = robot.motor
         top = float(m["Vmax"]) / float(m["Ke"]) / float(m.get("gear", 1.0)) * robot.wheel_radius  # m/s
-        v_max = min(kw.pop("v_max", 0.4), fraction * top)
+        # a v_max given is taken as given (it was capped at the fraction silently: drive.v_max 0.55 ran at 0.46);
+        # the wheels' limit then allows it on a straight
+        v_max = kw.pop("v_max", min(0.4, fraction * top))
         half = robot.track / 2
         return cls(v_max=v_max, w_max=kw.pop("w_max", min(3.0, fraction * top / half)), a_max=a_max,
-                   alpha_max=kw.pop("alpha_max", a_max / half), v_wheel=kw.pop("v_wheel", fraction * top),
+                   alpha_max=kw.pop("alpha_max", a_max / half), v_wheel=kw.pop("v_wheel", max(fraction * top, v_max)),
                    half_track=half, **kw)
 
 
