@@ -9,7 +9,8 @@ ROS 1 (a child process composing two components on a private master): a message 
 arrives once (in-process, not also through rospy's socket to itself), a ``float32`` field arrives as the wire
 makes it (32 bits), a publisher in another process still reaches the component through rospy, and rospy's
 own clock (``use_sim_time``) still hears the ``/clock`` a component publishes; a recording component gets every
-message once (``/clock`` too, the TF the components send, a latched topic told as latched).
+message once (``/clock`` too, the TF the components send, a latched topic told as latched). A node that fails
+to start still leaves every plan closed (record's bag), a close that raises the others too.
 """
 from __future__ import annotations
 
@@ -240,6 +241,61 @@ def test_composed_components_hear_each_other_once_as_the_wire_gives_it_and_other
     raw = res["raw"]  # what a recorder among the components gets: each message once, TF included, latching told
     assert raw.get("/tf") == [False] and raw.get("/tf_static") == [True] and raw.get("/latched") == [True], raw
     assert len(raw.get("/clock", [])) == 20, raw.get("/clock")  # through rospy only: not twice
+
+
+COMPOSE_FAILS = textwrap.dedent("""
+    import argparse, json
+    from robotatfactory.ros.cli import NodePlan
+    from robotatfactory.ros.mw import ros1
+    closed, stopped = [], []
+
+    class Obj:
+        def stop(self):
+            stopped.append("a")
+
+    def fails(node):
+        raise RuntimeError("the recorder did not start")  # as a recorder whose start raised after its bag opened
+
+    def close_fails():
+        closed.append("b")
+        raise OSError("the bag is gone")
+
+    plans = [NodePlan("a", "comp_a", {}, lambda n: Obj(), lambda o: "a running", close=lambda: closed.append("a")),
+             NodePlan("b", "comp_b", {}, fails, lambda o: "", close=close_fails),
+             NodePlan("c", "comp_c", {}, fails, lambda o: "", close=lambda: closed.append("c"))]
+    try:
+        ros1.run_nodes(argparse.Namespace(ns="", name="raf_compose_test", no_sim_time=True, roscore=False), plans)
+    except RuntimeError as e:
+        print(json.dumps({"error": str(e), "closed": closed, "stopped": stopped}), flush=True)
+""")
+
+
+@pytest.mark.ros
+def test_raf_compose_closes_every_plan_when_a_node_fails_to_start_and_one_close_fails():
+    from robotatfactory.ros.master import PrivateMaster
+
+    with PrivateMaster() as master:
+        r = subprocess.run([sys.executable, "-c", COMPOSE_FAILS], capture_output=True, text=True, timeout=60,
+                           env=master.env())
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = json.loads(r.stdout.strip().splitlines()[-1])
+    assert res == {"error": "the recorder did not start", "stopped": ["a"], "closed": ["c", "b", "a"]}, res
+    assert "raf compose: closing b failed: OSError: the bag is gone" in r.stderr, r.stderr[-2000:]
+
+
+def test_a_plan_run_alone_is_closed_whatever_its_node_did(monkeypatch):
+    from robotatfactory.ros import cli
+
+    def fails(*a):
+        raise RuntimeError("no master")
+
+    closed = []
+    monkeypatch.setattr(cli, "run_node", fails)
+    plan = cli.NodePlan("record", "raf_record", {}, lambda n: None, lambda o: "", close=lambda: closed.append(1))
+    with pytest.raises(RuntimeError):
+        plan.run(None)
+    monkeypatch.setattr(cli, "run_node", lambda *a: 0)
+    assert plan.run(None) == 0 and closed == [1, 1]
 
 
 @pytest.mark.parametrize("nodes, error", [

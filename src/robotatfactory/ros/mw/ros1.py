@@ -476,10 +476,20 @@ def _own_uri_out() -> None:
     RegManager.publisher_update = publisher_update
 
 
+def _reported(what: str, action: Callable[[], None]) -> None:
+    """``action()``, an exception from it printed and not raised: a component's failure to stop or close
+    leaves the others to stop and close."""
+    try:
+        action()
+    except Exception as e:  # noqa: BLE001 - reported; the others still stop
+        print(f"raf compose: {what} failed: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+
+
 def run_nodes(args, plans: list) -> int:
     """Several nodes as components of one process (see :func:`robotatfactory.ros.cli.run_nodes`): one rospy
     node (``args.name``), each plan's node a :class:`Ros1Node` component of it with the plan's name and
-    parameters, messages between them in-process (:mod:`.local`)."""
+    parameters, messages between them in-process (:mod:`.local`). At the end every node started is stopped
+    and every plan closed (:attr:`~robotatfactory.ros.cli.NodePlan.close`), whatever one of them raised."""
     from ..master import ensure_master
 
     master = ensure_master(args.roscore, "compose")
@@ -510,11 +520,10 @@ def run_nodes(args, plans: list) -> int:
     finally:
         try:
             for plan, obj in reversed(objs):  # each one stopped, whatever the one before did
-                try:
-                    obj.stop()
-                except Exception as e:  # noqa: BLE001 - reported; the others still stop
-                    print(f"raf compose: stopping {plan.who} failed: {type(e).__name__}: {e}", file=sys.stderr,
-                          flush=True)
+                _reported(f"stopping {plan.who}", obj.stop)
+            for plan in reversed(plans):  # what a plan holds open (record's bag), its node started or not
+                if plan.close is not None:
+                    _reported(f"closing {plan.who}", plan.close)
             c = bus.counts()
             print(f"raf compose: {len(plans)} nodes; in-process messages {c['delivered']} delivered, "
                   f"{c['dropped']} dropped (a full queue)", flush=True)
