@@ -165,9 +165,8 @@ CHILD = textwrap.dedent("""
     rosgraph.Master("/raf_local_test_cli").setParam("/use_sim_time", True)
     from geometry_msgs.msg import TransformStamped
     ros1._own_uri_out()
-    process = ros1.init_node("raf_local_test", argv=["x"], signals=False)
     bus = LocalBus()
-    process._bus = bus  # as run_nodes makes it: the process's TF publishers on the bus
+    process = ros1.init_node("raf_local_test", argv=["x"], signals=False, bus=bus)  # as run_nodes makes it
     a, b = ros1.Ros1Node("comp_a", bus, tf=process), ros1.Ros1Node("comp_b", bus, tf=process)
     raw = {}  # a recorder component's raw subscriptions: topic -> [latched flags]
     for t in ("/tf", "/tf_static", "/clock", "/latched"):

@@ -76,7 +76,7 @@ class LocalSubscription:
     def close(self) -> None:
         self._closed = True
         self.queue.put(_CLOSE)
-        self.bus._remove(self)
+        self.bus.remove(self)
 
 
 class LocalPublisher(Publisher):
@@ -89,17 +89,7 @@ class LocalPublisher(Publisher):
         self.last = None  # a latched topic's last message
 
     def publish(self, msg) -> None:
-        if self.latched:  # the latch and the delivery at once: a subscription made meanwhile gets one or the other
-            local = self.wire(msg) if self.wire is not None else msg
-            with self.bus._lock:
-                self.last = local
-                for sub in self.bus.subscriptions(self.topic):
-                    sub.put(local)
-        else:
-            subs = self.bus.subscriptions(self.topic)
-            local = self.wire(msg) if self.wire is not None and subs else msg
-            for sub in subs:
-                sub.put(local)
+        self.bus.deliver(self, msg)
         self.inner.publish(msg)
 
     def subscriber_count(self) -> int:
@@ -137,6 +127,21 @@ class LocalBus:
     def subscriptions(self, topic: str) -> tuple[LocalSubscription, ...]:
         return self._subs.get(topic, ())  # (a tuple replaced whole under the lock: read without it)
 
+    def deliver(self, pub: LocalPublisher, msg) -> None:
+        """``msg``, published by ``pub``, to every local subscription of its topic (as ``pub.wire`` makes it).
+        A latched topic's message is also kept as ``pub.last``."""
+        if pub.latched:  # the latch and the delivery at once: a subscription made meanwhile gets one or the other
+            local = pub.wire(msg) if pub.wire is not None else msg
+            with self._lock:
+                pub.last = local
+                for sub in self.subscriptions(pub.topic):
+                    sub.put(local)
+        else:
+            subs = self.subscriptions(pub.topic)
+            local = pub.wire(msg) if pub.wire is not None and subs else msg
+            for sub in subs:
+                sub.put(local)
+
     def unpublish(self, pub: LocalPublisher) -> None:
         """``pub`` is closed: its latched message no longer reaches new subscriptions."""
         with self._lock:
@@ -146,7 +151,8 @@ class LocalBus:
         """True when a component of this process publishes ``topic`` latched."""
         return any(p.latched for p in self._pubs.get(topic, ()))
 
-    def _remove(self, sub: LocalSubscription) -> None:
+    def remove(self, sub: LocalSubscription) -> None:
+        """``sub`` is closed: it hears no more, and its counts are kept for :meth:`counts`."""
         with self._lock:
             group = self._subs.get(sub.topic, ())
             if sub in group:

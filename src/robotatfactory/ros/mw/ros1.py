@@ -318,8 +318,9 @@ def loopback_ros_default() -> None:
 
 
 def init_node(name: str, argv: list[str] | None = None, anonymous: bool = False, signals: bool = True,
-              namespace: str = "") -> Ros1Node:
-    """``rospy.init_node`` (once per process) and the node's view."""
+              namespace: str = "", bus: LocalBus | None = None) -> Ros1Node:
+    """``rospy.init_node`` (once per process) and the node's view; ``bus``: the process's components' bus
+    (:func:`run_nodes`), which the process's own publishers (the TF of every component's ``send_tf``) use too."""
     loopback_ros_default()
     ns = namespace.strip("/")
     if ns:
@@ -331,7 +332,7 @@ def init_node(name: str, argv: list[str] | None = None, anonymous: bool = False,
         argv = list(argv or [sys.argv[0]]) + [f"__ns:=/{ns}"]
     rospy.init_node(name, argv=argv if argv is not None else sys.argv, anonymous=anonymous,
                     disable_signals=not signals)
-    return Ros1Node()
+    return Ros1Node(bus=bus)
 
 
 def myargv(argv: list[str]) -> list[str]:
@@ -506,9 +507,9 @@ def run_nodes(args, plans: list) -> int:
     loopback_ros_default()
     pid0 = master_pid()
     _own_uri_out()
-    process = init_node(args.name, argv=[sys.argv[0]], namespace=ns)
     bus = LocalBus(on_error=lambda text: rospy.logerr(f"{args.name}: {text}"))
-    process._bus = bus  # the process's TF publishers (every component's send_tf) reach the components too
+    # on the bus too: the process's TF publishers (every component's send_tf) reach the components
+    process = init_node(args.name, argv=[sys.argv[0]], namespace=ns, bus=bus)
     objs = []
     try:
         for plan in plans:
