@@ -2,8 +2,9 @@
 
 Plain: the bus hands a message to every local subscription and to the middleware's publisher; a latched
 topic's last message reaches a later subscription; a full queue drops the oldest and counts it; a closed
-subscription hears nothing more; a callback that raises is reported and the next message still arrives; the
-``wire`` copy is what local subscribers get, the object itself what the middleware sends.
+subscription hears nothing more (one its own callback closed still counts that delivery); a callback that
+raises is reported and the next message still arrives; the ``wire`` copy is what local subscribers get, the
+object itself what the middleware sends.
 
 ROS 1 (a child process composing two components on a private master): a message between the components
 arrives once (in-process, not also through rospy's socket to itself), a ``float32`` field arrives as the wire
@@ -91,21 +92,39 @@ def test_a_latched_topic_reaches_a_later_subscription_once_per_publisher():
 def test_a_full_queue_drops_the_oldest_and_counts_it():
     bus = LocalBus()
     pub = bus.publisher("/q", _Inner(), QoS.RELIABLE)
-    gate, got = threading.Event(), []
+    handling, gate, got = threading.Event(), threading.Event(), []
 
     def slow(msg):
+        handling.set()
         gate.wait(5.0)
         got.append(msg)
 
     bus.subscribe("/q", slow, 2)
     pub.publish(0)
-    assert _until(lambda: not bus.subscriptions("/q")[0].pending())  # 0 is being handled
+    assert handling.wait(5.0)  # 0 is out of the queue, being handled
     for i in range(1, 6):
         pub.publish(i)  # the queue holds 2: 1, 2, 3 are dropped
     gate.set()
     assert _until(lambda: len(got) == 3)
     assert got == [0, 4, 5]
     assert bus.counts() == {"delivered": 3, "dropped": 3}
+
+
+def test_a_subscription_closed_by_its_own_callback_counts_that_delivery():
+    bus = LocalBus()
+    pub = bus.publisher("/c", _Inner(), QoS.RELIABLE)
+    got = []
+
+    def once(msg):
+        sub.close()
+        got.append(msg)
+
+    sub = bus.subscribe("/c", once, 10)
+    pub.publish(1)
+    assert _until(lambda: got == [1])
+    pub.publish(2)
+    time.sleep(0.05)
+    assert got == [1] and bus.counts() == {"delivered": 1, "dropped": 0}
 
 
 def test_a_callback_that_raises_is_reported_and_the_next_message_arrives():

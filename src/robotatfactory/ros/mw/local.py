@@ -41,8 +41,11 @@ class LocalSubscription:
         self.queue: queue.SimpleQueue = queue.SimpleQueue()
         self.depth = max(1, int(depth))
         self.dropped = 0  # messages dropped because the queue was full (the oldest first, as rospy does)
-        self.delivered = 0
+        self.delivered = 0  # messages handed to the callback (counted before it runs, whether it raises or not)
         self._closed = False
+        # the counts against close(): no message is counted once it has set _closed, so the counts that
+        # LocalBus.remove takes then are final (a plain lock, taken once a message and on a drop)
+        self._lock = threading.Lock()
         self._on_error = on_error
         self._thread = threading.Thread(target=self._serve, name=f"raf-local{topic}", daemon=True)
         self._thread.start()
@@ -51,30 +54,33 @@ class LocalSubscription:
         if self._closed:
             return
         while self.queue.qsize() >= self.depth:
-            try:
-                self.queue.get_nowait()
-                self.dropped += 1
-            except queue.Empty:  # the subscription's thread took it meanwhile
-                break
+            with self._lock:
+                if self._closed:
+                    return
+                try:
+                    self.queue.get_nowait()
+                    self.dropped += 1
+                except queue.Empty:  # the subscription's thread took it meanwhile
+                    break
         self.queue.put(msg)
-
-    def pending(self) -> int:
-        """Messages waiting in the queue."""
-        return self.queue.qsize()
 
     def _serve(self) -> None:
         while True:
             msg = self.queue.get()
-            if msg is _CLOSE or self._closed:
+            if msg is _CLOSE:
                 return
+            with self._lock:  # counted before the callback: one that closes this subscription is counted too
+                if self._closed:
+                    return
+                self.delivered += 1
             try:
                 self.callback(msg)
-                self.delivered += 1
             except Exception as e:  # noqa: BLE001 - a callback's error is logged, as the middleware does
                 self._on_error(f"{self.topic}: callback error: {type(e).__name__}: {e}")
 
     def close(self) -> None:
-        self._closed = True
+        with self._lock:  # (released before the bus's lock is taken: a latched publish holds that, then this)
+            self._closed = True
         self.queue.put(_CLOSE)
         self.bus.remove(self)
 
