@@ -93,6 +93,19 @@ def test_bad_values_name_the_setting(over, names):
     assert names in str(e.value)
 
 
+def test_the_camera_half_in_the_bridge_process_is_ros1_only():
+    from robotatfactory.ros.config import check_camera_process
+
+    composed = load_config({"camera": {"process": "bridge"}})
+    check_camera_process(composed, "ros1")
+    with pytest.raises(ConfigError) as e:
+        check_camera_process(composed, "ros2")
+    assert str(e.value) == ("camera.process: bridge: ROS 1 only (one node per process there); on ros2 the camera "
+                            "runs in a process of its own (camera.process: own)")
+    check_camera_process(load_config({}), "ros2")  # its own process (the default)
+    check_camera_process(load_config({"camera": {"process": "bridge", "enabled": False}}), "ros2")  # no camera
+
+
 def test_any_host_and_hostnames():
     assert load_config({"simulator": {"host": "*"}}).sim_host == "*"
     assert load_config({"simulator": {"host": "localhost"}}).sim_host == "127.0.0.1"

@@ -2,14 +2,16 @@
 
 Plain: the bus hands a message to every local subscription and to the middleware's publisher; a latched
 topic's last message reaches a later subscription; a full queue drops the oldest and counts it; a closed
-subscription hears nothing more; a callback that raises is reported and the next message still arrives; the
-``wire`` copy is what local subscribers get, the object itself what the middleware sends.
+subscription hears nothing more (one its own callback closed still counts that delivery); a callback that
+raises is reported and the next message still arrives; the ``wire`` copy is what local subscribers get, the
+object itself what the middleware sends.
 
 ROS 1 (a child process composing two components on a private master): a message between the components
 arrives once (in-process, not also through rospy's socket to itself), a ``float32`` field arrives as the wire
 makes it (32 bits), a publisher in another process still reaches the component through rospy, and rospy's
 own clock (``use_sim_time``) still hears the ``/clock`` a component publishes; a recording component gets every
-message once (``/clock`` too, the TF the components send, a latched topic told as latched).
+message once (``/clock`` too, the TF the components send, a latched topic told as latched). A node that fails
+to start still leaves every plan closed (record's bag), a close that raises the others too.
 """
 from __future__ import annotations
 
@@ -90,21 +92,39 @@ def test_a_latched_topic_reaches_a_later_subscription_once_per_publisher():
 def test_a_full_queue_drops_the_oldest_and_counts_it():
     bus = LocalBus()
     pub = bus.publisher("/q", _Inner(), QoS.RELIABLE)
-    gate, got = threading.Event(), []
+    handling, gate, got = threading.Event(), threading.Event(), []
 
     def slow(msg):
+        handling.set()
         gate.wait(5.0)
         got.append(msg)
 
     bus.subscribe("/q", slow, 2)
     pub.publish(0)
-    assert _until(lambda: not bus.subscriptions("/q")[0].pending())  # 0 is being handled
+    assert handling.wait(5.0)  # 0 is out of the queue, being handled
     for i in range(1, 6):
         pub.publish(i)  # the queue holds 2: 1, 2, 3 are dropped
     gate.set()
     assert _until(lambda: len(got) == 3)
     assert got == [0, 4, 5]
     assert bus.counts() == {"delivered": 3, "dropped": 3}
+
+
+def test_a_subscription_closed_by_its_own_callback_counts_that_delivery():
+    bus = LocalBus()
+    pub = bus.publisher("/c", _Inner(), QoS.RELIABLE)
+    got = []
+
+    def once(msg):
+        sub.close()
+        got.append(msg)
+
+    sub = bus.subscribe("/c", once, 10)
+    pub.publish(1)
+    assert _until(lambda: got == [1])
+    pub.publish(2)
+    time.sleep(0.05)
+    assert got == [1] and bus.counts() == {"delivered": 1, "dropped": 0}
 
 
 def test_a_callback_that_raises_is_reported_and_the_next_message_arrives():
@@ -164,9 +184,8 @@ CHILD = textwrap.dedent("""
     rosgraph.Master("/raf_local_test_cli").setParam("/use_sim_time", True)
     from geometry_msgs.msg import TransformStamped
     ros1._own_uri_out()
-    process = ros1.init_node("raf_local_test", argv=["x"], signals=False)
     bus = LocalBus()
-    process._bus = bus  # as run_nodes makes it: the process's TF publishers on the bus
+    process = ros1.init_node("raf_local_test", argv=["x"], signals=False, bus=bus)  # as run_nodes makes it
     a, b = ros1.Ros1Node("comp_a", bus, tf=process), ros1.Ros1Node("comp_b", bus, tf=process)
     raw = {}  # a recorder component's raw subscriptions: topic -> [latched flags]
     for t in ("/tf", "/tf_static", "/clock", "/latched"):
@@ -240,6 +259,61 @@ def test_composed_components_hear_each_other_once_as_the_wire_gives_it_and_other
     raw = res["raw"]  # what a recorder among the components gets: each message once, TF included, latching told
     assert raw.get("/tf") == [False] and raw.get("/tf_static") == [True] and raw.get("/latched") == [True], raw
     assert len(raw.get("/clock", [])) == 20, raw.get("/clock")  # through rospy only: not twice
+
+
+COMPOSE_FAILS = textwrap.dedent("""
+    import argparse, json
+    from robotatfactory.ros.cli import NodePlan
+    from robotatfactory.ros.mw import ros1
+    closed, stopped = [], []
+
+    class Obj:
+        def stop(self):
+            stopped.append("a")
+
+    def fails(node):
+        raise RuntimeError("the recorder did not start")  # as a recorder whose start raised after its bag opened
+
+    def close_fails():
+        closed.append("b")
+        raise OSError("the bag is gone")
+
+    plans = [NodePlan("a", "comp_a", {}, lambda n: Obj(), lambda o: "a running", close=lambda: closed.append("a")),
+             NodePlan("b", "comp_b", {}, fails, lambda o: "", close=close_fails),
+             NodePlan("c", "comp_c", {}, fails, lambda o: "", close=lambda: closed.append("c"))]
+    try:
+        ros1.run_nodes(argparse.Namespace(ns="", name="raf_compose_test", no_sim_time=True, roscore=False), plans)
+    except RuntimeError as e:
+        print(json.dumps({"error": str(e), "closed": closed, "stopped": stopped}), flush=True)
+""")
+
+
+@pytest.mark.ros
+def test_raf_compose_closes_every_plan_when_a_node_fails_to_start_and_one_close_fails():
+    from robotatfactory.ros.master import PrivateMaster
+
+    with PrivateMaster() as master:
+        r = subprocess.run([sys.executable, "-c", COMPOSE_FAILS], capture_output=True, text=True, timeout=60,
+                           env=master.env())
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = json.loads(r.stdout.strip().splitlines()[-1])
+    assert res == {"error": "the recorder did not start", "stopped": ["a"], "closed": ["c", "b", "a"]}, res
+    assert "raf compose: closing b failed: OSError: the bag is gone" in r.stderr, r.stderr[-2000:]
+
+
+def test_a_plan_run_alone_is_closed_whatever_its_node_did(monkeypatch):
+    from robotatfactory.ros import cli
+
+    def fails(*a):
+        raise RuntimeError("no master")
+
+    closed = []
+    monkeypatch.setattr(cli, "run_node", fails)
+    plan = cli.NodePlan("record", "raf_record", {}, lambda n: None, lambda o: "", close=lambda: closed.append(1))
+    with pytest.raises(RuntimeError):
+        plan.run(None)
+    monkeypatch.setattr(cli, "run_node", lambda *a: 0)
+    assert plan.run(None) == 0 and closed == [1, 1]
 
 
 @pytest.mark.parametrize("nodes, error", [

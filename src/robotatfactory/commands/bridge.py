@@ -83,16 +83,11 @@ def run(args) -> int:
 def plan(args):
     """The node this command line makes (:class:`~robotatfactory.ros.cli.NodePlan`), not yet started."""
     from ..ros.cli import NodePlan
-    from ..ros.config import load_config
+    from ..ros.config import check_camera_process, load_config
+    from ..ros.mw import name as middleware
 
     cfg = load_config(build_params(args))  # a bad name or value: a clear error before the middleware starts
-    if cfg.camera.enabled and cfg.camera.process == "bridge":
-        from ..errors import ConfigError
-        from ..ros.mw import name as middleware
-
-        if middleware() != "ros1":
-            raise ConfigError(f"camera.process: bridge: ROS 1 only (one node per process there); on "
-                              f"{middleware()} the camera runs in a process of its own (camera.process: own)")
+    check_camera_process(cfg, middleware())
 
     def make_node(node):  # imported only once the middleware is up (ROS 1: --roscore sets ROS_MASTER_URI)
         from ..ros.bridge_node import Bridge

@@ -44,12 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    rec_plan = plan(args)
     ns = argparse.Namespace(ns=args.ns, name=args.name, no_sim_time=args.no_sim_time, roscore=args.roscore)
-    try:
-        return rec_plan.run(ns)
-    finally:
-        rec_plan.close()  # (the bag, if the node never started or stopped)
+    return plan(args).run(ns)  # (which closes the bag, if the node never started or stopped)
 
 
 def plan(args):
@@ -124,6 +120,4 @@ def plan(args):
         for w in opened:
             w.close()
 
-    p = NodePlan("record", args.name, {}, make_node, started)
-    p.close = close
-    return p
+    return NodePlan("record", args.name, {}, make_node, started, close=close)

@@ -50,7 +50,7 @@ from ..simtwo.timing import SimClock
 from ..simtwo.watchdog import CommandWatchdog
 from . import messages as rm
 from .cli import publish_every, spin_node
-from .config import BridgeConfig, default_params, load_config
+from .config import BridgeConfig, check_camera_process, default_params, load_config
 from .mw import QoS, api
 from .simulation_interfaces import StandardServices
 from .mw.base import OK, WARN, Node
@@ -174,12 +174,8 @@ class Bridge:
             name = f"{node.name.rsplit('/', 1)[-1]}_camera"
             here = None
             if cfg.camera.process == "bridge":
-                try:
-                    here = node.sibling(name)
-                except NotImplementedError as e:
-                    from ..errors import ConfigError
-
-                    raise ConfigError(f"camera.process: bridge: {e}") from None
+                check_camera_process(cfg, node.middleware)  # (raf bridge checked it; a launch file did not)
+                here = node.sibling(name)
             self.camera = CameraLink(cfg.given_params(), name, node.namespace, node=here)
         self._spawn(self._udp_loop, "udp")
         self._spawn(self._diag_loop, "diagnostics")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 
@@ -46,12 +46,19 @@ class NodePlan:
 
     who: str  #: the command (``bridge``): names the node in messages
     name: str  #: the node's name (``raf_bridge``)
-    params: dict = field(default_factory=dict)  #: as :func:`run_node`'s ``params``
-    make_node: Callable = None  #: ``make_node(node) -> obj`` (obj has ``stop()``)
-    started: Callable = None  #: ``started(obj) -> str``, the line printed once it runs
+    params: dict  #: as :func:`run_node`'s ``params`` (``{}``: none)
+    make_node: Callable[[object], object]  #: ``make_node(node) -> obj`` (obj has ``stop()``)
+    started: Callable[[object], str]  #: ``started(obj) -> str``, the line printed once it runs
+    #: releases what the plan holds outside its node (record's bag, opened by ``make_node``), whether or not the
+    #: node started or stopped: called once the node is done, by :meth:`run` and by :func:`run_nodes`
+    close: Callable[[], None] | None = None
 
     def run(self, args) -> int:
-        return run_node(args, self.who, self.params, self.make_node, self.started)
+        try:
+            return run_node(args, self.who, self.params, self.make_node, self.started)
+        finally:
+            if self.close is not None:
+                self.close()
 
 
 def run_nodes(args, plans: list[NodePlan]) -> int:

@@ -401,6 +401,15 @@ def load_config(overrides: dict | None = None) -> BridgeConfig:
     return resolve(build(BridgeSettings, overrides or {}))
 
 
+def check_camera_process(cfg: BridgeConfig, middleware: str) -> None:
+    """ConfigError for ``camera.process: bridge`` (an enabled camera) on a ``middleware`` other than ROS 1: the
+    camera half is then a second node in the bridge's process (:meth:`~.mw.base.Node.sibling`), and only rospy
+    makes one in a process. ``raf bridge`` checks before the middleware starts, the node for a launch file."""
+    if cfg.camera.enabled and cfg.camera.process == "bridge" and middleware != "ros1":
+        raise ConfigError(f"camera.process: bridge: ROS 1 only (one node per process there); on "
+                          f"{middleware} the camera runs in a process of its own (camera.process: own)")
+
+
 def default_params() -> dict:
     """The node's parameters with their defaults (what ROS 2 declares; unset: None): every bridge setting."""
     return tree(BridgeSettings())

@@ -41,8 +41,11 @@ class LocalSubscription:
         self.queue: queue.SimpleQueue = queue.SimpleQueue()
         self.depth = max(1, int(depth))
         self.dropped = 0  # messages dropped because the queue was full (the oldest first, as rospy does)
-        self.delivered = 0
+        self.delivered = 0  # messages handed to the callback (counted before it runs, whether it raises or not)
         self._closed = False
+        # the counts against close(): no message is counted once it has set _closed, so the counts that
+        # LocalBus.remove takes then are final (a plain lock, taken once a message and on a drop)
+        self._lock = threading.Lock()
         self._on_error = on_error
         self._thread = threading.Thread(target=self._serve, name=f"raf-local{topic}", daemon=True)
         self._thread.start()
@@ -51,32 +54,35 @@ class LocalSubscription:
         if self._closed:
             return
         while self.queue.qsize() >= self.depth:
-            try:
-                self.queue.get_nowait()
-                self.dropped += 1
-            except queue.Empty:  # the subscription's thread took it meanwhile
-                break
+            with self._lock:
+                if self._closed:
+                    return
+                try:
+                    self.queue.get_nowait()
+                    self.dropped += 1
+                except queue.Empty:  # the subscription's thread took it meanwhile
+                    break
         self.queue.put(msg)
-
-    def pending(self) -> int:
-        """Messages waiting in the queue."""
-        return self.queue.qsize()
 
     def _serve(self) -> None:
         while True:
             msg = self.queue.get()
-            if msg is _CLOSE or self._closed:
+            if msg is _CLOSE:
                 return
+            with self._lock:  # counted before the callback: one that closes this subscription is counted too
+                if self._closed:
+                    return
+                self.delivered += 1
             try:
                 self.callback(msg)
-                self.delivered += 1
             except Exception as e:  # noqa: BLE001 - a callback's error is logged, as the middleware does
                 self._on_error(f"{self.topic}: callback error: {type(e).__name__}: {e}")
 
     def close(self) -> None:
-        self._closed = True
+        with self._lock:  # (released before the bus's lock is taken: a latched publish holds that, then this)
+            self._closed = True
         self.queue.put(_CLOSE)
-        self.bus._remove(self)
+        self.bus.remove(self)
 
 
 class LocalPublisher(Publisher):
@@ -89,17 +95,7 @@ class LocalPublisher(Publisher):
         self.last = None  # a latched topic's last message
 
     def publish(self, msg) -> None:
-        if self.latched:  # the latch and the delivery at once: a subscription made meanwhile gets one or the other
-            local = self.wire(msg) if self.wire is not None else msg
-            with self.bus._lock:
-                self.last = local
-                for sub in self.bus.subscriptions(self.topic):
-                    sub.put(local)
-        else:
-            subs = self.bus.subscriptions(self.topic)
-            local = self.wire(msg) if self.wire is not None and subs else msg
-            for sub in subs:
-                sub.put(local)
+        self.bus.deliver(self, msg)
         self.inner.publish(msg)
 
     def subscriber_count(self) -> int:
@@ -137,6 +133,21 @@ class LocalBus:
     def subscriptions(self, topic: str) -> tuple[LocalSubscription, ...]:
         return self._subs.get(topic, ())  # (a tuple replaced whole under the lock: read without it)
 
+    def deliver(self, pub: LocalPublisher, msg) -> None:
+        """``msg``, published by ``pub``, to every local subscription of its topic (as ``pub.wire`` makes it).
+        A latched topic's message is also kept as ``pub.last``."""
+        if pub.latched:  # the latch and the delivery at once: a subscription made meanwhile gets one or the other
+            local = pub.wire(msg) if pub.wire is not None else msg
+            with self._lock:
+                pub.last = local
+                for sub in self.subscriptions(pub.topic):
+                    sub.put(local)
+        else:
+            subs = self.subscriptions(pub.topic)
+            local = pub.wire(msg) if pub.wire is not None and subs else msg
+            for sub in subs:
+                sub.put(local)
+
     def unpublish(self, pub: LocalPublisher) -> None:
         """``pub`` is closed: its latched message no longer reaches new subscriptions."""
         with self._lock:
@@ -146,7 +157,8 @@ class LocalBus:
         """True when a component of this process publishes ``topic`` latched."""
         return any(p.latched for p in self._pubs.get(topic, ()))
 
-    def _remove(self, sub: LocalSubscription) -> None:
+    def remove(self, sub: LocalSubscription) -> None:
+        """``sub`` is closed: it hears no more, and its counts are kept for :meth:`counts`."""
         with self._lock:
             group = self._subs.get(sub.topic, ())
             if sub in group:

@@ -318,8 +318,9 @@ def loopback_ros_default() -> None:
 
 
 def init_node(name: str, argv: list[str] | None = None, anonymous: bool = False, signals: bool = True,
-              namespace: str = "") -> Ros1Node:
-    """``rospy.init_node`` (once per process) and the node's view."""
+              namespace: str = "", bus: LocalBus | None = None) -> Ros1Node:
+    """``rospy.init_node`` (once per process) and the node's view; ``bus``: the process's components' bus
+    (:func:`run_nodes`), which the process's own publishers (the TF of every component's ``send_tf``) use too."""
     loopback_ros_default()
     ns = namespace.strip("/")
     if ns:
@@ -331,7 +332,7 @@ def init_node(name: str, argv: list[str] | None = None, anonymous: bool = False,
         argv = list(argv or [sys.argv[0]]) + [f"__ns:=/{ns}"]
     rospy.init_node(name, argv=argv if argv is not None else sys.argv, anonymous=anonymous,
                     disable_signals=not signals)
-    return Ros1Node()
+    return Ros1Node(bus=bus)
 
 
 def myargv(argv: list[str]) -> list[str]:
@@ -476,10 +477,20 @@ def _own_uri_out() -> None:
     RegManager.publisher_update = publisher_update
 
 
+def _reported(what: str, action: Callable[[], None]) -> None:
+    """``action()``, an exception from it printed and not raised: a component's failure to stop or close
+    leaves the others to stop and close."""
+    try:
+        action()
+    except Exception as e:  # noqa: BLE001 - reported; the others still stop
+        print(f"raf compose: {what} failed: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+
+
 def run_nodes(args, plans: list) -> int:
     """Several nodes as components of one process (see :func:`robotatfactory.ros.cli.run_nodes`): one rospy
     node (``args.name``), each plan's node a :class:`Ros1Node` component of it with the plan's name and
-    parameters, messages between them in-process (:mod:`.local`)."""
+    parameters, messages between them in-process (:mod:`.local`). At the end every node started is stopped
+    and every plan closed (:attr:`~robotatfactory.ros.cli.NodePlan.close`), whatever one of them raised."""
     from ..master import ensure_master
 
     master = ensure_master(args.roscore, "compose")
@@ -496,9 +507,9 @@ def run_nodes(args, plans: list) -> int:
     loopback_ros_default()
     pid0 = master_pid()
     _own_uri_out()
-    process = init_node(args.name, argv=[sys.argv[0]], namespace=ns)
     bus = LocalBus(on_error=lambda text: rospy.logerr(f"{args.name}: {text}"))
-    process._bus = bus  # the process's TF publishers (every component's send_tf) reach the components too
+    # on the bus too: the process's TF publishers (every component's send_tf) reach the components
+    process = init_node(args.name, argv=[sys.argv[0]], namespace=ns, bus=bus)
     objs = []
     try:
         for plan in plans:
@@ -510,11 +521,10 @@ def run_nodes(args, plans: list) -> int:
     finally:
         try:
             for plan, obj in reversed(objs):  # each one stopped, whatever the one before did
-                try:
-                    obj.stop()
-                except Exception as e:  # noqa: BLE001 - reported; the others still stop
-                    print(f"raf compose: stopping {plan.who} failed: {type(e).__name__}: {e}", file=sys.stderr,
-                          flush=True)
+                _reported(f"stopping {plan.who}", obj.stop)
+            for plan in reversed(plans):  # what a plan holds open (record's bag), its node started or not
+                if plan.close is not None:
+                    _reported(f"closing {plan.who}", plan.close)
             c = bus.counts()
             print(f"raf compose: {len(plans)} nodes; in-process messages {c['delivered']} delivered, "
                   f"{c['dropped']} dropped (a full queue)", flush=True)
