@@ -125,3 +125,39 @@ def test_a_script_call_that_reads_nothing_keeps_the_replies_for_the_next(field, 
 def test_paced_and_lockstep_exclude_each_other():
     with pytest.raises(ConfigError, match="paced"):
         RunnerConfig(mode="paced", lockstep=True)
+
+
+def _through_lossy_link(field, robot, path, notify: bool, cycles: int = 60, timeout: float = 5.0):
+    """A paced run whose frames and replies cross the faults proxy, dropping 20 % of each way (seeded)."""
+    from robotatfactory.experiments._faults_net import LOCAL, Proxy
+
+    peer = Controller(drive)
+    proxy = Proxy((LOCAL, peer.sock.getsockname()[1]), seed=7, notify_lost=notify)
+    proxy.set_faults(0.2)
+    runner, t, box = start(field, robot, (LOCAL, proxy.port), mode="paced", trace=str(path),
+                           duration=cycles * robot.control_period, lockstep_timeout=timeout, pace_hold=2)
+    try:
+        t.join(120)
+        assert not t.is_alive(), "the paced run did not end"
+    finally:
+        peer.close()
+        proxy.close()
+    return box["result"], read_trace(path), proxy
+
+
+def test_a_lossy_link_tells_a_paced_run_what_it_lost(field, robot, tmp_path):
+    """Paced, the runner waits for the reply to every frame; the proxy's notice of a lost frame or reply
+    (``LINK_LOST``) ends that wait at once, and the cycle keeps the command it had, as a lost reply does in
+    real time. Without the notice every loss costs the whole reply timeout."""
+    res, tr, proxy = _through_lossy_link(field, robot, tmp_path / "a.jsonl", notify=True)
+    c = res.counters
+    lost = proxy.counts["dropped"]
+    assert lost >= 5 and proxy.counts["lost_notices"] == lost
+    assert c["timeouts"] == 0 and c["link_lost"] == lost
+    assert len(tr.records) == 60 and c["replies"] + c["link_lost"] >= 60
+    # a cycle whose reply was lost runs the command before it: every command answers an earlier frame
+    assert all(r.cmd[0] <= drive(max(r.seq - 3, 0))[0] + 1e-9 for r in tr.records)
+    assert sum(r.cmd[0] == drive(r.seq - 3)[0] for r in tr.records[3:]) < 57  # some cycles kept an older one
+
+    res2, _, proxy2 = _through_lossy_link(field, robot, tmp_path / "b.jsonl", notify=False, timeout=0.2)
+    assert proxy2.counts["dropped"] >= 5 and res2.counters["timeouts"] >= 5 and res2.counters["link_lost"] == 0

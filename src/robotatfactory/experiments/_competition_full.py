@@ -179,7 +179,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         if any(loss):
             from ._faults_net import LOCAL, Proxy
 
-            proxy = Proxy((LOCAL, bridge_port), seed=1000 * round_no + seed)
+            # paced, raf sim waits for the reply to every frame: the link tells it what it lost (sim.runner.LINK_LOST)
+            proxy = Proxy((LOCAL, bridge_port), seed=1000 * round_no + seed, notify_lost=paced)
             proxy.set_faults(*loss)
             frames_to = proxy.port
         env = graph.env(**RUN_ENV)
@@ -248,7 +249,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     out["wall_analyse_s"] = round(time.perf_counter() - wall0 - sum(phases.values()), 3)
     if proxy is not None:  # what the lossy link did (both directions)
         out["link"] = {k: int(proxy.counts.get(k, 0)) for k in ("frames", "replies", "dropped", "duplicated",
-                                                               "reordered")}
+                                                               "reordered", "lost_notices")}
     return out
 
 

@@ -27,7 +27,9 @@ from collections import deque
 
 import numpy as np
 
+from ..sim.runner import link_lost
 from ..simtwo import Command, ProtocolError
+from ._faults_observe import DELAYED, DROPPED
 
 LOCAL = "127.0.0.1"
 
@@ -44,7 +46,8 @@ class Proxy:
     ranges when ``record_ranges``, for the observer's scan check: 360 floats a frame, off for long runs).
     """
 
-    def __init__(self, bridge: tuple[str, int], seed: int = 0, record_ranges: bool = False):
+    def __init__(self, bridge: tuple[str, int], seed: int = 0, record_ranges: bool = False,
+                 notify_lost: bool = False):
         from ..simtwo.messages import SensorFrame
 
         self._decode = SensorFrame.decode
@@ -69,6 +72,9 @@ class Proxy:
         self._held = {0: None, 1: None}  # a datagram held back per direction (reordering)
         self.inject_queue: deque = deque()
         self.forge_ticks_every = 0  # > 0: after every n-th frame, a copy of the next one with impossible ticks
+        # a paced simulator waits for the reply to each frame: tell it (sim.runner.LINK_LOST) of every frame, and
+        # every reply, dropped or held back, instead of letting it wait out its reply timeout
+        self.notify_lost = notify_lost
         self._running = True
         self.thread = threading.Thread(target=self._loop, name="raf-faults-proxy", daemon=True)
         self.thread.start()
@@ -124,14 +130,16 @@ class Proxy:
                 now = time.monotonic()
                 if addr == self.bridge:
                     self.counts["replies"] += 1
+                    c = None
                     try:
                         c = Command.decode(data)
                         with self.lock:
                             self.replies.append((now, c.seq, c.v, c.w))
                     except ProtocolError:
                         pass
-                    if self.sim_addr is not None:
-                        self._out(1, data, self.sim_addr)
+                    if self.sim_addr is not None and self._out(1, data, self.sim_addr) in (DROPPED, DELAYED) \
+                            and c is not None:
+                        self._notify_lost(c.seq)
                     continue
                 self.sim_addr = addr
                 try:
@@ -140,6 +148,8 @@ class Proxy:
                     continue
                 self.counts["frames"] += 1
                 fate = self._out(0, data, self.bridge)
+                if fate in (DROPPED, DELAYED):
+                    self._notify_lost(f.seq)
                 with self.lock:
                     self.frames.append((now, f.seq, f.time_ms, f.enc_total[0], f.enc_total[1], f.x, f.y, f.theta))
                     self.fates.append(fate)
@@ -148,6 +158,14 @@ class Proxy:
                     self.template = data
                 if self.forge_ticks_every and self.counts["frames"] % self.forge_ticks_every == 0:
                     self._forge_ticks(f)
+
+    def _notify_lost(self, seq: int) -> None:
+        if self.notify_lost and self.sim_addr is not None:
+            try:
+                self.sock.sendto(link_lost(seq), self.sim_addr)
+                self.counts["lost_notices"] = self.counts.get("lost_notices", 0) + 1
+            except OSError:
+                self.counts["reply_errors"] += 1
 
     def _forge_ticks(self, f) -> None:
         """The next frame before it comes, with encoder totals the wheels cannot reach in one cycle."""
