@@ -163,3 +163,42 @@ def test_the_join_onto_a_slots_normal_may_pass_where_only_the_exact_outline_is_c
         for (x, y), h in zip(p.xy, p.psi):
             if math.hypot(x - start[0], y - start[1]) > 0.02:
                 assert not ob.collides(fp, (float(x), float(y), float(h))), (x, y, h)
+
+
+def _leg_to(field, robot, slot: int, arc_join: float):
+    from robotatfactory.agent.behaviour import RoundAgent
+    from robotatfactory.agent.settings import agent_settings
+    from robotatfactory.agent.state import SlotRef
+
+    legs = RoundAgent(field, robot, agent_settings({"legs": {"arc_join": arc_join}})).legs
+    ob = FieldObstacles(field, [])
+    return legs, ob, legs.plan(ob, (-0.24, 0.33, 0.0), SlotRef("outgoing", slot), True, "place")
+
+
+def test_a_place_under_a_machine_is_joined_on_an_arc_with_arc_join(field, robot):
+    """Carrying from incoming 4 to outgoing 3, below machine B: no point of the slot's normal far enough out for
+    an arc has a clear turning circle, so the leg stops and turns on the spot with the part 6 cm out. With
+    ``legs.arc_join`` the normal is joined farther out on an arc along which the exact outline is clear: no stop,
+    the robot arrives along the normal, and driving it the exact outline touches nothing."""
+    _, _, before = _leg_to(field, robot, 3, 0.0)
+    assert before.aligned and before.smooth.stops == 1
+    legs, ob, leg = _leg_to(field, robot, 3, 0.012)
+    fp = legs.footprint(True)
+    assert leg.aligned and leg.smooth.stops == 0
+    pre = leg.path.points[-2]
+    assert ob.clearance_at(*pre) < fp.radius  # (where it could not turn on the spot)
+    last = leg.smooth.pieces[-1]
+    assert abs(wrap(last.psi[-1] - leg.goal[2])) < 1e-6
+    for p in leg.smooth.pieces:
+        for (x, y), h in zip(p.xy, p.psi):
+            if math.hypot(x + 0.24, y - 0.33) > 0.02:
+                assert not ob.collides(fp, (float(x), float(y), float(h))), (x, y, h)
+
+
+def test_arc_join_keeps_the_turn_where_no_arc_fits(field, robot):
+    """Outgoing 2, right under machine B: no arc onto its normal is clear either, and the leg is the one planned
+    without ``legs.arc_join`` (a turn on the spot where the turning circle is clear)."""
+    _, _, before = _leg_to(field, robot, 2, 0.0)
+    _, _, leg = _leg_to(field, robot, 2, 0.012)
+    assert leg.smooth.stops == before.smooth.stops == 1
+    assert leg.path.points == before.path.points and leg.goal == before.goal

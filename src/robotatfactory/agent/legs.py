@@ -51,6 +51,11 @@ class LegPlan:
     slot: object
 
 
+#: m behind the approach pose: where a leg may join the slot's normal on an arc (legs.arc_join): far enough out for
+#: the tightest arc before a place (a right angle at 8 cm) and the straight line after it
+ARC_JOIN_DISTANCES = (0.12, 0.15, 0.19, 0.24, 0.3)
+
+
 class LegPlanner:
     """Plans legs on one field for one robot (see the module docstring).
 
@@ -114,19 +119,45 @@ class LegPlanner:
             g2 = (goal[0] - d * math.cos(goal[2]), goal[1] - d * math.sin(goal[2]), goal[2])
             if pl.is_free(g2[:2], fp):
                 goals = [g2, goal]
-        join = self.settings.legs.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
-        if self.settings.legs.smooth:  # the last leg along the slot's normal: docking follows on at speed
+        lg = self.settings.legs
+        join = lg.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
+        if lg.smooth:  # the last leg along the slot's normal: docking follows on at speed
+
+            def smoothed(path, aligned):
+                return pl.smooth(path, fp, final_straight=(lg.place_straight if carrying else lg.pick_straight)
+                                 if aligned else 0.0, min_radius=lg.min_radius,
+                                 final_min_radius=lg.place_min_radius if carrying else lg.pick_min_radius)
+
+            sp = None
             for g in goals:  # the leg ending farther out if it can arrive along the normal there
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
                 if aligned:
                     break
+            if join > 0 and lg.arc_join > 0:  # onto the normal on an arc where it would stop and turn there
+                sp = smoothed(path, aligned)
+                if not (aligned and pl.corner_rounded(path, sp)):
+                    sp = None
+                    for g2 in goals:  # the normal's point nearest the slot whose corner is an arc
+                        found = pl.plan(tuple(pose[:2]), g2[:2], fp)  # (one search for every point tried)
+                        for d in ARC_JOIN_DISTANCES:
+                            p2, a2 = pl.plan_to_pose(tuple(pose[:2]), g2, fp, distances=(d,), join_inflate=join,
+                                                     arc_join=lg.arc_join, path=found)
+                            if a2:
+                                s2 = smoothed(p2, True)
+                                if pl.corner_rounded(p2, s2):  # (else it would turn where its circle is not clear)
+                                    path, aligned, g, sp = p2, True, g2, s2
+                                    break
+                        if sp is not None:
+                            break
+                    if sp is None:  # no arc: as without arc_join
+                        for g in goals:
+                            path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
+                            if aligned:
+                                break
             goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
-            if not aligned and len(goals) > 1:
+            if not aligned:
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp, join_inflate=join)
-            lg = self.settings.legs
-            sp = pl.smooth(path, fp, final_straight=(lg.place_straight if carrying else lg.pick_straight)
-                           if aligned else 0.0, min_radius=self.settings.legs.min_radius,
-                           final_min_radius=lg.place_min_radius if carrying else lg.pick_min_radius)
+            sp = sp if sp is not None else smoothed(path, aligned)
             end_speed = self.entry_speed(dock) if aligned else 0.0
         else:
             goal = goals[0]

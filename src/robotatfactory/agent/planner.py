@@ -217,7 +217,8 @@ class PathPlanner:
                            radii=tuple(r for r in RADII if r >= min_radius))
 
     def plan_to_pose(self, start, goal, footprint: Footprint, distances=(0.3, 0.24, 0.19, 0.15, 0.12, 0.09, 0.06),
-                     turn_cost: float = 0.08, max_turn: float = 2.0, join_inflate: float = 0.0) -> tuple[Path, bool]:
+                     turn_cost: float = 0.08, max_turn: float = 2.0, join_inflate: float = 0.0,
+                     arc_join: float = 0.0, path: Path | None = None) -> tuple[Path, bool]:
         """A path from ``start`` (x, y) to the approach pose ``goal`` (x, y, theta facing the slot) whose last
         leg runs along the slot's normal from a point ``d`` m behind ``goal`` (one of ``distances`` whose
         turning circle and line to ``goal`` are clear), so the robot arrives aligned and docking follows on
@@ -225,10 +226,14 @@ class PathPlanner:
         path that sees it, the choice the shortest (plus ``turn_cost`` m per radian of corner; no corner of more
         than ``max_turn`` rad at the normal's point, a hairpin). ``join_inflate`` > 0 (m): the straight line to the
         normal's point may also be one along which only the exact outline, grown by that much and heading along
-        it, is clear (the robot turns only at its ends, whose turning circles are clear). Returns the
-        path and whether it ends along the normal (False: the plain path to ``goal``; turn there)."""
+        it, is clear (the robot turns only at its ends, whose turning circles are clear). ``arc_join`` > 0 (m,
+        with ``join_inflate``): the normal's point may also be one whose turning circle is not clear, where the
+        exact outline grown by that much, facing the slot, is clear from it to ``goal``; the robot must then
+        round that corner on an arc (the caller smooths the path and checks it: :meth:`corner_rounded`). Returns
+        the path and whether it ends along the normal (False: the plain path to ``goal``; turn there). ``path``:
+        the search's result if the caller has it already (the same ``start``, ``goal`` and ``footprint``)."""
         need = self.required(footprint)
-        path = self.plan(start, goal[:2], footprint)
+        path = path if path is not None else self.plan(start, goal[:2], footprint)
         pts = list(path.points)
         ob = self.obstacles
         bx, by = -math.cos(goal[2]), -math.sin(goal[2])  # away from the slot
@@ -243,7 +248,9 @@ class PathPlanner:
         for d in distances:
             pre = (goal[0] + d * bx, goal[1] + d * by)
             # the approach pose's own circle is just clear (5 mm steps): the grid's bound is a few mm short
-            if not (self.is_free(pre, footprint) and ob.segment_clear(pre, goal[:2], need - 0.006)):
+            if not (self.is_free(pre, footprint) and ob.segment_clear(pre, goal[:2], need - 0.006)) and not (
+                    arc_join > 0 and join_inflate > 0
+                    and self.straight_clear(pre, goal[:2], footprint, arc_join)):
                 continue
             for i in range(len(pts) - 2, -1, -1):
                 r = need if i > 0 else need - self.margin  # the start may sit inside the margin
@@ -266,6 +273,16 @@ class PathPlanner:
             out.append(pre)
         out.append(tuple(goal[:2]))
         return Path(tuple(out), path.radius), True
+
+    @staticmethod
+    def corner_rounded(path: Path, smooth: SmoothPath) -> bool:
+        """True when the smoothed ``path`` does not stop at its last corner (the normal's point of
+        :meth:`plan_to_pose`): no piece of ``smooth`` starts there."""
+        pts = path.points
+        if len(pts) < 3:
+            return True
+        cx, cy = pts[-2]
+        return all(math.hypot(p.xy[0][0] - cx, p.xy[0][1] - cy) > 1e-3 for p in smooth.pieces[1:])
 
     def straight_clear(self, a, b, footprint: Footprint, inflate: float = 0.012) -> bool:
         """The exact outline (grown by ``inflate``) heading from ``a`` to ``b`` is clear all along the line."""
