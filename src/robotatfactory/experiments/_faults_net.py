@@ -57,7 +57,9 @@ class Proxy:
         self.sock.bind((LOCAL, 0))
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]
-        self.rng = random.Random(seed)
+        # a draw per datagram, from one generator per direction: which of a reply and the next frame reaches the
+        # proxy first depends on the machine's timing, and with one generator it would decide the fates of both
+        self.rngs = (random.Random(seed), random.Random(f"{seed}-replies"))
         self.drop = self.dup = self.reorder = 0.0
         self.sim_addr = None
         self.lock = threading.Lock()
@@ -84,7 +86,7 @@ class Proxy:
 
     def _out(self, direction: int, data: bytes, addr) -> int:
         """Send (or drop, duplicate, hold back) one datagram; returns its fate."""
-        r = self.rng.random()
+        r = self.rngs[direction].random()
         if r < self.drop:
             self.counts["dropped"] += 1
             return 1

@@ -266,6 +266,7 @@ class SimRunner:
         #: paced: the replies received, each with the Seq of the last frame sent before it came; the script call
         #: before frame n applies those of frames <= n - pace_hold (None: not paced)
         self._held: list[tuple[int, Command]] | None = [] if self.config.mode == "paced" else None
+        self._newest_reply = -1  # paced: the newest Seq a reply answered
         self._last_sent = -1
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), 0.0)  # (wall, simulation) times pacing counts from; set by run()
@@ -501,7 +502,15 @@ class SimRunner:
         self._controller_seen = now
         c.commands += 1
         if self._held is not None:  # paced: applied in a later script call (_apply_held)
-            self._held.append((self._last_sent, cmd))
+            if 0 <= cmd.seq <= self._newest_reply:
+                # a duplicate, or a reply a lossy link held back behind a newer one: when it is read depends on
+                # the machine's timing, so it is never applied (in real time it would mostly be superseded)
+                c.stale += 1
+                return False
+            self._newest_reply = max(self._newest_reply, cmd.seq)
+            # held as the reply to the frame it names (else the frame sent last): one that a lossy link let
+            # through after its notice, once the next frame was out, acts as if in time, whatever the timing
+            self._held.append((cmd.seq if cmd.seq >= 0 else self._last_sent, cmd))
         elif self._first_wins and self._applied_here:
             c.superseded += 1
             return False
