@@ -161,3 +161,42 @@ def test_a_lossy_link_tells_a_paced_run_what_it_lost(field, robot, tmp_path):
 
     res2, _, proxy2 = _through_lossy_link(field, robot, tmp_path / "b.jsonl", notify=False, timeout=0.2)
     assert proxy2.counts["dropped"] >= 5 and res2.counters["timeouts"] >= 5 and res2.counters["link_lost"] == 0
+
+
+def test_a_paced_run_drops_a_reply_older_than_one_it_has(field, robot, tmp_path):
+    """A controller that answers every frame, then sends the answer to the frame before it again (a duplicate,
+    or a reply a lossy link held back): raf sim counts each late one as stale and never applies it, so the run
+    is the one the plain controller gives (when a late reply comes depends on the machine's timing)."""
+    import socket
+
+    from robotatfactory.simtwo import Command
+
+    class Repeating(Controller):
+        def _loop(self):
+            from robotatfactory.simtwo import SensorFrame
+
+            while self._run:
+                try:
+                    data, addr = self.sock.recvfrom(65535)
+                except socket.timeout:
+                    continue
+                f = SensorFrame.decode(data)
+                self.frames.append(data)
+                self.sock.sendto(Command(*drive(f.seq), False, f.seq).encode(), addr)
+                if f.seq > 0:  # the previous answer again, with another speed: it must not act
+                    self.sock.sendto(Command(0.9, 0.0, False, f.seq - 1).encode(), addr)
+
+    _, plain = run_paced(field, robot, tmp_path / "a.jsonl", hold=2)
+    peer = Repeating(drive)
+    runner, t, box = start(field, robot, peer.sock.getsockname(), mode="paced", trace=str(tmp_path / "b.jsonl"),
+                           duration=60 * robot.control_period, lockstep_timeout=5.0, pace_hold=2,
+                           sim={"reply_timing": "every_cycle", "camera": False})
+    try:
+        t.join(60)
+        assert not t.is_alive()
+    finally:
+        peer.close()
+    c = box["result"].counters
+    assert c["stale"] >= 58 and c["timeouts"] == 0
+    late = read_trace(tmp_path / "b.jsonl")
+    assert [(r.seq, r.cmd) for r in late.records] == [(r.seq, r.cmd) for r in plain.records]
