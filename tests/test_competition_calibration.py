@@ -160,6 +160,29 @@ def test_the_whole_stack_run_gets_the_file_and_reports_it(tmp_path, monkeypatch)
     r = competition._full_job(1, 100, tmp_path, False, None, calibration="auto")
     assert "camera calibration (auto)" in r["error"] and r["max_score"] is False
 
+    # a port taken between choosing and binding it (another run's, a node's connection): the drive again, twice
+    tried = []
+
+    def port_race(*a, **k):
+        tried.append(1)
+        if len(tried) < 3:
+            raise RuntimeError("sim exited early with code 2: cannot bind the camera publisher tcp://127.0.0.1:1: "
+                               "Address already in use")
+        return fake_prepare(*a, **k)
+
+    monkeypatch.setattr(cc, "prepare", port_race)
+    r = competition._full_job(1, 100, tmp_path, False, None, sim_set=PERTURB_ITEMS, calibration="auto")
+    assert len(tried) == 3 and "error" not in r and r["calibration_drive_same_camera"] is True
+
+    def always(*a, **k):
+        tried.append(1)
+        raise RuntimeError("Address already in use")
+
+    tried.clear()
+    monkeypatch.setattr(cc, "prepare", always)
+    r = competition._full_job(1, 100, tmp_path, False, None, calibration="auto")
+    assert len(tried) == 3 and "camera calibration (auto)" in r["error"]
+
 
 def test_the_calibration_drive_passes_the_worlds_options_to_raf_sim(tmp_path, monkeypatch):
     """Session.start hands sim_extra to raf sim after its own options (the localization experiment's drive has

@@ -424,10 +424,19 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
     from ._competition_full import SimStartError, play_full_stack, run_dir
 
     log_dir = run_dir(out_dir, round_no, seed, simulator)
-    try:
-        calib, cal_keys = prepare(calibration, round_no, seed, sim_set, field_name, log_dir, simulator)
-    except Exception as e:  # noqa: BLE001 - no calibration, no run: reported as a failed run
-        return _failed(round_no, seed, RuntimeError(f"camera calibration ({calibration}): {type(e).__name__}: {e}"))
+    tries = 3
+    while True:
+        tries -= 1
+        try:
+            calib, cal_keys = prepare(calibration, round_no, seed, sim_set, field_name, log_dir, simulator)
+            break
+        except Exception as e:  # noqa: BLE001 - no calibration, no run: reported as a failed run
+            # a port another run (or a node's connection) took between choosing it and binding it: the drive
+            # picks fresh ports when it runs again (the drive runs in a child: the error comes as its text)
+            if tries and "Address already in use" in str(e):
+                continue
+            return _failed(round_no, seed, RuntimeError(f"camera calibration ({calibration}): {type(e).__name__}: "
+                                                        f"{e}"))
     tries = 3
     while True:
         tries -= 1
