@@ -49,8 +49,12 @@ class Controller:
                 continue
             f = SensorFrame.decode(data)
             self.frames.append(data)
-            v, w = self.drive(f.seq)
-            self.sock.sendto(Command(v, w, False, f.seq).encode(), addr)
+            self.answer(f, addr)
+
+    def answer(self, f, addr) -> None:
+        """Reply to frame ``f`` (a subclass may answer otherwise)."""
+        v, w = self.drive(f.seq)
+        self.sock.sendto(Command(v, w, False, f.seq).encode(), addr)
 
     def take(self) -> list[bytes]:
         out, self.frames = self.frames, []

@@ -167,24 +167,13 @@ def test_a_paced_run_drops_a_reply_older_than_one_it_has(field, robot, tmp_path)
     """A controller that answers every frame, then sends the answer to the frame before it again (a duplicate,
     or a reply a lossy link held back): raf sim counts each late one as stale and never applies it, so the run
     is the one the plain controller gives (when a late reply comes depends on the machine's timing)."""
-    import socket
-
     from robotatfactory.simtwo import Command
 
     class Repeating(Controller):
-        def _loop(self):
-            from robotatfactory.simtwo import SensorFrame
-
-            while self._run:
-                try:
-                    data, addr = self.sock.recvfrom(65535)
-                except socket.timeout:
-                    continue
-                f = SensorFrame.decode(data)
-                self.frames.append(data)
-                self.sock.sendto(Command(*drive(f.seq), False, f.seq).encode(), addr)
-                if f.seq > 0:  # the previous answer again, with another speed: it must not act
-                    self.sock.sendto(Command(0.9, 0.0, False, f.seq - 1).encode(), addr)
+        def answer(self, f, addr) -> None:
+            super().answer(f, addr)
+            if f.seq > 0:  # the previous answer again, with another speed: it must not act
+                self.sock.sendto(Command(0.9, 0.0, False, f.seq - 1).encode(), addr)
 
     _, plain = run_paced(field, robot, tmp_path / "a.jsonl", hold=2)
     peer = Repeating(drive)
