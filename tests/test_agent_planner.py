@@ -178,7 +178,7 @@ def _leg_to(field, robot, slot: int, arc_join: float):
 def test_a_place_under_a_machine_is_joined_on_an_arc_with_arc_join(field, robot):
     """Carrying from incoming 4 to outgoing 3, below machine B: no point of the slot's normal far enough out for
     an arc has a clear turning circle, so the leg stops and turns on the spot with the part 6 cm out. With
-    ``legs.arc_join`` the normal is joined farther out on an arc along which the exact outline is clear: no stop,
+    ``legs.arc_join`` (the default) the normal is joined farther out on an arc along which the exact outline is clear: no stop,
     the robot arrives along the normal, and driving it the exact outline touches nothing."""
     _, _, before = _leg_to(field, robot, 3, 0.0)
     assert before.aligned and before.smooth.stops == 1
