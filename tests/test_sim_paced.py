@@ -189,3 +189,23 @@ def test_a_paced_run_drops_a_reply_older_than_one_it_has(field, robot, tmp_path)
     assert c["stale"] >= 58 and c["timeouts"] == 0
     late = read_trace(tmp_path / "b.jsonl")
     assert [(r.seq, r.cmd) for r in late.records] == [(r.seq, r.cmd) for r in plain.records]
+
+
+def test_a_paced_run_answers_after_a_reset(field, robot):
+    """sim/reset restarts Seq at 0: the replies to the new frames are new, not older than the last one before
+    (the check that drops a late reply starts again), and none waits out the reply timeout."""
+    from test_sim_control import request, stop
+
+    peer = Controller(drive)
+    runner, t, _ = start(field, robot, peer.sock.getsockname(), mode="paced", start_paused=True,
+                         lockstep_timeout=1.0, pace_hold=2, sim={"camera": False})
+    addr = runner.control_address
+    try:
+        assert request(addr, {"op": "step", "cycles": 30})["ok"]
+        assert request(addr, {"op": "reset"})["ok"]
+        assert request(addr, {"op": "step", "cycles": 20})["ok"]
+        c = runner.counters
+        assert c.timeouts == 0 and c.replies == 50 and c.stale == 0
+    finally:
+        stop(runner, t)
+        peer.close()

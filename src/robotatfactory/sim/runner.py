@@ -385,6 +385,9 @@ class SimRunner:
         self._command_sim_time = None
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), new_sim.time)
+        if self._held is not None:  # paced: Seq starts again at 0; replies to the old scene's frames do not act
+            self._held.clear()
+            self._newest_reply = -1
         if self.server is not None and new_sim.factory is not None:
             self.server.factory = new_sim.factory
             self.server.clock = lambda: self.sim.time
