@@ -259,18 +259,49 @@ def test_replies_are_read_only_between_gui_turns_and_the_first_wins(field, robot
 
     runner = make_runner(field, robot, bridge)
     runner.open()
+    runner._frame_seq = 9  # (as if frames 0-9 had been sent)
     try:
-        for v in (0.1, 0.2, 0.3):
-            bridge.sendto(Command(v, 0.0, False, 5).encode(), runner.address)
+        for v, seq in ((0.1, 5), (0.2, 6), (0.3, 7)):
+            bridge.sendto(Command(v, 0.0, False, seq).encode(), runner.address)
         time.sleep(0.2)
         runner._drain(first_wins=True)
         c = runner.counters
         assert runner.command.v == 0.1 and (c.commands, c.applied, c.superseded) == (3, 1, 2)
-        for v in (0.4, 0.5):
-            bridge.sendto(Command(v, 0.0, False, 6).encode(), runner.address)
+        for v, seq in ((0.4, 6), (0.5, 7)):
+            bridge.sendto(Command(v, 0.0, False, seq).encode(), runner.address)
         time.sleep(0.2)
         runner._drain()  # every_cycle: the newest wins
         assert runner.command.v == 0.5 and c.applied == 2
+    finally:
+        runner.close()
+
+
+@pytest.mark.parametrize("first_wins", [True, False])
+def test_a_reply_acts_only_if_its_seq_is_acceptable(field, robot, bridge, first_wins):
+    """control.pas's SeqAcceptable, in every mode: a reply acts if its Seq is -1 or newer than the last one
+    applied and not newer than the frame just sent. A duplicate, a reply held back behind a newer one and one
+    to a frame not sent yet never act; with SimTwo's reply timing an unacceptable first reply of a script call
+    spoils the call (control.pas reads the first occurrence of each label)."""
+    runner = make_runner(field, robot, bridge)
+    runner.open()
+    runner._frame_seq = 9  # (as if frames 0-9 had been sent)
+
+    def read(*cmds):
+        for v, seq in cmds:
+            bridge.sendto(Command(v, 0.0, False, seq).encode(), runner.address)
+        time.sleep(0.2)
+        runner._drain(first_wins=first_wins)
+        return runner.command.v
+
+    try:
+        c = runner.counters
+        assert read((0.1, 5)) == 0.1
+        assert read((0.2, 5)) == 0.1 and c.stale == 1  # a duplicate
+        assert read((0.3, 4)) == 0.1 and c.stale == 2  # held back behind a newer one
+        assert read((0.4, 10)) == 0.1 and c.stale == 3  # a frame not sent yet
+        assert read((0.0, -1)) == 0.0  # unsolicited (a watchdog's stop): acts, and Seq 6 still may
+        assert read((0.3, 3), (0.6, 6)) == (0.0 if first_wins else 0.6)
+        assert read((0.7, 7)) == 0.7 and c.applied == (3 if first_wins else 4)
     finally:
         runner.close()
 

@@ -582,6 +582,51 @@ def test_reader_agrees_with_the_python_decoder_on_mixed_replies(harness_exe, tmp
     assert changes > 20 and ignored > 0, "the mix must exercise both accepting and rejecting"
 
 
+def test_the_stand_in_applies_the_replies_control_pas_applies(harness_exe, tmp_path, field, robot):
+    """The same replies, Seq by Seq, into control.pas (the harness) and into raf sim's reader (SimTwo's reply
+    timing: the replies to frame k are read together before frame k + 1 is sent): duplicates, replies held
+    back behind newer ones, replies to frames not sent yet, unsolicited ones and two queued together leave the
+    same command in force after every cycle."""
+    import socket as _socket
+
+    from test_sim_runner import make_runner
+
+    rng = random.Random(20261129)
+    state = {"last": -1}
+
+    def policy(k, raw):
+        if k % 4 == 0:  # a fresh reply now and then: no cycle reaches the command timeout
+            seqs = [k]
+        else:
+            seqs = [rng.choice([k, k, -1, state["last"], max(state["last"] - 2, 0), k + 3, k - 1])
+                    for _ in range(rng.choice([1, 1, 2]))]
+        if seqs[0] == -1 or 0 <= seqs[0] <= k and seqs[0] > state["last"]:
+            state["last"] = max(state["last"], seqs[0])
+        return [reply(s, round(rng.uniform(-0.5, 0.5), 3), round(rng.uniform(-2, 2), 3), rng.choice([0, 1]))
+                for s in seqs]
+
+    run = run_harness(harness_exe, tmp_path, 60, policy)
+    bridge = _socket.socket(_socket.AF_INET, _socket.SOCK_DGRAM)
+    bridge.bind(("127.0.0.1", 0))
+    runner = make_runner(field, robot, bridge)
+    runner.open()
+    got = []
+    try:
+        for k in range(len(run.frames)):
+            runner._frame_seq = k  # (cycle k reads the replies to frame k - 1, then sends frame k)
+            for dgram in run.replies[k - 1] if k > 0 else []:
+                bridge.sendto(dgram, runner.address)
+            time.sleep(0.02)
+            runner._drain(first_wins=True)
+            cmd = runner.command
+            got.append((cmd.v, cmd.w, int(cmd.magnet)))
+    finally:
+        runner.close()
+        bridge.close()
+    check_applied(run, got)
+    assert runner.counters.stale >= 5 and runner.counters.superseded >= 5, "the mix must reject and supersede"
+
+
 # ---- 3. no reply: the wheels stop after the timeout, never a block --------------------------------------
 
 def test_no_reply_stops_the_wheels_after_the_timeout_and_keeps_the_magnet(harness_exe, tmp_path):

@@ -183,8 +183,8 @@ class MultiRunner:
                 for r in runners:
                     r._check_command_age()
                 frames = sim.step_all([r.command for r in runners])
-                for r in runners:
-                    r.counters.cycles += 1
+                for r, f in zip(runners, frames):
+                    r._stepped(f)
                     r._publish(r.sim.take_frames())
                 runners[0]._pace(sim.time)
                 if not c.lockstep:  # the script calls, as SimRunner's: the replies so far, then the frames

@@ -215,7 +215,7 @@ class RunnerCounters:
     replies_deferred: int = 0  # script calls that could not read (a GUI catch-up turn's later calls)
     superseded: int = 0  # valid commands read together with an earlier one, which won (SimTwo: first wins)
     replies: int = 0  # valid commands whose Seq answered the frame just sent
-    stale: int = 0  # valid commands answering an older frame
+    stale: int = 0  # valid commands whose Seq was not acceptable (control.pas's SeqAcceptable): never applied
     rejected: int = 0  # malformed + foreign + version
     malformed: int = 0
     foreign: int = 0
@@ -262,11 +262,12 @@ class SimRunner:
         self._pub = None
         self.server = None
         self.command = Command.stop()
-        self._first_wins = self._applied_here = False  # _drain's state (one script call's reading)
+        self._first_wins = self._applied_here = self._decided_here = False  # one script call's reading (_read)
         #: paced: the replies received, each with the Seq of the last frame sent before it came; the script call
         #: before frame n applies those of frames <= n - pace_hold (None: not paced)
         self._held: list[tuple[int, Command]] | None = [] if self.config.mode == "paced" else None
-        self._newest_reply = -1  # paced: the newest Seq a reply answered
+        self._last_applied = -1  # the Seq of the last reply applied (-1: none, or only unsolicited ones)
+        self._frame_seq = -1  # the Seq of this cycle's frame (the newest a reply may answer)
         self._last_sent = -1
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), 0.0)  # (wall, simulation) times pacing counts from; set by run()
@@ -385,9 +386,10 @@ class SimRunner:
         self._command_sim_time = None
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), new_sim.time)
-        if self._held is not None:  # paced: Seq starts again at 0; replies to the old scene's frames do not act
+        # Seq starts again at 0: a reply to the old scene's frames is newer than the new frames, so never acts
+        self._last_applied = self._frame_seq = self._last_sent = -1
+        if self._held is not None:  # paced: nor do the ones held back
             self._held.clear()
-            self._newest_reply = -1
         if self.server is not None and new_sim.factory is not None:
             self.server.factory = new_sim.factory
             self.server.clock = lambda: self.sim.time
@@ -505,30 +507,49 @@ class SimRunner:
         self._controller_seen = now
         c.commands += 1
         if self._held is not None:  # paced: applied in a later script call (_apply_held)
-            if 0 <= cmd.seq <= self._newest_reply:
-                # a duplicate, or a reply a lossy link held back behind a newer one: when it is read depends on
-                # the machine's timing, so it is never applied (in real time it would mostly be superseded)
-                c.stale += 1
-                return False
-            self._newest_reply = max(self._newest_reply, cmd.seq)
             # held as the reply to the frame it names (else the frame sent last): one that a lossy link let
             # through after its notice, once the next frame was out, acts as if in time, whatever the timing
             self._held.append((cmd.seq if cmd.seq >= 0 else self._last_sent, cmd))
-        elif self._first_wins and self._applied_here:
-            c.superseded += 1
-            return False
         else:
-            self._command_sim_time = self.sim.time
-            if not self._applied_here:
-                c.applied += 1
-            self._applied_here = True
-            self.command = cmd
-        if expect_seq is not None and cmd.seq >= 0 and cmd.seq < expect_seq:
-            c.stale += 1
+            self._read(cmd)
         if expect_seq is not None and cmd.seq == expect_seq:
             c.replies += 1
             return True
         return False
+
+    def _stepped(self, frame) -> None:
+        """A cycle ran and made ``frame``: counted, and replies may now answer it."""
+        self.counters.cycles += 1
+        self._frame_seq = frame.seq
+
+    def _seq_acceptable(self, seq: int) -> bool:
+        """control.pas's ``SeqAcceptable``: a reply acts if its Seq is -1 (unsolicited) or newer than the last
+        reply applied and not newer than this cycle's frame (a duplicate, a reply a lossy link held back behind
+        a newer one, or one to a frame of an earlier run, does not)."""
+        return seq == -1 or self._last_applied < seq <= self._frame_seq
+
+    def _read(self, cmd: Command) -> None:
+        """One valid command read in this script call. With ``first_wins`` (SimTwo's reply timing) the first
+        of the call decides, as control.pas reads the first occurrence of each label of what ``ReadUDPData``
+        concatenated: if its Seq is not acceptable the call applies nothing. Otherwise each acceptable one
+        acts in turn (the newest stays)."""
+        c = self.counters
+        if self._first_wins and self._decided_here:
+            c.superseded += 1
+            return
+        self._decided_here = True
+        if not self._seq_acceptable(cmd.seq):
+            c.stale += 1
+            self._rlog.warn("rx-stale", f"command Seq {cmd.seq} ignored: not newer than the last applied "
+                                        f"({self._last_applied}) or newer than the frame sent ({self._frame_seq})")
+            return
+        if cmd.seq >= 0:
+            self._last_applied = cmd.seq
+        self._command_sim_time = self.sim.time
+        if not self._applied_here:
+            c.applied += 1
+        self._applied_here = True
+        self.command = cmd
 
     def _check_command_age(self) -> None:
         """No valid command for more than ``command_timeout`` simulation seconds: stop the wheels (magnet kept).
@@ -555,7 +576,7 @@ class SimRunner:
         takes each label's first occurrence); the others are counted in ``superseded``."""
         got = False
         sock = self._sock
-        self._first_wins, self._applied_here = first_wins, False
+        self._first_wins, self._applied_here, self._decided_here = first_wins, False, False
         while True:
             try:
                 data, addr = sock.recvfrom(RECV_BUFFER)
@@ -577,11 +598,9 @@ class SimRunner:
         if not due:
             return
         self._held[:] = [(n, c) for n, c in self._held if n > limit]
-        cmd = due[0] if first_wins else due[-1]
-        self.counters.applied += 1
-        self.counters.superseded += len(due) - 1
-        self._command_sim_time = self.sim.time
-        self.command = cmd
+        self._first_wins, self._applied_here, self._decided_here = first_wins, False, False
+        for cmd in due:  # in the order they came, as ReadUDPData concatenates them
+            self._read(cmd)
 
     def _wait_reply(self, seq: int) -> bool:
         """Lockstep: wait up to the timeout for the Command answering frame ``seq``."""
@@ -736,7 +755,7 @@ class SimRunner:
                     continue
                 self._check_command_age()
                 frame = sim.step_cycle(self.command)
-                self.counters.cycles += 1
+                self._stepped(frame)
                 if self._trace is not None:
                     self._trace.cycle(sim, frame, self.command)
                 if c.end_after_max is not None and self._max_reached(sim, c.end_after_max):
