@@ -195,10 +195,21 @@ def test_a_place_under_a_machine_is_joined_on_an_arc_with_arc_join(field, robot)
                 assert not ob.collides(fp, (float(x), float(y), float(h))), (x, y, h)
 
 
-def test_arc_join_keeps_the_turn_where_no_arc_fits(field, robot):
+def test_arc_join_keeps_the_turn_where_no_arc_fits(field, robot, monkeypatch):
     """Outgoing 2, right under machine B: no arc onto its normal is clear either, and the leg is the one planned
-    without ``legs.arc_join`` (a turn on the spot where the turning circle is clear)."""
+    without ``legs.arc_join`` (a turn on the spot where the turning circle is clear), from the same searches
+    (not planned a second time: only the arcs tried are added)."""
+    searches = []
+    plan_to_pose = PathPlanner.plan_to_pose
+
+    def counted(self, *a, **kw):
+        searches.append("arc" if "distances" in kw else "leg")
+        return plan_to_pose(self, *a, **kw)
+
+    monkeypatch.setattr(PathPlanner, "plan_to_pose", counted)
     _, _, before = _leg_to(field, robot, 2, 0.0)
+    plain, searches[:] = list(searches), []
     _, _, leg = _leg_to(field, robot, 2, 0.012)
     assert leg.smooth.stops == before.smooth.stops == 1
     assert leg.path.points == before.path.points and leg.goal == before.goal
+    assert searches.count("leg") == plain.count("leg") and "arc" in searches

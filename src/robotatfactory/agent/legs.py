@@ -128,35 +128,22 @@ class LegPlanner:
                                  if aligned else 0.0, min_radius=lg.min_radius,
                                  final_min_radius=lg.place_min_radius if carrying else lg.pick_min_radius)
 
-            sp = None
             for g in goals:  # the leg ending farther out if it can arrive along the normal there
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
                 if aligned:
                     break
+            sp = None
             if join > 0 and lg.arc_join > 0:  # onto the normal on an arc where it would stop and turn there
                 sp = smoothed(path, aligned)
                 if not (aligned and pl.corner_rounded(path, sp)):
-                    sp = None
-                    for g2 in goals:  # the normal's point nearest the slot whose corner is an arc
-                        found = pl.plan(tuple(pose[:2]), g2[:2], fp)  # (one search for every point tried)
-                        for d in ARC_JOIN_DISTANCES:
-                            p2, a2 = pl.plan_to_pose(tuple(pose[:2]), g2, fp, distances=(d,), join_inflate=join,
-                                                     arc_join=lg.arc_join, path=found)
-                            if a2:
-                                s2 = smoothed(p2, True)
-                                if pl.corner_rounded(p2, s2):  # (else it would turn where its circle is not clear)
-                                    path, aligned, g, sp = p2, True, g2, s2
-                                    break
-                        if sp is not None:
-                            break
-                    if sp is None:  # no arc: as without arc_join
-                        for g in goals:
-                            path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
-                            if aligned:
-                                break
+                    arc = self._arc_join_leg(pl, pose, goals, fp, join, lg.arc_join, smoothed)
+                    if arc is not None:
+                        path, g, sp = arc
+                        aligned = True
             goal = g if aligned else goals[0]  # not aligned: a turn on the spot farther out
-            if not aligned:
+            if not aligned and len(goals) > 1:  # (the loop ended on the last goal)
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), goal, fp, join_inflate=join)
+                sp = None
             sp = sp if sp is not None else smoothed(path, aligned)
             end_speed = self.entry_speed(dock) if aligned else 0.0
         else:
@@ -164,6 +151,22 @@ class LegPlanner:
             path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
             sp, end_speed = path.points, 0.0
         return LegPlan(path, sp, goal, aligned, end_speed, slot)
+
+    @staticmethod
+    def _arc_join_leg(pl, pose, goals, fp, join: float, arc_join: float, smoothed):
+        """``legs.arc_join``: the leg joining the normal of the first of ``goals`` that allows it at the point
+        nearest the slot (``ARC_JOIN_DISTANCES``) whose corner the smoothed path rounds into an arc, as
+        ``(path, goal, smoothed path)``; None if there is none (the leg stays as planned without it)."""
+        for g in goals:
+            found = pl.plan(tuple(pose[:2]), g[:2], fp)  # (one search for every point tried)
+            for d in ARC_JOIN_DISTANCES:
+                path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, distances=(d,), join_inflate=join,
+                                                arc_join=arc_join, path=found)
+                if aligned:
+                    sp = smoothed(path, True)
+                    if pl.corner_rounded(path, sp):  # (else it would turn where its circle is not clear)
+                        return path, g, sp
+        return None
 
     def plan_on_arcs(self, obstacles: FieldObstacles, pose, target: SlotRef) -> LegPlan:
         """The leg to a place on arcs only (:mod:`.hybrid`; carrying): to a point on the slot's normal, then
