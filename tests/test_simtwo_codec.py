@@ -248,3 +248,12 @@ def test_bad_parts_labels_are_named(n, values, what):
     raw += f"PartsN\r\n{n}\r\n\r\nParts\r\n{values}\r\n\r\n".encode()
     with pytest.raises(ProtocolError, match=what):
         SensorFrame.decode(raw)
+
+
+def test_a_link_lost_notice_round_trips_and_nothing_else_is_one():
+    from robotatfactory.simtwo.messages import decode_link_lost, encode_link_lost
+
+    assert decode_link_lost(encode_link_lost(1234)) == 1234
+    assert decode_link_lost(encode_link_lost(0)) == 0
+    assert decode_link_lost(Command(0.1, 0.0, False, 5).encode()) is None
+    assert decode_link_lost(b"RAF-LINK-LOST x") is None and decode_link_lost(b"RAF-LINK-LOST") is None

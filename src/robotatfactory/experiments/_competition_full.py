@@ -179,7 +179,7 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         if any(loss):
             from ._faults_net import LOCAL, Proxy
 
-            # paced, raf sim waits for the reply to every frame: the link tells it what it lost (sim.runner.LINK_LOST)
+            # paced, raf sim waits for the reply to every frame: the link tells it what it lost (simtwo.messages.LINK_LOST)
             proxy = Proxy((LOCAL, bridge_port), seed=1000 * round_no + seed, notify_lost=paced)
             proxy.set_faults(*loss)
             frames_to = proxy.port

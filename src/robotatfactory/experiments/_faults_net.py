@@ -27,8 +27,8 @@ from collections import deque
 
 import numpy as np
 
-from ..sim.runner import link_lost
 from ..simtwo import Command, ProtocolError
+from ..simtwo.messages import encode_link_lost
 from ._faults_observe import DELAYED, DROPPED
 
 LOCAL = "127.0.0.1"
@@ -74,7 +74,7 @@ class Proxy:
         self._held = {0: None, 1: None}  # a datagram held back per direction (reordering)
         self.inject_queue: deque = deque()
         self.forge_ticks_every = 0  # > 0: after every n-th frame, a copy of the next one with impossible ticks
-        # a paced simulator waits for the reply to each frame: tell it (sim.runner.LINK_LOST) of every frame, and
+        # a paced simulator waits for the reply to each frame: tell it (simtwo.messages.LINK_LOST) of every frame, and
         # every reply, dropped or held back, instead of letting it wait out its reply timeout
         self.notify_lost = notify_lost
         self._running = True
@@ -164,7 +164,7 @@ class Proxy:
     def _notify_lost(self, seq: int) -> None:
         if self.notify_lost and self.sim_addr is not None:
             try:
-                self.sock.sendto(link_lost(seq), self.sim_addr)
+                self.sock.sendto(encode_link_lost(seq), self.sim_addr)
                 self.counts["lost_notices"] = self.counts.get("lost_notices", 0) + 1
             except OSError:
                 self.counts["reply_errors"] += 1

@@ -54,7 +54,8 @@ from ..ratelog import RateLimitedLog
 from ..simtwo import Command, ProtocolError
 from ..simtwo.camera import camera_header
 from ..simtwo.labels import format_real
-from ..simtwo.messages import LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, encode_parts, encode_ranges
+from ..simtwo.messages import (LIDAR_SEPARATOR, PROTOCOL_VERSION, VERSION_LABEL, decode_link_lost, encode_parts,
+                               encode_ranges)
 from ..simtwo.ports import BRIDGE_UDP_PORT, CAMERA_ZMQ_PORT, LOCALHOST, SERVER_UDP_PORT, SIMTWO_UDP_PORT, bind_udp
 
 log = logging.getLogger(__name__)
@@ -64,16 +65,6 @@ MODES = ("realtime", "fast", "paced")
 RECV_BUFFER = 65535
 MAX_BEHIND = 0.25  # s: a realtime run further behind the wall clock than this stops trying to catch up
 PACED_SUBSCRIBER_WAIT = 30.0  # wall s a paced run waits for a camera subscriber before its first frame
-#: A lossy link's notice to a paced run (not SimTwo's protocol): ``LINK_LOST`` + the Seq of a frame, or of the
-#: reply to it, that the link lost or held back. A paced run waits for the reply to each frame; without the
-#: notice a lost datagram would cost the whole reply timeout. The faults proxy sends it (``notify_lost``).
-LINK_LOST = b"RAF-LINK-LOST "
-
-
-def link_lost(seq: int) -> bytes:
-    """The notice that the frame ``seq``, or the reply to it, is lost on the link."""
-    return LINK_LOST + str(int(seq)).encode()
-
 
 @dataclass(frozen=True)
 class RunnerConfig:
@@ -472,14 +463,10 @@ class SimRunner:
                                                  f"{self.controller[0]}:{self.controller[1]} (another controller "
                                                  f"sending to port {self.address[1]}?)")
             return False
-        if self._held is not None and data.startswith(LINK_LOST):  # paced: the link lost a frame or its reply
-            try:
-                lost = int(data[len(LINK_LOST):])
-            except ValueError:
-                lost = None
-            if lost is not None:
-                c.link_lost += 1
-                return lost == expect_seq  # (the command stays: as in real time, a cycle with no reply keeps it)
+        lost = decode_link_lost(data) if self._held is not None else None  # paced: the link lost a frame/reply
+        if lost is not None:
+            c.link_lost += 1
+            return lost == expect_seq  # (the command stays: as in real time, a cycle with no reply keeps it)
         try:
             cmd = Command.decode(data)
         except (ProtocolError, UnicodeDecodeError, ValueError) as e:

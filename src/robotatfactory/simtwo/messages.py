@@ -219,3 +219,24 @@ class Command:
     @staticmethod
     def stop(seq: int = -1) -> "Command":
         return Command(0.0, 0.0, False, seq)
+
+
+#: A lossy link's notice to a paced raf sim (not SimTwo's protocol): ``LINK_LOST`` + the Seq of a frame, or of
+#: the reply to it, that the link lost or held back. A paced run waits for the reply to each frame; without the
+#: notice a lost datagram would cost the whole reply timeout. The faults proxy sends it (``notify_lost``).
+LINK_LOST = b"RAF-LINK-LOST "
+
+
+def encode_link_lost(seq: int) -> bytes:
+    """The notice that the frame ``seq``, or the reply to it, is lost on the link."""
+    return LINK_LOST + str(int(seq)).encode()
+
+
+def decode_link_lost(data: bytes) -> int | None:
+    """The Seq a link-lost notice names; None if ``data`` is not one."""
+    if not data.startswith(LINK_LOST):
+        return None
+    try:
+        return int(data[len(LINK_LOST):])
+    except ValueError:
+        return None
