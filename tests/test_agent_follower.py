@@ -64,6 +64,21 @@ def test_rules_on_a_kinematic_robot(robot):
     assert v.max() > 0.3  # but it does speed up on the long leg
 
 
+def test_a_stop_at_a_corner_is_reached_not_crept_towards(robot):
+    """On a pose that follows the commands exactly (as leg_time's kinematic run), the speed profile only tends
+    to 0 at a corner's stop: the follower used to creep the last 5 mm for 3.6 s (90 cycles) before the turn,
+    and leg_time counted those seconds in every leg with a stop. The turn now begins within a few cycles."""
+    lim = DriveLimits.from_robot(robot)
+    dt = robot.control_period
+    f = PathFollower(lim, dt)
+    f.start([(0.0, 0.0), (0.6, 0.0), (0.6, 0.3)], final_heading=math.pi / 2)
+    outs, poses = drive_kinematic(f, (0.0, 0.0, 0.0), dt)
+    near = next(k for k, p in enumerate(poses) if abs(p[0] - 0.6) < lim.position_tolerance)
+    turn = next(k for k, o in enumerate(outs) if k > near and o.v == 0.0 and o.w != 0.0)
+    assert turn - near <= 10
+    assert abs(poses[turn][0] - 0.6) < lim.position_tolerance and outs[-1].done
+
+
 @pytest.fixture(scope="module")
 def sim(field, robot):
     from robotatfactory.sim import Simulator

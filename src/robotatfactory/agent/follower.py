@@ -31,6 +31,11 @@ from .footprint import wrap
 from .smooth import Piece, SmoothPath, smooth_path
 
 
+#: m/s: the least speed the follower drives at on a piece before its end (it still ends within one cycle: at
+#: most the distance left); below it the approach to a stop tends to zero speed without reaching the end
+CREEP_SPEED = 0.02
+
+
 def spin_rate(err: float, w_max: float, gain: float, offset: float = 0.0, alpha_max: float | None = None,
               brake: float = 1.0) -> float:
     """The turn rate (rad/s) of a turn on the spot towards a heading ``err`` rad away (signed as ``err``):
@@ -294,6 +299,9 @@ class PathFollower:
                     prof = self._prof[self.k]
                     ahead = s + self.v * self.dt
                     v_allowed = float(np.interp(ahead, p.s, prof)) if len(p.s) > 1 else 0.0
+                    # the profile only tends to 0 at a stop: the last millimetres at CREEP_SPEED at least (else a
+                    # pose that follows the command exactly crept on for seconds before the next piece's turn)
+                    v_allowed = max(v_allowed, CREEP_SPEED)
                     v_t = min(v_allowed, max(to_end, 0.0) / self.dt if not (last and self.end_speed > 0) else v_allowed)
                     v_t *= max(0.0, math.cos(herr))
                     # feed-forward: the curvature where the robot will be once w has changed
