@@ -1,0 +1,98 @@
+"""``raf bench planning``: the agent's leg planning, its CPU and its legs' driving time (no simulator, no ROS).
+
+The agent plans a leg (:meth:`~robotatfactory.agent.legs.LegPlanner.plan`: grid A*, the join onto the slot's
+normal, the smoothing into arcs) at every decision, several when it chooses a destination by time, and in real
+time the robot waits for it. This plans a fixed set: every slot of the four zones from six poses spread over the
+field, empty to a pick and carrying to a place as the slot's role allows (``--agent`` settings as in ``raf
+experiment competition``), on the nominal map with no part in it, and times each leg's planning (CPU, one core)
+and its kinematic drive (:meth:`~robotatfactory.agent.legs.LegPlanner.leg_time`).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+NAME = "planning"
+HELP = ("the agent's leg planning: CPU ms per leg, empty and carrying, and the planned legs' kinematic driving "
+        "time, on the nominal map (--agent settings as raf experiment competition's)")
+TARGETS = {}
+
+#: start poses (x, y, heading) spread over the field: the start area, mid-field, before each warehouse
+POSES = ((-0.24, 0.33, math.pi / 2), (0.0, 0.0, 1.0), (0.3, -0.2, 3.0), (-0.5, -0.3, -1.5), (0.55, 0.3, 2.0),
+         (0.1, 0.35, -0.5))
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--repeats", type=int, default=3, help="passes over the legs; the median CPU per leg of "
+                                                               "the passes is reported (default 3)")
+    parser.add_argument("--agent", metavar="NAME=VALUE", action="append", default=[],
+                        help="an agent setting (as raf experiment competition's --agent), e.g. legs.arc_join=0 "
+                             "(repeatable)")
+
+
+def legs_to_plan(field):
+    """(pose, SlotRef, carrying, dock) for every slot and pose: picks from incoming slots and machine outputs,
+    places in outgoing slots and machine inputs."""
+    from ..agent.state import ZONES, SlotRef
+
+    out = []
+    for zone in ZONES:
+        for n in range(1, 5):
+            role = field.slot(zone, n).role
+            kinds = [(False, "pick"), (True, "place")] if role == "store" else (
+                [(True, "place")] if role == "input" else [(False, "pick")])
+            for carrying, dock in kinds:
+                if zone == "incoming" and carrying or zone == "outgoing" and not carrying:
+                    continue
+                out.extend((pose, SlotRef(zone, n), carrying, dock) for pose in POSES)
+    return out
+
+
+def run(args) -> dict:
+    from ..agent.behaviour import RoundAgent
+    from ..agent.obstacles import FieldObstacles
+    from ..agent.planner import NoPath
+    from ..agent.settings import agent_settings
+    from ..experiments.competition import parse_agent
+    from ..field import load_field
+    from ..robot import load_robot
+
+    field, robot = load_field(), load_robot()
+    tree = parse_agent(args.agent)
+    legs = RoundAgent(field, robot, agent_settings(tree)).legs
+    ob = FieldObstacles(field, [])
+    todo = legs_to_plan(field)
+    cpu = {False: [], True: []}
+    drive = {False: [], True: []}
+    failed = 0
+    for rep in range(max(1, args.repeats)):
+        per = {False: [], True: []}
+        for pose, ref, carrying, dock in todo:
+            t0 = time.process_time()
+            try:
+                leg = legs.plan(ob, pose, ref, carrying, dock)
+            except NoPath:
+                failed += rep == 0
+                continue
+            per[carrying].append(time.process_time() - t0)
+            if rep == 0:
+                drive[carrying].append(legs.leg_time(leg, pose, carrying))
+        for k in per:
+            cpu[k].append(float(np.mean(per[k])) if per[k] else math.nan)
+        print(f"[bench planning] pass {rep + 1}: {1000 * cpu[False][-1]:.1f} ms a leg empty, "
+              f"{1000 * cpu[True][-1]:.1f} ms carrying", flush=True)
+    return {
+        "agent_settings": ", ".join(args.agent) if args.agent else "defaults",
+        "map": f"{field.name}, nominal, no part in it",
+        "legs": len(todo),
+        "legs_empty": len(drive[False]),
+        "legs_carrying": len(drive[True]),
+        "legs_without_path": failed,
+        "cpu_ms_per_leg_empty": 1000 * float(np.median(cpu[False])),
+        "cpu_ms_per_leg_carrying": 1000 * float(np.median(cpu[True])),
+        "drive_s_per_leg_empty_mean": float(np.mean(drive[False])) if drive[False] else math.nan,
+        "drive_s_per_leg_carrying_mean": float(np.mean(drive[True])) if drive[True] else math.nan,
+        "repeats": max(1, args.repeats),
+    }
