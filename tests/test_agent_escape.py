@@ -53,3 +53,43 @@ def test_a_target_without_a_path_is_given_up_not_asked_for_forever(field, robot)
     assert agent.mode == "done", agent.events[-5:]
     assert any("giving it up" in text for _, text in agent.events)
     assert agent.counters.no_path == agent.settings.tasks.give_up_after and agent.counters.picks == 0
+
+
+
+def test_a_cornered_robot_with_a_part_escapes_straight_not_sideways(field, robot):
+    """Carrying, the escape drive never turns on the spot, so a clear point beside the robot is one it cannot
+    reach (whole stack, round 3: three escapes barely moved it, then it stood still for 170 s). Its escape point
+    lies straight ahead or behind where one is clear within 0.3 m: on the heading's line, the outline clear all
+    the way at the robot's heading. The empty robot still goes to the nearest clear point."""
+    from robotatfactory.agent.state import FactoryState
+
+    agent = RoundAgent(field, robot)
+    agent.state = FactoryState.from_letters("XXXX")
+    obs = agent._obstacles()
+    legs = agent.legs
+    pl, fp = legs.path_planner(obs, True), legs.fp_carry
+    cases = 0
+    for x in np.arange(-0.6, 0.6, 0.03):  # poses whose nearest clear point is beside them, 5 cm or more away
+        for y in np.arange(-0.35, 0.35, 0.03):
+            if pl.is_free((x, y), fp) or obs.clearance_at(x, y) < 0.03:
+                continue
+            near = pl.escape_point((x, y), fp)
+            if near is None or math.hypot(near[0] - x, near[1] - y) < 0.05:
+                continue
+            h = math.atan2(near[1] - y, near[0] - x) + math.pi / 2
+            if obs.collides(fp, (x, y, h)):
+                continue
+            p = legs.escape_point(obs, (x, y, h), carrying=True)
+            assert p is not None
+            assert abs(-(p[0] - x) * math.sin(h) + (p[1] - y) * math.cos(h)) < 1e-9 or p == near
+            if p == near:
+                continue  # (no straight way out within 0.3 m: the nearest clear point, as before)
+            cases += 1
+            d = math.hypot(p[0] - x, p[1] - y)
+            assert pl.is_free(p, fp) and d <= 0.3 + 1e-9
+            sign = 1.0 if (p[0] - x) * math.cos(h) + (p[1] - y) * math.sin(h) > 0 else -1.0
+            for s in np.arange(0.01, d, 0.01):
+                assert not obs.collides(fp, (x + sign * s * math.cos(h), y + sign * s * math.sin(h), h))
+            empty = legs.path_planner(obs, False).escape_point((x, y), legs.fp_empty)
+            assert legs.escape_point(obs, (x, y, h), carrying=False) == empty
+    assert cases >= 10

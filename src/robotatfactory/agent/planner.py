@@ -105,6 +105,33 @@ class PathPlanner:
             return None
         return tuple(map(float, ob.center(*self._nearest_free(cell, free, max_dist=math.inf))))
 
+    def escape_straight(self, pose, footprint: Footprint, max_dist: float = 0.3,
+                        step: float = 0.01) -> tuple[float, float] | None:
+        """The nearest point straight ahead of or behind ``pose`` (x, y, heading) whose clearance fits
+        ``footprint``, reached without a turn: the exact outline, keeping the heading, touches nothing on the way
+        (from ``step`` on: the robot may touch something where it stands); None when there is none within
+        ``max_dist`` m or ``pose`` is free already. For a robot that should not turn on the spot where it is (a
+        part on the magnet, too close to something)."""
+        ob = self.obstacles
+        x, y, h = (float(v) for v in pose[:3])
+        if self.is_free((x, y), footprint):
+            return None
+        c, s = math.cos(h), math.sin(h)
+        blocked = {1.0: False, -1.0: False}
+        for k in range(1, int(round(max_dist / step)) + 1):
+            d = k * step
+            for sign in (1.0, -1.0):
+                if blocked[sign]:
+                    continue
+                px, py = x + sign * d * c, y + sign * d * s
+                if ob.collides(footprint, (px, py, h)):
+                    blocked[sign] = True
+                elif self.is_free((px, py), footprint):
+                    return px, py
+            if all(blocked.values()):
+                return None
+        return None
+
     def _nearest_free(self, cell, free: np.ndarray, max_dist: float = 0.1) -> tuple[int, int]:
         """The free cell nearest ``cell``; NoPath when there is none within ``max_dist`` m."""
         if free[cell]:
