@@ -271,7 +271,7 @@ def test_replies_are_read_only_between_gui_turns_and_the_first_wins(field, robot
             bridge.sendto(Command(v, 0.0, False, seq).encode(), runner.address)
         time.sleep(0.2)
         runner._drain()  # every_cycle: the newest wins
-        assert runner.command.v == 0.5 and c.applied == 2
+        assert runner.command.v == 0.5 and (c.applied, c.superseded) == (2, 3)
     finally:
         runner.close()
 

@@ -204,7 +204,7 @@ class RunnerCounters:
     commands: int = 0  # valid commands received
     applied: int = 0  # cycles that got a new valid command (reply_timing simtwo: at most one per script call)
     replies_deferred: int = 0  # script calls that could not read (a GUI catch-up turn's later calls)
-    superseded: int = 0  # valid commands read together with an earlier one, which won (SimTwo: first wins)
+    superseded: int = 0  # valid commands read in one call with another that won (SimTwo: the first; every_cycle: the newest)
     replies: int = 0  # valid commands whose Seq answered the frame just sent
     stale: int = 0  # valid commands whose Seq was not acceptable (control.pas's SeqAcceptable): never applied
     rejected: int = 0  # malformed + foreign + version
@@ -533,7 +533,9 @@ class SimRunner:
         if cmd.seq >= 0:
             self._last_applied = cmd.seq
         self._command_sim_time = self.sim.time
-        if not self._applied_here:
+        if self._applied_here:
+            c.superseded += 1  # (the one applied before it in this call)
+        else:
             c.applied += 1
         self._applied_here = True
         self.command = cmd
