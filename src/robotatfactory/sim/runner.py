@@ -204,7 +204,7 @@ class RunnerCounters:
     commands: int = 0  # valid commands received
     applied: int = 0  # cycles that got a new valid command (reply_timing simtwo: at most one per script call)
     replies_deferred: int = 0  # script calls that could not read (a GUI catch-up turn's later calls)
-    superseded: int = 0  # valid commands read in one call with another that won (SimTwo: the first; every_cycle: the newest)
+    superseded: int = 0  # valid commands read in one call with another that won (simtwo: the first; else the newest)
     replies: int = 0  # valid commands whose Seq answered the frame just sent
     stale: int = 0  # valid commands whose Seq was not acceptable (control.pas's SeqAcceptable): never applied
     rejected: int = 0  # malformed + foreign + version
