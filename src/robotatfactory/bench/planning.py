@@ -41,12 +41,8 @@ def legs_to_plan(field):
     for zone in ZONES:
         for n in range(1, 5):
             role = field.slot(zone, n).role
-            kinds = [(False, "pick"), (True, "place")] if role == "store" else (
-                [(True, "place")] if role == "input" else [(False, "pick")])
-            for carrying, dock in kinds:
-                if zone == "incoming" and carrying or zone == "outgoing" and not carrying:
-                    continue
-                out.extend((pose, SlotRef(zone, n), carrying, dock) for pose in POSES)
+            carrying = zone == "outgoing" or role == "input"
+            out.extend((pose, SlotRef(zone, n), carrying, "place" if carrying else "pick") for pose in POSES)
     return out
 
 
