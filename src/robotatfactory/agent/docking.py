@@ -153,9 +153,13 @@ class Docker:
         return q + tuple(p[2:])
 
     def _lateral_offset(self, pose) -> float:
-        """base_link's offset from the slot's normal to the robot's left (m; the robot facing the slot)."""
+        """Where the robot's centre line crosses the slot's centre, to the left of the slot's normal (m; the robot
+        facing the slot): base_link's offset plus what the heading adds over the distance to the slot's centre.
+        Turned 7 deg, base_link 14 mm off the normal put the magnet's centre on the part; base_link's offset
+        alone taken as the part's was placed 14 mm off (round 3 seed 100, docs/agent.md)."""
         s = self._slot
-        return (pose[0] - s.xy[0]) * math.sin(s.facing) - (pose[1] - s.xy[1]) * math.cos(s.facing)
+        lateral = (pose[0] - s.xy[0]) * math.sin(s.facing) - (pose[1] - s.xy[1]) * math.cos(s.facing)
+        return lateral + self._along(pose) * math.tan(wrap(pose[2] - s.facing - math.pi))
 
     def _along(self, pose) -> float:
         """base_link's distance from the slot's centre along its normal (m)."""
