@@ -163,7 +163,7 @@ def test_a_lossy_link_tells_a_paced_run_what_it_lost(field, robot, tmp_path):
     assert proxy2.counts["dropped"] >= 5 and res2.counters["timeouts"] >= 5 and res2.counters["link_lost"] == 0
 
 
-def test_a_paced_run_drops_a_reply_older_than_one_it_has(field, robot, tmp_path):
+def test_a_paced_run_never_applies_a_reply_older_than_one_applied(field, robot, tmp_path):
     """A controller that answers every frame, then sends the answer to the frame before it again (a duplicate,
     or a reply a lossy link held back): raf sim counts each late one as stale and never applies it, so the run
     is the one the plain controller gives (when a late reply comes depends on the machine's timing)."""

@@ -61,8 +61,8 @@ class Legs:
     arc_join: float = setting(0.012, "m, carrying, where no point on the slot's normal far enough out for an arc "
                                      "has a clear turning circle (under a machine): the leg may join the normal on "
                                      "an arc along which the exact outline grown by this is clear, instead of a "
-                                     "turn on the spot with the part (0: off; on, 1.2-3.0 s a round faster bare, "
-                                     "no collision in 60 whole-stack runs)", lo=0.0, hi=0.2)
+                                     "turn on the spot with the part (0: off; its measured effect: docs/benchmarks.md)",
+                              lo=0.0, hi=0.2)
 
 
 @dataclass(frozen=True)
