@@ -93,3 +93,51 @@ def test_a_cornered_robot_with_a_part_escapes_straight_not_sideways(field, robot
             empty = legs.path_planner(obs, False).escape_point((x, y), legs.fp_empty)
             assert legs.escape_point(obs, (x, y, h), carrying=False) == empty
     assert cases >= 10
+
+
+def test_a_cornered_robot_with_a_part_and_no_straight_way_out_turns_on_its_last_escape(field, robot):
+    """Carrying, where no straight way out is clear within 0.3 m, the escape point lies beside the robot. The
+    drive steers and never turns on the spot, so it cannot end there: on the whole stack (round 3) three such
+    escapes barely moved the robot and it stood still for the rest of the round. The last try turns on the spot
+    to the point: it ends there, where a leg can be planned from."""
+    from robotatfactory.agent.state import FactoryState, SlotRef
+    from robotatfactory.competition.rounds import PartType
+
+    agent = RoundAgent(field, robot)
+    agent.state = FactoryState.from_letters("XXXX")
+    obs = agent._obstacles()
+    legs = agent.legs
+    pl, fp = legs.path_planner(obs, True), legs.fp_carry
+    poses = []
+    for x in np.arange(-0.6, 0.6, 0.03):  # beside its nearest clear point, no straight way out
+        for y in np.arange(-0.35, 0.35, 0.03):
+            if pl.is_free((x, y), fp) or obs.clearance_at(x, y) < 0.03:
+                continue
+            near = pl.escape_point((x, y), fp)
+            if near is None or math.hypot(near[0] - x, near[1] - y) < 0.05:
+                continue
+            h = math.atan2(near[1] - y, near[0] - x) + math.pi / 2
+            if not obs.collides(fp, (x, y, h)) and legs.escape_point(obs, (x, y, h), carrying=True) == near:
+                poses.append(((float(x), float(y), h), near))
+    assert len(poses) >= 5, "no such poses on this field"
+    tries = agent.settings.recovery.escape_tries
+    target = SlotRef("outgoing", 1)
+    for pose, near in poses:
+        agent = RoundAgent(field, robot)
+        agent.state = FactoryState.from_letters("XXXX")
+        ends = []
+        for k in range(tries):
+            agent.carrying, agent.target, agent.mode = PartType.BLUE, target, "decide"
+            agent._no_leg(pose)
+            assert agent.mode == "escape"
+            spin = not agent.follower.no_spin
+            bot = KinRobot(field, robot)
+            bot.pose = pose
+            run(agent, bot, lambda a: a.mode != "escape", limit=agent.settings.recovery.escape_time + 1.0)
+            ends.append((spin, math.hypot(bot.pose[0] - near[0], bot.pose[1] - near[1]), bot.pose))
+        assert [spin for spin, _, _ in ends] == [False] * (tries - 1) + [True], ends
+        assert all(d > 0.03 for _, d, _ in ends[:-1]), ends  # steering, it never ends at the point
+        assert ends[-1][1] < 0.01, ends
+        legs.plan(obs, ends[-1][2], target, True, "place")  # (raises NoPath where it could not plan from)
+        agent._no_leg(pose)  # every try spent: no more escapes
+        assert agent.mode != "escape"
