@@ -306,6 +306,22 @@ def test_a_reply_acts_only_if_its_seq_is_acceptable(field, robot, bridge, first_
         runner.close()
 
 
+def test_a_frame_answered_twice_counts_once(field, robot, bridge):
+    """``replies`` counts frames answered: the awaited reply and its duplicate, read in one wait, are one."""
+    runner = make_runner(field, robot, bridge)
+    runner.open()
+    runner._frame_seq = 4
+    try:
+        for _ in range(2):
+            bridge.sendto(Command(0.1, 0.0, False, 4).encode(), runner.address)
+        time.sleep(0.2)
+        assert runner._drain(expect_seq=4)
+        c = runner.counters
+        assert c.commands == 2 and c.replies == 1 and c.stale == 1
+    finally:
+        runner.close()
+
+
 def test_reply_timing_is_checked():
     from robotatfactory.errors import ConfigError
 

@@ -205,7 +205,7 @@ class RunnerCounters:
     applied: int = 0  # cycles that got a new valid command (reply_timing simtwo: at most one per script call)
     replies_deferred: int = 0  # script calls that could not read (a GUI catch-up turn's later calls)
     superseded: int = 0  # valid commands read in one call with another that won (simtwo: the first; else the newest)
-    replies: int = 0  # valid commands whose Seq answered the frame just sent
+    replies: int = 0  # frames answered: a valid command with the Seq of the frame awaited (a duplicate not again)
     stale: int = 0  # valid commands whose Seq was not acceptable (control.pas's SeqAcceptable): never applied
     rejected: int = 0  # malformed + foreign + version
     malformed: int = 0
@@ -259,6 +259,7 @@ class SimRunner:
         self._held: list[tuple[int, Command]] | None = [] if self.config.mode == "paced" else None
         self._last_applied = -1  # the Seq of the last reply applied (-1: none, or only unsolicited ones)
         self._frame_seq = -1  # the Seq of this cycle's frame (the newest a reply may answer)
+        self._answered = -1  # the Seq of the last frame counted as answered (``replies``)
         self._last_sent = -1
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), 0.0)  # (wall, simulation) times pacing counts from; set by run()
@@ -378,7 +379,7 @@ class SimRunner:
         self._encoder = CachedFrameEncoder()
         self._pace0 = (time.monotonic(), new_sim.time)
         # Seq starts again at 0: a reply to the old scene's frames is newer than the new frames, so never acts
-        self._last_applied = self._frame_seq = self._last_sent = -1
+        self._last_applied = self._frame_seq = self._last_sent = self._answered = -1
         if self._held is not None:  # paced: nor do the ones held back
             self._held.clear()
         if self.server is not None and new_sim.factory is not None:
@@ -500,7 +501,9 @@ class SimRunner:
         else:
             self._read(cmd)
         if expect_seq is not None and cmd.seq == expect_seq:
-            c.replies += 1
+            if self._answered != expect_seq:
+                c.replies += 1
+                self._answered = expect_seq
             return True
         return False
 
