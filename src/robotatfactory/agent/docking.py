@@ -100,7 +100,7 @@ class Docker:
         self._steps = 0
         self.held_offset = 0.0  # m: the held part's centre to the right of the magnet's centre line, estimated
         self._shift = 0.0
-        self._lateral: list[float] = []
+        self._lateral: list[tuple[float, float]] = []  # picking: (base_link's, the centre line's) offsets
 
     # ------------------------------------------------------------------------------------------ geometry
     def dock_distance(self) -> float:
@@ -152,14 +152,17 @@ class Docker:
         q = (p[0] + self._shift * math.sin(f), p[1] - self._shift * math.cos(f))
         return q + tuple(p[2:])
 
+    def _base_offset(self, pose) -> float:
+        """base_link's offset from the slot's normal, to its left (m; the robot facing the slot)."""
+        s = self._slot
+        return (pose[0] - s.xy[0]) * math.sin(s.facing) - (pose[1] - s.xy[1]) * math.cos(s.facing)
+
     def _lateral_offset(self, pose) -> float:
         """Where the robot's centre line crosses the slot's centre, to the left of the slot's normal (m; the robot
         facing the slot): base_link's offset plus what the heading adds over the distance to the slot's centre.
         Turned 7 deg, base_link 14 mm off the normal put the magnet's centre on the part; base_link's offset
         alone taken as the part's was placed 14 mm off (round 3 seed 100, docs/agent.md)."""
-        s = self._slot
-        lateral = (pose[0] - s.xy[0]) * math.sin(s.facing) - (pose[1] - s.xy[1]) * math.cos(s.facing)
-        return lateral + self._along(pose) * math.tan(wrap(pose[2] - s.facing - math.pi))
+        return self._base_offset(pose) + self._along(pose) * math.tan(wrap(pose[2] - self._slot.facing - math.pi))
 
     def _along(self, pose) -> float:
         """base_link's distance from the slot's centre along its normal (m)."""
@@ -185,7 +188,7 @@ class Docker:
             self._steps += 1
             out = self.follower.step(pose)
             if self.mode == "pick":
-                self._lateral = (self._lateral + [self._lateral_offset(pose)])[-6:]
+                self._lateral = (self._lateral + [(self._base_offset(pose), self._lateral_offset(pose))])[-6:]
             if self.phase == "approach" and self.mode == "pick" and contact and self.settings.press_time > 0:
                 self.phase, self._wait = "press", 0.0
             if self.phase == "press":  # on towards the wall, at most press_time s
@@ -196,9 +199,12 @@ class Docker:
             if self.mode == "pick" and (contact or self.phase == "press"):
                 # the magnet holds the part where it met it: the robot's offset from the slot's normal now is
                 # the part's from the magnet's centre line, to be repeated at the place (mean of 6 cycles)
-                self.held_offset = sum(self._lateral) / len(self._lateral)
+                self.held_offset = sum(c for _, c in self._lateral) / len(self._lateral)
                 if self.settings.compensate_offset:
-                    self._shift = self.held_offset  # backing out: the part stays on the slot's normal
+                    # backing out along the normal through base_link as it stands: steering onto another line
+                    # turns the robot in the slot and swings the part on the magnet against a rib (a pick
+                    # turned 5 deg: 13 mm of swing where 3 mm took the part against machine A's rib)
+                    self._shift = sum(b for b, _ in self._lateral) / len(self._lateral)
                 self.follower.stop()  # brake within the limits (a few mm at v_dock), magnet on at once
                 self.phase, self._wait = "grip", 0.0
                 self.magnet = True
