@@ -30,6 +30,25 @@ def _cornered_pose(field, robot):
     raise AssertionError("no cornered spot on this field")
 
 
+def _carrying_poses_beside_clear(agent):
+    """(pose, nearest clear point) for poses whose nearest point clear for the carrying outline lies beside
+    them, 5 cm or more away; the pose heading across the way to it, its outline touching nothing."""
+    obs = agent._obstacles()
+    pl, fp = agent.legs.path_planner(obs, True), agent.legs.fp_carry
+    out = []
+    for x in np.arange(-0.6, 0.6, 0.03):
+        for y in np.arange(-0.35, 0.35, 0.03):
+            if pl.is_free((x, y), fp) or obs.clearance_at(x, y) < 0.03:
+                continue
+            near = pl.escape_point((x, y), fp)
+            if near is None or math.hypot(near[0] - x, near[1] - y) < 0.05:
+                continue
+            h = math.atan2(near[1] - y, near[0] - x) + math.pi / 2
+            if not obs.collides(fp, (x, y, h)):
+                out.append(((float(x), float(y), h), near))
+    return out
+
+
 def test_a_cornered_robot_drives_clear_then_goes_on(field, robot):
     agent = RoundAgent(field, robot)
     bot = KinRobot(field, robot)
@@ -69,29 +88,20 @@ def test_a_cornered_robot_with_a_part_escapes_straight_not_sideways(field, robot
     legs = agent.legs
     pl, fp = legs.path_planner(obs, True), legs.fp_carry
     cases = 0
-    for x in np.arange(-0.6, 0.6, 0.03):  # poses whose nearest clear point is beside them, 5 cm or more away
-        for y in np.arange(-0.35, 0.35, 0.03):
-            if pl.is_free((x, y), fp) or obs.clearance_at(x, y) < 0.03:
-                continue
-            near = pl.escape_point((x, y), fp)
-            if near is None or math.hypot(near[0] - x, near[1] - y) < 0.05:
-                continue
-            h = math.atan2(near[1] - y, near[0] - x) + math.pi / 2
-            if obs.collides(fp, (x, y, h)):
-                continue
-            p = legs.escape_point(obs, (x, y, h), carrying=True)
-            assert p is not None
-            assert abs(-(p[0] - x) * math.sin(h) + (p[1] - y) * math.cos(h)) < 1e-9 or p == near
-            if p == near:
-                continue  # (no straight way out within 0.3 m: the nearest clear point, as before)
-            cases += 1
-            d = math.hypot(p[0] - x, p[1] - y)
-            assert pl.is_free(p, fp) and d <= 0.3 + 1e-9
-            sign = 1.0 if (p[0] - x) * math.cos(h) + (p[1] - y) * math.sin(h) > 0 else -1.0
-            for s in np.arange(0.01, d, 0.01):
-                assert not obs.collides(fp, (x + sign * s * math.cos(h), y + sign * s * math.sin(h), h))
-            empty = legs.path_planner(obs, False).escape_point((x, y), legs.fp_empty)
-            assert legs.escape_point(obs, (x, y, h), carrying=False) == empty
+    for (x, y, h), near in _carrying_poses_beside_clear(agent):
+        p = legs.escape_point(obs, (x, y, h), carrying=True)
+        assert p is not None
+        assert abs(-(p[0] - x) * math.sin(h) + (p[1] - y) * math.cos(h)) < 1e-9 or p == near
+        if p == near:
+            continue  # (no straight way out within 0.3 m: the nearest clear point, as before)
+        cases += 1
+        d = math.hypot(p[0] - x, p[1] - y)
+        assert pl.is_free(p, fp) and d <= 0.3 + 1e-9
+        sign = 1.0 if (p[0] - x) * math.cos(h) + (p[1] - y) * math.sin(h) > 0 else -1.0
+        for s in np.arange(0.01, d, 0.01):
+            assert not obs.collides(fp, (x + sign * s * math.cos(h), y + sign * s * math.sin(h), h))
+        empty = legs.path_planner(obs, False).escape_point((x, y), legs.fp_empty)
+        assert legs.escape_point(obs, (x, y, h), carrying=False) == empty
     assert cases >= 10
 
 
@@ -107,18 +117,8 @@ def test_a_cornered_robot_with_a_part_and_no_straight_way_out_turns_on_its_last_
     agent.state = FactoryState.from_letters("XXXX")
     obs = agent._obstacles()
     legs = agent.legs
-    pl, fp = legs.path_planner(obs, True), legs.fp_carry
-    poses = []
-    for x in np.arange(-0.6, 0.6, 0.03):  # beside its nearest clear point, no straight way out
-        for y in np.arange(-0.35, 0.35, 0.03):
-            if pl.is_free((x, y), fp) or obs.clearance_at(x, y) < 0.03:
-                continue
-            near = pl.escape_point((x, y), fp)
-            if near is None or math.hypot(near[0] - x, near[1] - y) < 0.05:
-                continue
-            h = math.atan2(near[1] - y, near[0] - x) + math.pi / 2
-            if not obs.collides(fp, (x, y, h)) and legs.escape_point(obs, (x, y, h), carrying=True) == near:
-                poses.append(((float(x), float(y), h), near))
+    poses = [(pose, near) for pose, near in _carrying_poses_beside_clear(agent)  # no straight way out
+             if legs.escape_point(obs, pose, carrying=True) == near]
     assert len(poses) >= 5, "no such poses on this field"
     tries = agent.settings.recovery.escape_tries
     target = SlotRef("outgoing", 1)
