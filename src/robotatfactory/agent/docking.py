@@ -197,13 +197,13 @@ class Docker:
                         and not out.done:
                     return self._out(out.v, out.w)
             if self.mode == "pick" and (contact or self.phase == "press"):
-                # the magnet holds the part where it met it: the robot's offset from the slot's normal now is
-                # the part's from the magnet's centre line, to be repeated at the place (mean of 6 cycles)
+                # the magnet holds the part where it met it: where the robot's centre line crosses the slot's
+                # centre now is the part's offset from that line, to be repeated at the place (mean of 6 cycles)
                 self.held_offset = sum(c for _, c in self._lateral) / len(self._lateral)
                 if self.settings.compensate_offset:
                     # backing out along the normal through base_link as it stands: steering onto another line
-                    # turns the robot in the slot and swings the part on the magnet against a rib (a pick
-                    # turned 5 deg: 13 mm of swing where 3 mm took the part against machine A's rib)
+                    # turns the robot in the slot and swings the part on the magnet (turned 5 deg at the grip,
+                    # steering onto the centre line's swung it 13 mm sideways against 8: machine A's rib, round 3)
                     self._shift = sum(b for b, _ in self._lateral) / len(self._lateral)
                 self.follower.stop()  # brake within the limits (a few mm at v_dock), magnet on at once
                 self.phase, self._wait = "grip", 0.0
