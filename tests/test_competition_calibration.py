@@ -225,3 +225,31 @@ def test_a_kept_run_measured_again_keeps_how_its_camera_was_calibrated(tmp_path)
                                                       "calibration": "auto: ...", "calibration_cy_error_px": -2.1}]))
     r = competition._reanalysed(tmp_path, 1, 100, False, None)
     assert r["calibration"] == "auto: ..." and r["calibration_cy_error_px"] == -2.1 and r["wall_s"] == 200.0
+
+
+def test_a_round_tried_again_after_a_port_race_starts_on_a_clean_directory(tmp_path, monkeypatch):
+    """raf sim exits at once when another run took its port (SimStartError): the round is tried again. The first
+    attempt's recorder had opened pose.bag, and the recorder never overwrites a bag: the second attempt failed
+    (issue 20's batch at 1c0c55a, round 1 seed 113). The attempt's outputs go before the next one."""
+    from robotatfactory.experiments import _competition_full as full
+
+    attempts = []
+
+    def play(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set, loss,
+             calibration=None, log_dir=None, paced=False, compose=False):
+        attempts.append(sorted(p.name for p in log_dir.iterdir()))
+        if (log_dir / "pose.bag").exists():  # as raf record does
+            raise RuntimeError(f"stack exited early with code 2: {log_dir / 'pose.bag'} exists already")
+        (log_dir / "pose.bag").write_bytes(b"#ROSBAG V2.0\n")
+        (log_dir / "trace.jsonl").write_text("{}\n")
+        (log_dir / "pose_bag").mkdir()
+        (log_dir / "sim.log").write_text("raf sim: cannot bind: Address already in use\n")
+        if len(attempts) < 3:
+            raise full.SimStartError("raf sim could not start (exit code 2)")
+        return {"round": round_no, "seed": seed, "points": 4, "max_points": 4, "max_score": True,
+                "last_score_s": 60.0, "notes": [], "false_start": False}
+
+    monkeypatch.setattr(full, "play_full_stack", play)
+    r = competition._full_job(1, 100, tmp_path, False, None)
+    assert "error" not in r and r["max_score"] is True, r
+    assert attempts == [[], ["sim.log"], ["sim.log"]]  # the logs stay (overwritten), the outputs go

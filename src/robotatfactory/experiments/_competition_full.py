@@ -262,6 +262,24 @@ def run_dir(out_dir: Path | None, round_no: int, seed: int, simulator: str = "st
     return d
 
 
+#: what a round writes into its run directory that a second attempt would find there: the recorder never
+#: overwrites a bag (a retry after SimStartError failed on the first attempt's pose.bag), and a trace would mix
+ATTEMPT_OUTPUTS = ("pose.bag", "pose_bag", "trace.jsonl")
+
+
+def discard_attempt(log_dir: Path) -> None:
+    """Remove what an attempt that could not start left in ``log_dir`` (:data:`ATTEMPT_OUTPUTS`) before the run
+    is tried again; its logs are overwritten by the next attempt's."""
+    import shutil
+
+    for name in ATTEMPT_OUTPUTS:
+        p = Path(log_dir) / name
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
+
+
 def _read(path: Path) -> str:
     try:
         return path.read_text(errors="replace")

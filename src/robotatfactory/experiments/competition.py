@@ -421,7 +421,7 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
     :func:`._competition_calibration.resolve` gave; a drive with ``auto``), then the round on it (``paced``: by
     simulation time, docs/pacing.md; ``compose``: the robot's nodes in one process)."""
     from ._competition_calibration import prepare
-    from ._competition_full import SimStartError, play_full_stack, run_dir
+    from ._competition_full import SimStartError, discard_attempt, play_full_stack, run_dir
 
     log_dir = run_dir(out_dir, round_no, seed, simulator)
     tries = 3
@@ -447,6 +447,7 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
         except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
             if not tries:
                 return _failed(round_no, seed, e)
+            discard_attempt(log_dir)
         except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
             return _failed(round_no, seed, e)
     drive_cam = cal_keys.pop("calibration_drive_camera", None)
