@@ -263,6 +263,13 @@ class ActionClient:
                 cancelled = True
             assert time.monotonic() < end, f"no result in {timeout} s ({len(feedback)} feedbacks)"
             time.sleep(0.01)
+        # feedback and result come on separate channels: a step's feedback may arrive after the result (under
+        # load in the full suite, 8 steps' worth did): wait until none has come for 0.3 s
+        seen, quiet_since = len(feedback), time.monotonic()
+        while time.monotonic() - quiet_since < 0.3 and time.monotonic() < end:
+            if len(feedback) != seen:
+                seen, quiet_since = len(feedback), time.monotonic()
+            time.sleep(0.01)
         return res.result().status, res.result().result, feedback
 
     def close(self):
