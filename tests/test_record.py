@@ -91,6 +91,74 @@ def test_type_names(middleware):
     assert bags.find_topic(topics, "camera/image_raw") == ["/robot1/camera/image_raw"]
 
 
+class _ClockNode:
+    """A node whose sim clock is invalid (0) until ``tick``; one latched publisher on /tf_static."""
+
+    def __init__(self):
+        self.ns, self.subscribed, self.said = 0, [], []
+
+    def resolve(self, t):
+        return t if t.startswith("/") else "/" + t
+
+    def now(self):
+        return _time_msg(self.ns)
+
+    def topic_types(self):
+        return {"/tf_static": "tf2_msgs/msg/TFMessage", "/odom": "nav_msgs/msg/Odometry"}
+
+    def subscribe_raw(self, topic, msgtype, cb):
+        self.subscribed.append(topic)
+        cb(b"latched", None) if topic == "/tf_static" else None  # a latched message comes at once
+        return object(), None
+
+    def info(self, text, throttle=0.0):
+        self.said.append(text)
+
+    warn = info
+
+    def close(self, sub):
+        pass
+
+
+class _Writer:
+    def __init__(self):
+        self.times, self.topics = [], set()
+
+    def has_topic(self, t):
+        return True
+
+    def write_raw(self, topic, data, t):
+        self.times.append((topic, t))
+
+    def close(self):
+        pass
+
+
+def test_on_simulation_time_recording_starts_at_the_first_clock(middleware):
+    from robotatfactory.ros.recorder import Recorder
+
+    node, writer = _ClockNode(), _Writer()
+    rec = Recorder(node, writer, ["/tf_static", "odom"], rescan=0.05).start()
+    try:
+        time.sleep(0.3)
+        assert node.subscribed == [] and not rec.recording.is_set(), node.subscribed
+        assert sum("waiting for the first /clock" in s for s in node.said) == 1, node.said
+        node.ns = 12_500_000_000  # the first /clock
+        assert rec.recording.wait(2.0)
+        end = time.monotonic() + 2
+        while time.monotonic() < end and len(node.subscribed) < 2:
+            time.sleep(0.02)
+    finally:
+        rec.stop()
+    assert sorted(node.subscribed) == ["/odom", "/tf_static"]
+    assert writer.times == [("/tf_static", 12_500_000_000)], "the latched message at a valid time, never 0"
+    # wall time: no clock needed
+    node2 = _ClockNode()
+    rec2 = Recorder(node2, _Writer(), ["/odom"], wall_time=True).start()
+    rec2.stop()
+    assert rec2.recording.is_set() and node2.subscribed == ["/odom"]
+
+
 # ---- a recorded run ---------------------------------------------------------------------------------
 
 HASHES = textwrap.dedent("""
@@ -168,10 +236,10 @@ def test_record_a_run_and_read_it_back(tmp_path, middleware):
     assert 1.0 < span < 5 * 3, f"{span} s of simulation time in 5 s of recording"
     # one Odometry per 40 ms control cycle, none lost between the first and the last recorded
     assert len(stamps) >= 0.95 * (span / 0.04 + 1), (len(stamps), span)
-    # bag time is simulation time (the bridge's /clock): near the header's, except 0 for what arrived before
-    # the recorder's first /clock (at most the first few)
+    # bag time is simulation time (the bridge's /clock), near the header's: the recording starts at the
+    # recorder's first /clock, so nothing has the invalid time 0
     late = [(t, s) for t, s in zip(bag_times, stamps) if abs(t - s) >= 0.5e9]
-    assert all(t == 0 for t, _ in late) and len(late) <= 5, late[:10]
+    assert not late, late[:10]
     m = odom[-1][2]
     assert m.header.frame_id == "odom" and m.child_frame_id == "base_link"
     q = m.pose.pose.orientation

@@ -11,8 +11,9 @@ Record the run's topics as they come off the wire into a bag, with the rosbags l
 install needed): on ROS 2 (raf --middleware ros2 record) a rosbag2 directory with MCAP storage (or
 --format sqlite3), Jazzy's type definitions and type hashes, the publishers' QoS; on ROS 1 a .bag with the
 publishers' own definitions. Topics are subscribed to as they appear (start it before or after the rest).
-Bag time is the ROS clock (simulation time from the bridge's /clock; --no-sim-time: wall time).
-Stops on Ctrl-C or after --duration seconds, then prints what it wrote. Read a bag back with
+Bag time is the ROS clock (simulation time from the bridge's /clock; --no-sim-time: wall time); on
+simulation time the recording starts at the first /clock, as rosbag record's does. Stops on Ctrl-C or after
+--duration seconds of recording, then prints what it wrote. Read a bag back with
 robotatfactory.ros.bags.open_bag, `raf calibrate --bag`, or ros2 bag / rosbag on a real install.
 
 default topics: {topics}
@@ -36,7 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--topics", nargs="+", metavar="TOPIC",
                         help="record these topics instead of the default set (relative names: in --ns)")
     parser.add_argument("--no-images", action="store_true", help="leave out the camera images (the bulk of a bag)")
-    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall time")
+    parser.add_argument("--duration", type=float, metavar="S",
+                        help="stop after S seconds of wall time, counted from the recording's start")
     parser.add_argument("--ns", metavar="NS", default="", help="namespace the relative topic names resolve in")
     parser.add_argument("--name", default="raf_record", help="node name (default raf_record)")
     parser.add_argument("--no-sim-time", action="store_true", help="bag time from the wall clock, not /clock")
@@ -105,6 +107,8 @@ def plan(args):
         rec = Recorder(node, writer, topics, wall_time=args.no_sim_time).start()
         if args.duration is not None:
             def stop_later():
+                while node.ok() and not rec.recording.wait(0.05):
+                    pass
                 end = time.monotonic() + args.duration
                 while node.ok() and time.monotonic() < end:
                     time.sleep(0.05)

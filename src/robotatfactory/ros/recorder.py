@@ -11,8 +11,9 @@ markers), and the bag records the offered QoS so that ``ros2 bag play`` republis
 latched.
 
 Bag time is the node's clock at reception: simulation time under ``use_sim_time`` (the default, as the
-bridge publishes ``/clock``), 0 for what arrives before the first ``/clock`` (the latched topics); or the
-wall clock (``wall_time``).
+bridge publishes ``/clock``), or the wall clock (``wall_time``). On simulation time the recording starts at
+the node's first ``/clock`` (as ``rosbag record`` waits for a valid time): nothing is subscribed to before
+it, so no message gets the invalid time 0, and the latched topics arrive once it has started.
 """
 from __future__ import annotations
 
@@ -43,8 +44,11 @@ class Recorder:
         self.rescan = rescan
         self.errors = 0
         self._subs: dict[str, object] = {}
+        #: set once the clock is valid (at once on wall time): the recording has started
+        self.recording = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._waiting_told = False
 
     # -- life ---------------------------------------------------------------------------------------------
     def start(self) -> "Recorder":
@@ -65,7 +69,7 @@ class Recorder:
         return sorted(self._subs)
 
     def _scan_loop(self) -> None:
-        while not self._stop.wait(self.rescan):
+        while not self._stop.wait(self.rescan if self.recording.is_set() else min(self.rescan, 0.02)):
             try:
                 self._scan()
             except Exception as e:  # noqa: BLE001 - a graph query that failed once: try again next round
@@ -77,6 +81,14 @@ class Recorder:
 
     # -- subscribing ------------------------------------------------------------------------------------
     def _scan(self) -> None:
+        if not self.recording.is_set():
+            if not (self.wall_time or stamp_ns(self.node.now()) > 0):
+                if not self._waiting_told:
+                    self._waiting_told = True
+                    self.node.info("record: waiting for the first /clock (simulation time) before recording "
+                                   "(--no-sim-time records on wall time)")
+                return
+            self.recording.set()
         types = self.node.topic_types()
         for topic in self.topics:
             if topic in self._subs or not types.get(topic):
