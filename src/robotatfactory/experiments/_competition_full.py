@@ -157,8 +157,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
 
         field_name = field_for_simtwo(field_name or DEFAULT_FIELD)
     log_dir = Path(log_dir) if log_dir is not None else run_dir(out_dir, round_no, seed, simulator)
-    trace_path = log_dir / "trace.jsonl"
-    bag_path = log_dir / ("pose.bag" if fmt == "bag" else "pose_bag")
+    trace_path = log_dir / TRACE_FILE
+    bag_path = log_dir / (POSE_BAG_FILE if fmt == "bag" else POSE_BAG_DIR)
     # (each run's own; a port another run took meanwhile makes raf sim exit at once: SimStartError, retried)
     sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()  # (TCP)
     field_args = ["--field", field_name] if field_name else []
@@ -262,9 +262,19 @@ def run_dir(out_dir: Path | None, round_no: int, seed: int, simulator: str = "st
     return d
 
 
+#: the agent's trace in a run directory
+TRACE_FILE = "trace.jsonl"
+#: the recorded poses in a run directory: a ROS 1 bag is a file, a rosbag2 a directory
+POSE_BAG_FILE, POSE_BAG_DIR = "pose.bag", "pose_bag"
 #: what a round writes into its run directory that a second attempt would find there: the recorder never
 #: overwrites a bag (a retry after SimStartError failed on the first attempt's pose.bag), and a trace would mix
-ATTEMPT_OUTPUTS = ("pose.bag", "pose_bag", "trace.jsonl")
+ATTEMPT_OUTPUTS = (POSE_BAG_FILE, POSE_BAG_DIR, TRACE_FILE)
+
+
+def kept_pose_bag(log_dir: Path) -> Path:
+    """The pose recording a run left in ``log_dir``, whichever middleware recorded it."""
+    log_dir = Path(log_dir)
+    return log_dir / POSE_BAG_FILE if (log_dir / POSE_BAG_FILE).exists() else log_dir / POSE_BAG_DIR
 
 
 def discard_attempt(log_dir: Path) -> None:

@@ -487,7 +487,7 @@ def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: 
     """A whole-stack run kept by ``--out`` (logs, trace, bag), measured again (``--analyse DIR``)."""
     import json
 
-    from ._competition_full import analyse
+    from ._competition_full import TRACE_FILE, analyse, kept_pose_bag
 
     simtwo = simulator == "simtwo"
     d = kept / f"{'simtwo' if simtwo else 'full'}_r{round_no}_s{seed}"
@@ -504,8 +504,7 @@ def _reanalysed(kept: Path, round_no: int, seed: int, record: bool, field_name: 
                       if r.get("round") == round_no and r.get("seed") == seed)
     except (OSError, ValueError, StopIteration):
         pass
-    bag = d / "pose.bag" if (d / "pose.bag").exists() else d / "pose_bag"
-    out = analyse(round_no, seed, d, d / "trace.jsonl", bag, record, field_name,
+    out = analyse(round_no, seed, d, d / TRACE_FILE, kept_pose_bag(d), record, field_name,
                   wall_s=float(before.get("wall_s", math.nan)), middleware=before.get("middleware", "unknown"),
                   report_log="referee.log" if simtwo else "sim.log",
                   agent_log="stack.log" if (d / "stack.log").exists() else "agent.log")  # (a composed run)
