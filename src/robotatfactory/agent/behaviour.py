@@ -553,15 +553,15 @@ class RoundAgent:
         (up to ``escape_tries`` times); a target without a path ``give_up_after`` times running is given up
         (its part left alone, or, carrying, another destination preferred), as a failed pick or place is."""
         carrying = self.carrying is not None
-        point = self.legs.escape_point(self._obstacles(), pose, carrying)
+        escape = self.legs.escape_point(self._obstacles(), pose, carrying)
         tries = self.settings.recovery.escape_tries
-        if point is not None and self._escapes < tries:
+        if escape is not None and self._escapes < tries:
             self._escapes += 1
             self.counters.escapes += 1
+            point = escape.xy
             # carrying, the drive steers and never turns on the spot: a point beside the robot it barely nears
             # (whole stack, round 3: it stood still for 170 s after its escapes). The last try may turn there.
-            beside = abs(-(point[0] - pose[0]) * math.sin(pose[2]) + (point[1] - pose[1]) * math.cos(pose[2])) > 0.005
-            spin = carrying and beside and self._escapes == tries
+            spin = carrying and not escape.straight and self._escapes == tries
             self._event(self.t, f"too close to an obstacle at ({pose[0]:.2f}, {pose[1]:.2f}): driving to "
                                 f"({point[0]:.2f}, {point[1]:.2f}) first" + (", turning on the spot" if spin else ""))
             self._escape(pose, point, no_spin=carrying and not spin)

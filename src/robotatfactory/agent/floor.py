@@ -331,8 +331,9 @@ class FloorRecovery:
         obstacles = self._obstacles()
         if may_escape:
             # standing next to it (it fell beside the robot): first straight away to where the robot may turn
-            point = self.legs.escape_point(obstacles, pose, False)
-            if point is not None:
+            escape = self.legs.escape_point(obstacles, pose, False)
+            if escape is not None:
+                point = escape.xy
                 self._event(t, f"too close to the part on the floor: driving to ({point[0]:.2f}, {point[1]:.2f}) "
                                "first")
                 return Next("escape", point=point)

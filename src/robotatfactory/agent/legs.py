@@ -38,6 +38,16 @@ BLOCKED_SPOT_SIDE = 0.06  # m, the square a blocked spot becomes on the map
 
 
 @dataclass(frozen=True)
+class Escape:
+    """Where a robot too close to something drives first (:meth:`LegPlanner.escape_point`)."""
+
+    xy: tuple[float, float]
+    #: on the robot's heading line, ahead or behind, clear all the way: a steering drive ends there; else the
+    #: nearest clear point, which may lie beside the robot
+    straight: bool
+
+
+@dataclass(frozen=True)
 class LegPlan:
     """A planned leg: the planner's polyline ``path``, what the follower drives (``smooth``: a SmoothPath, or the
     polyline without smoothing), the approach pose ``goal`` (x, y, theta) it ends at, whether it arrives along
@@ -239,7 +249,7 @@ class LegPlanner:
         return t + max(d_end, 0.0) / v
 
     # ------------------------------------------------------------------------------------------ around a leg
-    def escape_point(self, obstacles: FieldObstacles, pose, carrying: bool) -> tuple[float, float] | None:
+    def escape_point(self, obstacles: FieldObstacles, pose, carrying: bool) -> Escape | None:
         """Where a robot too close to something to plan from (``pose``) drives first, or None. Carrying, the
         nearest clear point straight ahead or behind if there is one within 0.3 m (the escape drive does not turn
         on the spot with a part, and a point beside the robot it could not reach: whole stack, round 3, three
@@ -249,11 +259,12 @@ class LegPlanner:
         if carrying:
             p = pl.escape_straight(pose, fp)
             if p is not None:
-                return p
+                return Escape(p, straight=True)
         try:
-            return pl.escape_point(tuple(pose[:2]), fp)
+            p = pl.escape_point(tuple(pose[:2]), fp)
         except NoPath:
             return None
+        return None if p is None else Escape(p, straight=False)
 
     def retreat(self, obstacles: FieldObstacles, target: SlotRef, carrying: bool) -> float:
         """Distance from ``target``'s centre to back out to after docking there (m): the approach distance of
