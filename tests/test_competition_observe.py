@@ -36,3 +36,34 @@ def test_a_part_that_leaves_its_slot_unheld_is_knocked_out_a_machines_move_or_a_
                                            2: (a.xy[0] + 0.1, a.xy[1], a.facing)})  # shoved 5 cm
     assert obs.knocked_out == 1 and obs.knocks[0][1] == 1
     assert obs.figures()["parts_knocked_out"] == 1
+
+
+def test_where_a_part_is_let_go_is_its_offset_from_the_slots_normal_a_drop_is_not_counted(field, robot):
+    """The release offset: a part let go 6 mm to the left of outgoing 3's normal and 2 cm along it is 6 mm off
+    (signed, to the left of the slot's facing), whatever the slot's facing; one let go on the open floor is
+    a drop, listed but not an offset."""
+    import math
+
+    from robotatfactory.experiments import competition
+
+    obs = RunObserver(field, robot)
+    far = (0.0, -0.3, 0.0)
+    slot = field.slot("outgoing", 3)
+    c, s = math.cos(slot.facing), math.sin(slot.facing)
+    placed = (slot.xy[0] + 0.02 * c - 0.006 * s, slot.xy[1] + 0.02 * s + 0.006 * c, slot.facing)
+    obs.cycle(0.0, 0, far, 4, (0, 0), {4: placed, 5: (0.0, 0.0, 0.0)})
+    obs.cycle(0.04, 1, far, None, (0, 0), {4: placed, 5: (0.0, 0.0, 0.0)})  # let go in the slot
+    obs.cycle(0.08, 2, far, 5, (0, 0), {4: placed, 5: (0.0, 0.0, 0.0)})
+    obs.cycle(0.12, 3, far, None, (0, 0), {4: placed, 5: (0.0, 0.0, 0.0)})  # dropped on the open floor
+    fig = obs.figures()
+    assert [r[:3] for r in fig["releases"]] == [(0.04, 4, "outgoing_3"), (0.12, 5, fig["releases"][1][2])]
+    assert math.isclose(fig["releases"][0][3], 0.006, abs_tol=1e-4) and fig["releases"][1][4] > 0.1
+    assert fig["release_offsets_m"] == [abs(fig["releases"][0][3])]
+    run = dict(round=1, seed=100, points=4, max_points=4, max_score=True, last_score_s=50.0, notes=[],
+               picks_attempted=2, pick_failures=0, timeouts=0, wall_s=1.0, false_start=False, **fig)
+    res = competition.summarize("bare_truth", [run, dict(run, seed=101, release_offsets_m=[0.002, 0.010])])
+    assert res["bare_truth_heldout_r1_releases_in_slots"] == 3
+    assert res["bare_truth_heldout_r1_release_offset_median_m"] == 0.006
+    assert res["bare_truth_heldout_r1_release_offset_max_m"] == 0.01
+    assert res["bare_truth_heldout_r1_s101_release_offset_max_m"] == 0.01
+    assert "6.0/10.0" in competition.table("bare_truth", [run, dict(run, seed=101, release_offsets_m=[0.002, 0.010])])

@@ -5,7 +5,9 @@ Per run: collision checks that hit (the robot's outline, and a held part's at it
 more from every slot centre, against walls and ribs or beyond the floor's 2 cm overhang allowance, every 5
 cycles), parts knocked out of slots (a part more than 3 cm from every slot centre that was within 3 cm of one
 at the check before, not on the magnet then or now: the issue's target is none), parts pushed (stricter: a part
-not on the magnet moving 2 mm - 5 cm within 5 cycles: a push, not a machine's teleport), the wheel odometry's error against the truth over each
+not on the magnet moving 2 mm - 5 cm within 5 cycles: a push, not a machine's teleport), where each part was let
+go (its offset from the nearest slot's normal, the line through the slot's centre along its facing: how far
+beside its slot the agent put it), the wheel odometry's error against the truth over each
 second per metre driven, the time split per agent activity (when the caller knows it), and for the figures the
 path and the animation frames.
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 import math
 
 CHECK_EVERY = 5  # cycles between collision and push checks (and path samples)
+RELEASE_NEAR = 0.1  # m: a part let go farther than this from every slot's centre was dropped, not placed
 SLIP_EVERY = 25  # cycles per odometry-slip interval (1 s)
 
 
@@ -29,7 +32,8 @@ class RunObserver:
         self.fp = robot_footprint(robot)
         p = field.part  # a part in its own frame: the plate towards +x (its pose's heading is the plate's facing)
         self.part_outline = Footprint((Rect(-p.depth / 2, p.depth / 2 + PLATE_THICKNESS, -p.width / 2, p.width / 2),))
-        self.slot_xy = [s.xy for s in field.slots]
+        self.slots = list(field.slots)
+        self.slot_xy = [s.xy for s in self.slots]
         self.period = robot.control_period
         self.record_path = record_path
         self.touched = self.off_floor = self.pushed = self.knocked_out = 0
@@ -41,6 +45,8 @@ class RunObserver:
         self.frames: list[tuple] = []
         self.split: dict[str, float] = {}
         self._last_xy: dict[int, tuple] = {}
+        self.releases: list[tuple] = []  # (t, part id, nearest slot, offset from its normal m, from its centre m)
+        self._held_before: int | None = None
         self._odo = DiffDriveOdometry(robot)
         self._odo_started = False
         self._prev = None
@@ -53,6 +59,11 @@ class RunObserver:
         agent's activity (None: unknown)."""
         if activity is not None:
             self.split[activity] = self.split.get(activity, 0.0) + self.period
+        if self._held_before is not None and held != self._held_before:  # let go (read on the cycle it happens)
+            released = (parts() if callable(parts) else parts).get(self._held_before)
+            if released is not None:
+                self.releases.append((round(t, 2), self._held_before, *self._release_offset(released)))
+        self._held_before = held
         if not self._odo_started:
             self._odo.reset(baseline=tuple(enc), t=t)
             self._odo_started = True
@@ -100,6 +111,14 @@ class RunObserver:
                     self.pushes.append((round(t, 2), round(px, 3), round(py, 3), round(1000 * d, 1), activity))
             self._last_xy[pid] = (px, py, "held" if held == pid else "")
 
+    def _release_offset(self, part_pose) -> tuple[str, float, float]:
+        """The slot nearest to a part let go at ``part_pose``: its name, the part's signed offset from the slot's
+        normal (m, positive to the left of the facing) and its distance from the slot's centre (m)."""
+        x, y = part_pose[0], part_pose[1]
+        slot = min(self.slots, key=lambda s: math.hypot(x - s.xy[0], y - s.xy[1]))
+        dx, dy = x - slot.xy[0], y - slot.xy[1]
+        return slot.name, -dx * math.sin(slot.facing) + dy * math.cos(slot.facing), math.hypot(dx, dy)
+
     def _out_of_slot(self, part_pose, within: float = 0.03) -> bool:
         return all(math.hypot(part_pose[0] - sx, part_pose[1] - sy) > within for sx, sy in self.slot_xy)
 
@@ -109,6 +128,8 @@ class RunObserver:
         out = {"collision_checks_hit": self.touched, "off_floor_checks": self.off_floor, "collision_hits": self.hits,
                "parts_pushed": self.pushed, "pushes": self.pushes,
                "parts_knocked_out": self.knocked_out, "knocks": self.knocks,
+               "releases": [(t, pid, name, round(off, 4), round(d, 4)) for t, pid, name, off, d in self.releases],
+               "release_offsets_m": [round(abs(r[3]), 4) for r in self.releases if r[4] <= RELEASE_NEAR],
                "odometry_error_per_m": sum(s[0] for s in self.slip) / moved if moved > 0 else 0.0,
                "odometry_error_max_per_s_m": max((s[0] for s in self.slip), default=0.0),
                "odometry_heading_error_max_per_s_rad": max((s[1] for s in self.slip), default=0.0)}

@@ -33,10 +33,13 @@ separately: every key carries the set, ``{mode}_{set}_r{round}_...`` (``other`` 
 Per run (keys ``{mode}_{set}_r{round}_s{seed}_...``): score and maximum score, the referee's delivery time
 (when the final score was reached and held), points the referee took back (``points_lost``), referee rule notes, picks attempted / failed, places, timeouts, collisions of the robot's outline
 with walls or ribs, or beyond the floor's 2 cm overhang allowance (``floor``), checked every 5 cycles, parts pushed (a part not on the magnet moving 2 mm - 5 cm
-within 5 cycles: a push, not a machine's teleport), and the wheel odometry's error against the truth over
+within 5 cycles: a push, not a machine's teleport), where each part was let go (``release_offset_max_m``:
+its offset from the nearest slot's normal, the line through the slot's centre along its facing; parts let go
+more than 0.1 m from every slot are left out), and the wheel odometry's error against the truth over
 each second (``odometry_error_per_m``: the sum of those errors over the distance driven; slip that ground
 truth hides from the agent but the EKF would not). Per round: success rate at maximum score, median and
-worst time of the last scoring delivery, and the targets of the issue:
+worst time of the last scoring delivery, the release offsets' median, p90 and maximum over every part let go
+in a slot (``..._release_offset_median_m``, the table's ``release mm p50/max``), and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts knocked out of slots;
@@ -588,6 +591,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         if r["collision_checks_hit"]:
             out[f"{p}_collision_where"] = "; ".join(f"{k} at t {t} s ({x}, {y})" for t, x, y, k in r["collision_hits"])
         out[f"{p}_parts_pushed"] = r["parts_pushed"]
+        if r.get("release_offsets_m"):  # how far beside its slot's normal each part was let go
+            out[f"{p}_release_offset_max_m"] = round(max(r["release_offsets_m"]), 4)
         out[f"{p}_parts_knocked_out"] = r.get("parts_knocked_out", 0)
         if r.get("pushes"):
             out[f"{p}_pushes_where"] = "; ".join(f"{mm} mm at t {t} s ({x}, {y}) while {a}" for t, x, y, mm, a in r["pushes"])
@@ -625,6 +630,11 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_points_lost"] = sum(int(r.get("points_lost", 0)) for r in rs)  # the referee took them back
         out[f"{p}_pick_failures"] = sum(int(r.get("pick_failures", 0)) for r in rs)
         out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
+        offsets = sorted(o for r in rs for o in r.get("release_offsets_m", ()))
+        out[f"{p}_releases_in_slots"] = len(offsets)
+        if offsets:  # every part let go in a slot, in every run: its offset from the slot's normal
+            for q, name in ((0.5, "median"), (0.9, "p90"), (1.0, "max")):
+                out[f"{p}_release_offset_{name}_m"] = round(_quantile(offsets, q), 4)
         if mode.endswith("full_stack"):  # the agent's pose against the truth while it picks or places (issue: <= 2 cm)
             dock = [r["pose_error_docking_max_m"] for r in rs if math.isfinite(r.get("pose_error_docking_max_m", math.nan))]
             out[f"{p}_pose_error_docking_max_m"] = round(max(dock), 4) if dock else None
@@ -651,11 +661,17 @@ def summarize(mode: str, runs: list[dict]) -> dict:
     return out
 
 
+def _quantile(sorted_values: list[float], q: float) -> float:
+    """The value at fraction ``q`` of ``sorted_values`` (nearest rank; 0.5 of an even count: the upper)."""
+    return sorted_values[min(len(sorted_values) - 1, int(q * len(sorted_values)))]
+
+
 def table(mode: str, runs: list[dict]) -> str:
     bare = mode == "bare_truth"
     lines = [f"competition, mode {mode} ({POSE_SOURCE[mode]})",
              f"{'seeds':<14} {'round':>5} {'runs':>4} {'max score':>9} {'median s':>9} {'worst s':>8} {'target s':>8} "
-             f"{'pick fail':>9} {'knocked':>7} {'pushed':>6} {'notes':>5} {'collide':>7} {'odo mm/m':>8}"
+             f"{'pick fail':>9} {'knocked':>7} {'pushed':>6} {'notes':>5} {'collide':>7} {'odo mm/m':>8} "
+             f"{'release mm p50/max':>18}"
              + ("" if bare else f" {'pose err docking max mm':>23}")]
     groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
                     key=lambda g: (("tuned", "heldout", "other").index(g[0]), g[1]))
@@ -671,7 +687,8 @@ def table(mode: str, runs: list[dict]) -> str:
                      f"{sum(int(r.get('parts_pushed', 0)) for r in rs):>6} "
                      f"{sum(len(r.get('notes', [])) for r in rs):>5} "
                      f"{sum(int(r.get('collision_checks_hit', 0)) for r in rs):>7} "
-                     f"{1000 * statistics.median([r.get('odometry_error_per_m', math.nan) for r in rs]):>8.2f}"
+                     f"{1000 * statistics.median([r.get('odometry_error_per_m', math.nan) for r in rs]):>8.2f} "
+                     f"{_release_cell(rs):>18}"
                      + ("" if bare else
                         f" {1000 * max((r.get('pose_error_docking_max_m', math.nan) for r in rs), key=_nan_last):>23.1f}"))
     if bare:
@@ -684,6 +701,12 @@ def table(mode: str, runs: list[dict]) -> str:
                 lines.append(f"  {k:<7} round {rn}{'':>36}" + " ".join(
                     f"{statistics.median(s.get(a, 0.0) for s in sp):>13.1f}" for a in acts))
     return "\n".join(lines)
+
+
+def _release_cell(rs: list[dict]) -> str:
+    """The table's release offsets: median / max over every part let go in a slot, mm."""
+    offsets = sorted(o for r in rs for o in r.get("release_offsets_m", ()))
+    return f"{1000 * _quantile(offsets, 0.5):.1f}/{1000 * offsets[-1]:.1f}" if offsets else "-"
 
 
 def figure(run: dict, path: Path, mode: str, field_name: str | None = None) -> Path:
