@@ -532,7 +532,7 @@ def test_elapsed_rule_follows_the_stream_rate_and_clamps_to_the_cycle():
     assert isinstance(wait, Pending) and wait.deadline == pytest.approx(a_last + 0.5 + st.wait_overdue)
     late = st.stamp(a_last + 0.5, now=wait.deadline)
     assert late.stamp == pytest.approx(P * 31 / 1000) and st.counters.clamped == 1 and st.counters.waited == 1
-    again = st.stamp(a_last + 0.6, now=a_last + 0.8)  # the same bound again: nudged to stay increasing
+    again = st.stamp(a_last + 0.6, now=a_last + 0.6 + st.wait_overdue)  # the same bound: nudged, increasing
     assert again.stamp == pytest.approx(P * 31 / 1000 + 0.001) and st.counters.conflicts == 1
     with pytest.raises(ValueError):
         CameraStamper(P, 60, 4, rule="grid")

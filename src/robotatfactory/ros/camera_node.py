@@ -29,6 +29,7 @@ import time
 TIMING = struct.Struct("<qdq")  # Tms (or -1: reset), arrival (monotonic seconds), CamN (-1: not sent)
 RESET = -1
 RCVHWM = 64  # camera frames queued in ZMQ before it drops any (77 MB at 640x480 BGRA)
+SUPERSEDED = object()  # CameraBridge._stamp: a newer frame arrived while this one waited
 
 
 def camera_stamper(cfg):
@@ -58,6 +59,7 @@ class CameraBridge:
         self.counts = {"received": 0, "skipped": 0, "wrong_size": 0, "published": 0, "timing_messages": 0,
                        "publisher_restarts": 0}
         self._mail = None
+        self._wait_deadline: float | None = None  # the first waiting frame's bound (monotonic s), see _stamp
         self._cv = threading.Condition()
         self._timing_cv = threading.Condition()  # notified on every SensorFrame timing message
         self._drain_lock = threading.Lock()  # one reader of the timing socket at a time, in order
@@ -233,6 +235,11 @@ class CameraBridge:
                 carried = skipped  # not a frame of this camera: the frames skipped before it still count
                 continue
             est = self._stamp(arrival, skipped)
+            if est is SUPERSEDED:  # a newer frame waits for its SensorFrames instead: this one is skipped
+                with self._cv:
+                    self.counts["skipped"] += 1
+                carried = skipped + 1
+                continue
             if est is None:
                 self._warn("clock", "camera: frame before any SensorFrame: no simulation time to stamp it with, "
                                     "dropped")
@@ -275,7 +282,14 @@ class CameraBridge:
         return True
 
     def _stamp(self, arrival: float, skipped: int):
-        """The frame's stamp; waits (briefly) for the SensorFrame after it when the stamper needs it."""
+        """The frame's stamp; waits (briefly) for the SensorFrame after it when the stamper needs it.
+        :data:`SUPERSEDED` when a newer frame arrived while it waited: that one is published instead.
+
+        The wait's bound is the first waiting frame's deadline, kept across the frames that supersede it. A
+        newer frame is no reason to decide early: the simulator sent this frame's SensorFrames before it, but a
+        loaded bridge may pass them on later still, and a stamp decided without them is early by a cycle or
+        more (CI, ROS 2: frames 81 and 148 ms early). Nor is it a reason to wait anew: frames keep coming
+        where SensorFrames do not."""
         from ..simtwo.timing import Pending
 
         while True:
@@ -283,12 +297,16 @@ class CameraBridge:
             with self._timing_cv:
                 est = self.stamper.stamp(arrival, skipped=skipped)
                 if not isinstance(est, Pending):
+                    self._wait_deadline = None
                     return est
-                if self._mail is not None:
-                    # a newer frame has arrived: it was published after this frame's SensorFrame was sent,
-                    # so waiting longer cannot tell more; decide now (this also keeps up with floods)
+                if self._wait_deadline is None:
+                    self._wait_deadline = est.deadline
+                if time.monotonic() >= self._wait_deadline:  # waited long enough: decide with what is known
+                    self._wait_deadline = None
                     return self.stamper.stamp(arrival, now=est.deadline, skipped=skipped)
-                self._timing_cv.wait(max(0.0, est.deadline - time.monotonic()) + 1e-4)
+                if self._mail is not None:
+                    return SUPERSEDED
+                self._timing_cv.wait(max(0.0, min(est.deadline, self._wait_deadline) - time.monotonic()) + 1e-4)
 
     # -- diagnostics -------------------------------------------------------------------------------------------
     def _diag_loop(self) -> None:
