@@ -213,3 +213,52 @@ def test_arc_join_keeps_the_turn_where_no_arc_fits(field, robot, monkeypatch):
     assert leg.smooth.stops == before.smooth.stops == 1
     assert leg.path.points == before.path.points and leg.goal == before.goal
     assert searches.count("leg") == plain.count("leg") and "arc" in searches
+
+
+def test_the_fast_exact_checks_agree_with_the_reference_ones(field, geo):
+    """The planner's checks run thousands of times a decision, so they are vectorised: the stacked
+    separating-axis test agrees with :func:`polygons_overlap` on random rectangles (touching, crossing,
+    apart), a line of poses with the pose-by-pose test, and the clearance of many points with the single one."""
+    from robotatfactory.agent.obstacles import _edge_normals, _quads_overlap, _rect_polygon
+
+    rng = np.random.default_rng(7)
+
+    def rect():
+        c, (w, h), yaw = rng.uniform(-0.2, 0.2, 2), rng.uniform(0.01, 0.15, 2), rng.uniform(-math.pi, math.pi)
+        return _rect_polygon(c[0], c[1], w, h, yaw)
+
+    a, b = np.array([rect() for _ in range(120)]), np.array([rect() for _ in range(80)])
+    b[0] = a[0] + (a[0][1] - a[0][0])  # one shifted by its own edge: touching counts as overlap
+    fast = _quads_overlap(a, b, _edge_normals(b))
+    slow = np.array([[polygons_overlap(p, q) for q in b] for p in a])
+    assert (fast == slow).all() and 0 < slow.sum() < slow.size and fast[0, 0]
+    empty, carrying, _ = geo
+    ob = FieldObstacles(field, [PartObstacle(s.xy[0], s.xy[1], s.facing) for s in field.slots[::3]])
+    for fp in (empty, carrying):
+        for _ in range(60):
+            x0, y0 = rng.uniform(-0.85, 0.85), rng.uniform(-0.6, 0.6)
+            h = rng.uniform(-math.pi, math.pi)
+            xs, ys = x0 + np.linspace(0, 0.2, 21) * math.cos(h), y0 + np.linspace(0, 0.2, 21) * math.sin(h)
+            assert ob.collides_any(fp, xs, ys, h) == any(ob.collides(fp, (x, y, h)) for x, y in zip(xs, ys))
+            assert np.allclose(ob.clearance_of(xs, ys), [ob.clearance_at(x, y) for x, y in zip(xs, ys)], atol=1e-12)
+
+
+def test_a_search_is_remembered_with_its_obstacles(field, geo):
+    """A decision plans the same legs several times (timing each destination, then the chosen one): the second
+    plan on the same obstacles finds the search remembered and gives the same path; other obstacles search anew;
+    a search that found no path says so again."""
+    empty, _, _ = geo
+    ob = FieldObstacles(field, [])
+    start, goal = (-0.6, -0.35), (0.55, 0.3)
+    first = PathPlanner(ob).plan(start, goal, empty)
+    kept = dict(ob.searches)
+    assert len(kept) >= 1
+    again = PathPlanner(ob).plan(start, goal, empty)
+    assert again.points == first.points and ob.searches.keys() == kept.keys()
+    other = FieldObstacles(field, [])
+    assert PathPlanner(other).plan(start, goal, empty).points == first.points and len(other.searches) >= 1
+    walled = FieldObstacles(field, [], extra=[[(-0.05, -0.7), (0.05, -0.7), (0.05, 0.7), (-0.05, 0.7)]])
+    for _ in range(2):
+        with pytest.raises(NoPath):
+            PathPlanner(walled).plan(start, goal, empty)
+    assert any(isinstance(v, NoPath) for v in walled.searches.values())

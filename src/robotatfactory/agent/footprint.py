@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -45,24 +46,34 @@ class Footprint:
 
     rects: tuple[Rect, ...]
 
-    @property
+    # (derived once per outline: the planner asks for them thousands of times a decision)
+    @cached_property
     def radius(self) -> float:
         """The largest distance (m) from base_link to the outline: the turning-in-place circle."""
         return max(float(np.hypot(*c)) for r in self.rects for c in r.corners())
 
-    @property
+    @cached_property
     def front(self) -> float:
         return max(r.x1 for r in self.rects)
 
-    @property
+    @cached_property
     def back(self) -> float:
         return min(r.x0 for r in self.rects)
 
+    @cached_property
+    def _corners(self) -> np.ndarray:
+        """Every rectangle's corners, (rectangles, 4, 2), base_link."""
+        return np.array([r.corners() for r in self.rects], dtype=float).reshape(-1, 4, 2)
+
     def polygons(self, x: float, y: float, theta: float) -> list[np.ndarray]:
         """Each rectangle's four corners (4x2, field frame) with base_link at (x, y, theta)."""
+        return list(self.corners_at(x, y, theta))
+
+    def corners_at(self, x: float, y: float, theta: float) -> np.ndarray:
+        """:meth:`polygons` as one array (rectangles, 4, 2)."""
         c, s = math.cos(theta), math.sin(theta)
         R = np.array([[c, s], [-s, c]])  # row vectors: p_world = p_local @ R + t
-        return [r.corners() @ R + (x, y) for r in self.rects]
+        return self._corners @ R + (x, y)
 
     def inflated(self, margin: float) -> Footprint:
         """Every rectangle grown by ``margin`` m on each side (a safety margin for exact checks)."""

@@ -76,6 +76,10 @@ class FieldObstacles:
         self.polygons: list[np.ndarray] = [b.footprint() for b in field.boxes]
         self.polygons += [part_polygon(field.part, p) for p in self.parts]
         self.polygons += [np.asarray(e, dtype=float).reshape(-1, 2) for e in extra]  # convex, e.g. a blocked spot
+        # the quadrilaterals (every wall, rib, part and blocked spot) stacked for the exact test, the rest apart
+        self._quad_index = [k for k, poly in enumerate(self.polygons) if poly.shape == (4, 2)]
+        self._quads = np.array([self.polygons[k] for k in self._quad_index], dtype=float).reshape(-1, 4, 2)
+        self._quad_axes = _edge_normals(self._quads)
         self._centres = np.array([poly.mean(axis=0) for poly in self.polygons])
         self._radii = np.array([np.max(np.hypot(*(poly - poly.mean(axis=0)).T)) for poly in self.polygons])
         o = float(floor_overhang)
@@ -99,6 +103,9 @@ class FieldObstacles:
         # of the distance to the nearest obstacle
         d = ndimage.distance_transform_edt(~occ) * res - half_diag
         self.clearance = np.where(occ, 0.0, np.maximum(d, 0.0))
+        #: the planner's grid searches on these obstacles, by query (planner.PathPlanner._astar): the obstacles
+        #: never change once made, so neither does a search's result
+        self.searches: dict = {}
 
     # ------------------------------------------------------------------------------------------ grid
     def cell(self, x: float, y: float) -> tuple[int, int]:
@@ -117,29 +124,74 @@ class FieldObstacles:
         cx, cy = self.center(i, j)
         return max(0.0, float(self.clearance[i, j]) - math.hypot(x - cx, y - cy))
 
+    def clearance_of(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """:meth:`clearance_at` of many points at once (arrays of x and y, m)."""
+        r = self.resolution
+        i = np.minimum(np.maximum(((x - self.x0) / r).astype(int), 0), self.nx - 1)  # (astype: towards 0, as int())
+        j = np.minimum(np.maximum(((y - self.y0) / r).astype(int), 0), self.ny - 1)
+        off = np.hypot(x - (self.x0 + (i + 0.5) * r), y - (self.y0 + (j + 0.5) * r))
+        return np.maximum(0.0, self.clearance[i, j] - off)
+
     def segment_clear(self, a, b, radius: float) -> bool:
         """True when every point of the segment a-b (m) has clearance >= ``radius``."""
         n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / (self.resolution / 2)) + 1)
-        for k in range(n):
-            u = k / (n - 1)
-            if self.clearance_at(a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1])) < radius:
-                return False
-        return True
+        u = np.arange(n) / (n - 1)
+        return not (self.clearance_of(a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1])) < radius).any()
 
     # ------------------------------------------------------------------------------------------ exact
+    def collides_any(self, footprint: Footprint, x: np.ndarray, y: np.ndarray, theta: float) -> bool:
+        """:meth:`collides` for many positions at one heading (arrays of x and y, m): does any of them?"""
+        if len(x) == 0:
+            return False
+        (fx0, fx1), (fy0, fy1) = self.floor
+        local = footprint.corners_at(0.0, 0.0, theta)  # (rects, 4, 2) at the heading, base_link at 0
+        corners = local[None] + np.stack((x, y), axis=-1)[:, None, None, :]  # (poses, rects, 4, 2)
+        if (corners[..., 0].min() < fx0 or corners[..., 0].max() > fx1
+                or corners[..., 1].min() < fy0 or corners[..., 1].max() > fy1):
+            return True
+        d = np.hypot(self._centres[:, 0][None] - x[:, None], self._centres[:, 1][None] - y[:, None])
+        near = (d <= (self._radii + footprint.radius)[None]).any(axis=0)
+        quads = near[self._quad_index]
+        flat = corners.reshape(-1, 4, 2)
+        if quads.any() and _quads_overlap(flat, self._quads[quads], self._quad_axes[quads]).any():
+            return True
+        others = [self.polygons[k] for k in np.flatnonzero(near) if self.polygons[k].shape != (4, 2)]
+        return any(polygons_overlap(poly, ob) for poly in flat for ob in others)
+
     def collides(self, footprint: Footprint, pose: tuple[float, float, float], ignore_floor: bool = False) -> bool:
         """Exact test: does the outline at ``pose`` overlap an obstacle or leave the floor?"""
         (fx0, fx1), (fy0, fy1) = self.floor
         near = np.hypot(self._centres[:, 0] - pose[0], self._centres[:, 1] - pose[1]) <= self._radii + footprint.radius
-        candidates = [self.polygons[k] for k in np.flatnonzero(near)]
-        for poly in footprint.polygons(*pose):
-            if not ignore_floor and (poly[:, 0].min() < fx0 or poly[:, 0].max() > fx1
-                                     or poly[:, 1].min() < fy0 or poly[:, 1].max() > fy1):
-                return True
-            for ob in candidates:
-                if polygons_overlap(poly, ob):
-                    return True
-        return False
+        quads = near[self._quad_index]
+        others = [self.polygons[k] for k in np.flatnonzero(near) if self.polygons[k].shape != (4, 2)]
+        corners = footprint.corners_at(*pose)
+        if not ignore_floor and (corners[..., 0].min() < fx0 or corners[..., 0].max() > fx1
+                                 or corners[..., 1].min() < fy0 or corners[..., 1].max() > fy1):
+            return True
+        if quads.any() and _quads_overlap(corners, self._quads[quads], self._quad_axes[quads]).any():
+            return True
+        return any(polygons_overlap(poly, ob) for poly in corners for ob in others)
+
+
+def _edge_normals(quads: np.ndarray) -> np.ndarray:
+    """Each edge's normal (not unit length) of each quadrilateral (n, 4, 2): the separating axes."""
+    e = np.roll(quads, -1, axis=1) - quads
+    return np.stack((-e[..., 1], e[..., 0]), axis=-1)
+
+
+def _quads_overlap(a: np.ndarray, b: np.ndarray, b_axes: np.ndarray) -> np.ndarray:
+    """:func:`polygons_overlap` for convex quadrilaterals, every one of ``a`` (n, 4, 2) against every one of
+    ``b`` (m, 4, 2, edge normals ``b_axes``): (n, m) booleans. Touching counts as overlap."""
+    a_axes = _edge_normals(a)
+    # projections on a's axes: a's corners (n, 4 axes, 4 corners), b's (n, m, 4, 4)
+    pa = np.einsum("nad,ncd->nac", a_axes, a)
+    pb = np.einsum("nad,mcd->nmac", a_axes, b)
+    sep = (pa.max(-1)[:, None] < pb.min(-1)) | (pb.max(-1) < pa.min(-1)[:, None])
+    # and on b's axes: b's corners (m, 4, 4), a's (n, m, 4, 4)
+    qb = np.einsum("mad,mcd->mac", b_axes, b)
+    qa = np.einsum("mad,ncd->nmac", b_axes, a)
+    sep |= (qa.max(-1) < qb.min(-1)[None]) | (qb.max(-1)[None] < qa.min(-1))
+    return ~sep.any(-1)
 
 
 def _inside_convex(poly: np.ndarray, X: np.ndarray, Y: np.ndarray, pad: float = 0.0) -> np.ndarray:

@@ -25,6 +25,7 @@ from .obstacles import FieldObstacles
 from .smooth import RADII, SmoothPath, smooth_path
 
 _NEIGHBOURS = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)]
+SEARCHES_KEPT = 512  # grid searches remembered per obstacle set (FieldObstacles.searches)
 
 
 class NoPath(RuntimeError):
@@ -147,50 +148,88 @@ class PathPlanner:
         return int(idx[k, 0]), int(idx[k, 1])
 
     def _astar(self, s, g, free: np.ndarray, need: float) -> list[tuple[int, int]]:
+        """The grid search from cell ``s`` to ``g``, remembered on the obstacles (which never change): a decision
+        plans the same legs several times over (timing each destination, then the leg it chose)."""
+        ob = self.obstacles
+        key = (s, g, need, self.keep_away, self.keep_away_weight)
+        found = ob.searches.get(key)
+        if found is None:
+            try:
+                found = tuple(self._search(s, g, free, need))
+            except NoPath as e:
+                found = e
+            if len(ob.searches) >= SEARCHES_KEPT:
+                ob.searches.clear()
+            ob.searches[key] = found
+        if isinstance(found, NoPath):
+            raise NoPath(str(found))
+        return list(found)
+
+    def _search(self, s, g, free: np.ndarray, need: float) -> list[tuple[int, int]]:
+        """A* over the free cells, 8-connected; a step into a cell with less than ``need + keep_away`` of
+        clearance costs more (``keep_away_weight``). Cells are flat indices into the grid padded by one
+        non-free cell all round (no bounds checks); the arithmetic and the heap's order are those of (i, j)."""
         ob = self.obstacles
         res = ob.resolution
-        clr = ob.clearance
         pref = need + self.keep_away
         w = self.keep_away_weight
         nx, ny = free.shape
+        W = ny + 2
+        padded = np.zeros((nx + 2, W), dtype=bool)
+        padded[1:-1, 1:-1] = free
+        # a step's cost factor into each free cell that keeps less than pref clear (else None: the plain step)
+        short = (pref - ob.clearance).ravel()
+        near = np.flatnonzero((short > 0) & free.ravel())
+        factors = [None] * ((nx + 2) * W)
+        for k, f in zip(((near // ny + 1) * W + near % ny + 1).tolist(),
+                        (1.0 + w * short[near] / self.keep_away).tolist()):
+            factors[k] = f
+        is_free = padded.ravel().tolist()
+        moves = [(di * W + dj, res * (1.4142135623730951 if di and dj else 1.0)) for di, dj in _NEIGHBOURS]
+        start, goal = (s[0] + 1) * W + s[1] + 1, (g[0] + 1) * W + g[1] + 1
         gx, gy = g
-        best = {s: 0.0}
-        parent: dict = {s: None}
-        heap = [(0.0, 0.0, s)]
+        best = [math.inf] * len(is_free)
+        best[start] = 0.0
+        parent = [-1] * len(is_free)
+        parent[start] = start
+        heap = [(0.0, 0.0, start)]
+        pop, push, hypot = heapq.heappop, heapq.heappush, math.hypot
         while heap:
-            _, cost, c = heapq.heappop(heap)
-            if c == g:
+            _, cost, c = pop(heap)
+            if c == goal:
                 break
-            if cost > best.get(c, math.inf):
+            if cost > best[c]:
                 continue
-            ci, cj = c
-            for di, dj in _NEIGHBOURS:
-                i, j = ci + di, cj + dj
-                if not (0 <= i < nx and 0 <= j < ny) or not free[i, j]:
+            for dk, base in moves:
+                k = c + dk
+                if not is_free[k]:
                     continue
-                step = res * (1.4142135623730951 if di and dj else 1.0)
-                short = pref - clr[i, j]
-                if short > 0:
-                    step *= 1.0 + w * short / self.keep_away
-                nc = cost + step
-                if nc < best.get((i, j), math.inf):
-                    best[(i, j)] = nc
-                    parent[(i, j)] = c
-                    h = res * math.hypot(i - gx, j - gy)
-                    heapq.heappush(heap, (nc + h, nc, (i, j)))
-        if g not in parent:
+                f = factors[k]
+                nc = cost + (base if f is None else base * f)
+                if nc < best[k]:
+                    best[k] = nc
+                    parent[k] = c
+                    i, j = divmod(k, W)
+                    push(heap, (nc + res * hypot(i - 1 - gx, j - 1 - gy), nc, k))
+        if parent[goal] < 0:
             raise NoPath(f"no path from {ob.center(*s)} to {ob.center(*g)} with clearance {need:.3f} m")
-        out = []
-        c = g
-        while c is not None:
-            out.append(c)
-            c = parent[c]
-        return out[::-1]
+        out = [goal]
+        while out[-1] != start:
+            out.append(parent[out[-1]])
+        return [(k // W - 1, k % W - 1) for k in reversed(out)]
 
     def _shortcut(self, pts: list, need: float) -> list:
-        """Greedy string pulling: from each kept point, jump to the farthest point it sees."""
+        """Greedy string pulling: from each kept point, jump to the farthest point it sees (remembered with the
+        searches: the same search's cells are pulled the same way)."""
         if len(pts) <= 2:
             return list(pts)
+        key = ("shortcut", tuple(pts), need)
+        found = self.obstacles.searches.get(key)
+        if found is None:
+            found = self.obstacles.searches[key] = tuple(self._pull(pts, need))
+        return list(found)
+
+    def _pull(self, pts: list, need: float) -> list:
         out = [pts[0]]
         i = 0
         while i < len(pts) - 1:
@@ -317,12 +356,10 @@ class PathPlanner:
         need = footprint.radius + inflate
         h = math.atan2(b[1] - a[1], b[0] - a[0])
         n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / 0.01) + 1)
-        for k in range(n):
-            u = k / (n - 1)
-            x, y = a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1])
-            if self.obstacles.clearance_at(x, y) < need and self.obstacles.collides(fp, (x, y, h)):
-                return False
-        return True
+        u = np.arange(n) / (n - 1)
+        x, y = a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1])
+        near = self.obstacles.clearance_of(x, y) < need  # only there can the exact outline touch anything
+        return not self.obstacles.collides_any(fp, x[near], y[near], h)
 
     # ------------------------------------------------------------------------------------------ slots
     def approach_pose(self, slot, dock_distance: float, footprint: Footprint | float,
