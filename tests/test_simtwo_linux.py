@@ -280,8 +280,9 @@ def test_bench_simtwo_one_run():
     # patch 15: a reply is applied in (nearly) every cycle (before it: 58-61 %)
     assert 0.95 <= r["replies_applied_share"] <= 1.0 and r["replies_ignored"] == 0
     # SimTwo renders in software (llvmpipe): 6.7-7.3 frames/s on the machines of docs/simtwo.md, 3.6 on a slower
-    # one quiet and 1.8-2.3 there in the suite (2026-11-26): the bound says the camera streams, not how fast
-    assert r["camera_frames_per_s"] >= 1.2 and 0 < r["camera_after_sensorframe_ms"] <= 60
+    # one quiet and 1.8-2.3 there in the suite (2026-11-26), 0.9 in the suite on another (2026-11-29): the bound
+    # says the camera streams (three frames or more), not how fast (raf bench simtwo measures that)
+    assert r["camera_frames_per_s"] * r["streaming_s"] >= 3 and 0 < r["camera_after_sensorframe_ms"] <= 60
     assert r["straight_odom_over_truth"] == pytest.approx(1.0, abs=0.01)
     # 184-186 on the earlier hosts; 190.7 once in CI on a host that renders at half speed (its loop stalls)
     assert r["spin_truth_turn_deg"] == pytest.approx(180, abs=15)
