@@ -24,6 +24,9 @@ def test_every_leg_is_planned_and_the_agent_settings_act(field):
     out = planning.run(_args())
     assert out["legs_without_path"] == 0 and out["legs_empty"] == out["legs_carrying"] == 48
     assert out["cpu_ms_per_leg_carrying"] > 0 and 2.0 < out["drive_s_per_leg_empty_mean"] < 10.0
+    for r in (1, 3):  # a decision (the choice after a pick) costs more than a cycle that follows a path
+        assert out[f"round{r}_cycle_ms_max"] > 3 * out[f"round{r}_cycle_ms_median"] > 0
+        assert out[f"round{r}_cycles_over_period"] >= 0
     plain = planning.run(_args("legs.arc_join=0"))
     assert plain["agent_settings"] == "legs.arc_join=0"
     # legs under machine B join their slot's normal on an arc only with arc_join: fewer turns on the spot

@@ -5,7 +5,14 @@ normal, the smoothing into arcs) at every decision, several when it chooses a de
 time the robot waits for it. This plans a fixed set: every slot of the four zones from six poses spread over the
 field, empty to a pick and carrying to a place as the slot's role allows (``--agent`` settings as in ``raf
 experiment competition``), on the nominal map with no part in it, and times each leg's planning (CPU, one core)
-and its kinematic drive (:meth:`~robotatfactory.agent.legs.LegPlanner.leg_time`).
+and its kinematic drive (:meth:`~robotatfactory.agent.legs.LegPlanner.leg_time`). Each pass plans on
+obstacles of its own: the planner remembers its searches with the obstacles (a decision plans the same legs
+several times), and a pass on the previous pass's obstacles would time only the memory.
+
+Then the decisions as a round makes them: rounds 1 and 3 of seed 100 on the bare stand-in (ground truth as the
+pose, ``--agent`` settings), each control cycle's wall time (the agent's step and the bare simulator's cycle,
+about a millisecond): the longest cycle is the choice of a destination after a pick, during which a robot in
+real time gets no new command (paced runs wait for it).
 """
 from __future__ import annotations
 
@@ -58,12 +65,12 @@ def run(args) -> dict:
     field, robot = load_field(), load_robot()
     tree = parse_agent(args.agent)
     legs = RoundAgent(field, robot, agent_settings(tree)).legs
-    ob = FieldObstacles(field, [])
     todo = legs_to_plan(field)
     cpu = {False: [], True: []}
     drive = {False: [], True: []}
     failed = 0
     for rep in range(max(1, args.repeats)):
+        ob = FieldObstacles(field, [])
         per = {False: [], True: []}
         for pose, ref, carrying, dock in todo:
             t0 = time.process_time()
@@ -79,7 +86,7 @@ def run(args) -> dict:
             cpu[k].append(float(np.mean(per[k])) if per[k] else math.nan)
         print(f"[bench planning] pass {rep + 1}: {1000 * cpu[False][-1]:.1f} ms a leg empty, "
               f"{1000 * cpu[True][-1]:.1f} ms carrying", flush=True)
-    return {
+    out = {
         "agent_settings": ", ".join(args.agent) if args.agent else "defaults",
         "map": f"{field.name}, nominal, no part in it",
         "legs": len(todo),
@@ -92,3 +99,29 @@ def run(args) -> dict:
         "drive_s_per_leg_carrying_mean": float(np.mean(drive[True])) if drive[True] else math.nan,
         "repeats": max(1, args.repeats),
     }
+    for round_no in (1, 3):
+        cycles = round_cycles(round_no, 100, tree)
+        print(f"[bench planning] round {round_no} seed 100 (bare): longest cycle {1000 * max(cycles):.0f} ms",
+              flush=True)
+        out[f"round{round_no}_cycle_ms_max"] = 1000 * max(cycles)
+        out[f"round{round_no}_cycle_ms_median"] = 1000 * float(np.median(cycles))
+        out[f"round{round_no}_cycles_over_period"] = sum(c > robot.control_period for c in cycles)
+        out[f"round{round_no}_cycle_s_over_period_total"] = sum(c for c in cycles if c > robot.control_period)
+    return out
+
+
+def round_cycles(round_no: int, seed: int, agent: dict) -> list[float]:
+    """Wall seconds of each control cycle of a bare round (the agent's step and the simulator's cycle)."""
+    from ..experiments.competition import play_round
+
+    cycles: list[float] = []
+    t0 = [0.0]
+
+    def before(sim, agent_) -> None:
+        t0[0] = time.perf_counter()
+
+    def after(sim, agent_, command, frame) -> None:
+        cycles.append(time.perf_counter() - t0[0])
+
+    play_round(round_no, seed, agent=agent, on_cycle=before, after_cycle=after)
+    return cycles
