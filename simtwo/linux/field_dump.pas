@@ -17,8 +17,12 @@
 //                                                         and where it stands PROBE_SETTLE cycles later
 //   FIELD lidar <name> <x> <y> <theta> <n> <r0>;<r1>;...   the LIDAR's sweep with the robot set down there
 //                                                         (its pose as SimTwo reads it at the sweep)
-//   FIELD camera <name> <x> <y> <theta>                    the robot stands there CAMERA_HOLD cycles more, for
-//                                                         a camera frame (read by fielddump.py over ZMQ)
+//   FIELD camera <name> <x> <y> <theta>                    the robot stands there until a datagram
+//                                                         'FIELD next <name>' arrives on SimTwo's UDP port
+//                                                         (fielddump.py sends it once it holds a frame
+//                                                         rendered after the line; a software-rendered
+//                                                         camera gives about one a second) or CAMERA_HOLD
+//                                                         cycles have passed
 //   FIELD done
 //
 // SimTwo's script API has no obstacle count, ID or size getter: the obstacles are read by index until the
@@ -29,7 +33,8 @@
 
 const
   PROBE_SETTLE = 12;     // cycles a probe waits (0.48 s at 40 ms: two LIDAR periods of 0.2 s, a part at rest)
-  CAMERA_HOLD = 10;      // cycles the robot stands still after its camera line (0.4 s: several frames)
+  CAMERA_HOLD = 500;     // cycles the robot stands still at most after its camera line (20 s), waiting for
+                         // 'FIELD next <name>' from fielddump.py
   PART_Z = 0.0021;       // scene.xml part_pos_z
   SPARE_X = 3.0;         // parts wait off the field, beyond every wall, at (SPARE_X, SPARE_Y + 0.2 i)
   SPARE_Y = 3.0;
@@ -38,7 +43,7 @@ var
   Cycle, Phase, ProbeIndex, ProbeWait: integer;
   RAGV, RProbe, ILidar: integer;
   PX, PY, PTh: double;
-  PName: string;
+  PName, Heard, Dropped: string;
   Done: boolean;
 
 function F(x: double): string;
@@ -230,6 +235,9 @@ begin
     ProbeWait := 2;  // the parts leave first
     exit;
   end;
+  Heard := ReadUDPData();        // SimTwo keeps each datagram twice: here, and in the packet list
+  while GetUDPPacketCount() > 0 do Dropped := ReadUDPPacket();
+  if (Phase = 3) and (Pos('FIELD next ' + PName + ';', Heard) > 0) then ProbeWait := 1;
   ProbeWait := ProbeWait - 1;
   if ProbeWait > 0 then exit;
   if Phase = 2 then begin

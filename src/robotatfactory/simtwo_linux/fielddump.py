@@ -23,6 +23,7 @@ import ast
 import math
 import operator
 import re
+import socket
 import tempfile
 import time
 import xml.etree.ElementTree as ET
@@ -32,6 +33,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..simtwo.ports import LOCALHOST
 from .scene import DEFAULT_SCENE, SIMTWO_DIR
 
 SCRIPT = SIMTWO_DIR / "linux" / "field_dump.pas"
@@ -62,6 +64,8 @@ LIDAR_SHARE = 0.95
 #: positions the field texture gives to 0.04 mm, i.e. the robot's camera model (robot_simtwo.json) against
 #: SimTwo's GLScene camera, not the field; 5 px is twice that
 CAMERA_PX = 5.0
+#: the frame taken for a camera line: the second received after it (the first may have been rendered before)
+FRAMES_AFTER_LINE = 2
 
 
 # ---------------------------------------------------------------------------------------------- the dump
@@ -297,7 +301,7 @@ def _wrap(defines_node):
 
 
 # ---------------------------------------------------------------------------------------------- running it
-def run_dump(fld, build=None, timeout: float = 120.0, keep: Path | None = None,
+def run_dump(fld, build=None, timeout: float = 240.0, keep: Path | None = None,
              progress: Callable[[str], None] = lambda _m: None, probe_list: list[Probe] | None = None,
              robot_camera=None) -> Dump:
     """One SimTwo start with field_dump.pas (probes from ``fld``); its lines and camera frames parsed.
@@ -314,31 +318,37 @@ def run_dump(fld, build=None, timeout: float = 120.0, keep: Path | None = None,
     run = SimTwoRun(build, Ports.free(), camera=True, script=script, ready_line=READY_LINE, workdir=keep,
                     keep=keep is not None, progress=progress, robot_camera=robot_camera)
     frames: dict[str, np.ndarray] = {}
-    sub = None
+    sub = udp = None
     try:
         run.start(timeout=90)
         sub = zmq.Context.instance().socket(zmq.SUB)
         sub.setsockopt(zmq.SUBSCRIBE, b"")
         sub.setsockopt(zmq.LINGER, 0)
         sub.connect(f"tcp://127.0.0.1:{run.ports.camera}")
+        udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         end = time.monotonic() + timeout
         seen: set[str] = set()
-        pending: list[tuple[str, float]] = []
+        pending: dict[str, int] = {}   # camera line's probe -> frames received since the line
         while True:
             run.check()
             msgs = run.messages()
             for m in msgs:
                 if m.startswith("script: FIELD camera ") and m not in seen:
                     seen.add(m)
-                    pending.append((m.split()[3], time.monotonic()))
+                    pending[m.split()[3]] = 0
+                    while sub.poll(0):   # frames queued before the line was read were rendered before it
+                        sub.recv()
             while sub.poll(20):
                 data = sub.recv()
-                now = time.monotonic()
-                for name, t in list(pending):
-                    # the first whole frame rendered after the line: the robot stands still for CAMERA_HOLD
-                    if now - t > 0.1:
+                for name in list(pending):
+                    # the first frame received after the line may have been rendered before it (a software
+                    # camera takes ~1 s a frame); the second was rendered after the first was sent. The robot
+                    # stands still until told to go on.
+                    pending[name] += 1
+                    if pending[name] >= FRAMES_AFTER_LINE:
                         frames[name] = data
-                        pending.remove((name, t))
+                        del pending[name]
+                        udp.sendto(f"FIELD next {name};".encode(), (LOCALHOST, run.ports.udp))
             if DONE_LINE in msgs and not pending:
                 break
             if time.monotonic() > end:
@@ -347,6 +357,8 @@ def run_dump(fld, build=None, timeout: float = 120.0, keep: Path | None = None,
     finally:
         if sub is not None:
             sub.close()
+        if udp is not None:
+            udp.close()
         run.stop()
         import shutil
 
