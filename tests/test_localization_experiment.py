@@ -139,8 +139,9 @@ def test_bag_options(tmp_path):
 
 @pytest.mark.middlewares
 def test_calibration_drive_recording_reads_back(middleware, tmp_path):
-    """The calibration drive's bag (this middleware's format) holds what raf calibrate reads: every 3rd image,
-    every odom and camera_info, under global names, at their header stamps."""
+    """The calibration drive's bag (this middleware's format) holds what raf calibrate reads: an image per 0.2 s
+    (every 3rd of a 15 fps camera, every one of a 1 fps camera), every odom and camera_info, under global names,
+    at their header stamps."""
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import CameraInfo, Image
 
@@ -150,11 +151,11 @@ def test_calibration_drive_recording_reads_back(middleware, tmp_path):
     from robotatfactory.ros.mw.base import stamp_ns
 
     path = tmp_path / ("drive.bag" if middleware == "ros1" else "drive")
-    sink = BagSink(path, image_every=3)
+    sink = BagSink(path, image_period_s=0.2)
     on_odom, on_info = sink.writer("odom", "odom"), sink.writer("camera/camera_info", "camera_info")
     for k in range(7):
         img = Image(height=2, width=3, encoding="bgr8", step=9, data=bytes([k] * 18))
-        img.header.stamp = rm.stamp_ms(40 * k + 7)
+        img.header.stamp = rm.stamp_ms(round(1000 * k / 15) + 7)   # the stand-in's 15 fps
         sink.image(img)
         info = CameraInfo(height=2, width=3)
         info.header.stamp = rm.stamp_ms(40 * k + 7)
@@ -171,7 +172,15 @@ def test_calibration_drive_recording_reads_back(middleware, tmp_path):
         assert find_topic(bag.topics, "camera/image_raw") == ["/camera/image_raw"]
         images = list(bag.messages(["/camera/image_raw"]))
         odoms = list(bag.messages(["/odom"]))
-    assert [t for _, t, _ in images] == [(40 * k + 7) * 1_000_000 for k in (0, 3, 6)]
+    assert [t for _, t, _ in images] == [(round(1000 * k / 15) + 7) * 1_000_000 for k in (0, 3, 6)]
     assert [int(m.data[0]) for _, _, m in images] == [0, 3, 6]
     assert [stamp_ns(m.header.stamp) for _, _, m in odoms] == [40 * k * 1_000_000 for k in range(7)]
     assert odoms[-1][2].twist.twist.linear.x == pytest.approx(0.6)
+
+    slow = BagSink(tmp_path / ("slow.bag" if middleware == "ros1" else "slow"), image_period_s=0.2)
+    for ms in (0, 840, 1690, 2500, 2450):  # a 1 fps software camera (SimTwo's on a slow host), then a restart
+        img = Image(height=2, width=3, encoding="bgr8", step=9, data=bytes(18))
+        img.header.stamp = rm.stamp_ms(ms)
+        slow.image(img)
+    slow.close()
+    assert slow.counts["images"] == 5

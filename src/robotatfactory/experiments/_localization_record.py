@@ -54,13 +54,18 @@ SIMTWO_SIM_OPTIONS: tuple = ()
 # ------------------------------------------------------------------------------------------- recorder
 
 
+#: the calibration drive keeps a camera frame per this much camera time (s)
+IMAGE_PERIOD_S = 0.2
+
+
 class Recorder:
     """The experiment's recording on this process's node (:class:`~robotatfactory.ros.processes.ExperimentNode`,
     either middleware): drives the route on ground truth and records every pose stream; on the calibration
-    drive also camera/image_raw (every ``image_every``-th frame), camera_info and odom into a bag
+    drive also camera/image_raw (one frame per ``image_period_s`` of camera time), camera_info and odom into a bag
     (:func:`open_bag_writer`)."""
 
-    def __init__(self, exp, route, speed: float, robot, bag_path: Path | None = None, image_every: int = 3):
+    def __init__(self, exp, route, speed: float, robot, bag_path: Path | None = None,
+                 image_period_s: float = IMAGE_PERIOD_S):
         from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
         from nav_msgs.msg import Odometry
 
@@ -86,12 +91,12 @@ class Recorder:
         self.subs += [node.subscribe(f"aruco/fixes/{m}", Pose, self._rec(m), QoS.RELIABLE, 50) for m in METHODS]
         self.subs += [node.subscribe(f"aruco/fixes/filter_{k}", Pose, self._rec(k), QoS.RELIABLE, 100)
                       for k in ("accepted", "rejected")]
-        # the calibration drive: camera/image_raw (every image_every-th frame), camera_info and odom to a bag
+        # the calibration drive: camera/image_raw (one frame per image_period_s), camera_info and odom to a bag
         self.bag = None
         if bag_path is not None:
             from sensor_msgs.msg import CameraInfo, Image
 
-            self.bag = bag = BagSink(bag_path, image_every)
+            self.bag = bag = BagSink(bag_path, image_period_s)
             self.subs += [node.subscribe("camera/image_raw", Image, bag.image, QoS.SENSOR, 20, large=True),
                           node.subscribe("camera/camera_info", CameraInfo, bag.writer("camera/camera_info",
                                                                                       "camera_info"), QoS.SENSOR, 20),
@@ -183,13 +188,18 @@ def stamp_ns(stamp) -> int:
 
 class BagSink:
     """The calibration drive's recording: callbacks that write messages to a bag (:func:`open_bag_writer`)
-    under global topic names (``/camera/image_raw``), stamped with their header stamps; images only every
-    ``image_every``-th. ``counts``: messages written (images, odom, camera_info)."""
+    under global topic names (``/camera/image_raw``), stamped with their header stamps; an image only once
+    ``image_period_s`` of header time has passed since the last one kept (a frame in 3 from the stand-in's
+    15 fps camera; every frame from a software-rendered SimTwo at 1-9 fps). ``counts``: messages written
+    (images, odom, camera_info)."""
 
-    def __init__(self, path: Path, image_every: int = 3):
+    def __init__(self, path: Path, image_period_s: float = IMAGE_PERIOD_S):
+        if not image_period_s >= 0:
+            raise ValueError(f"image_period_s {image_period_s} must be >= 0")
         self._bag = open_bag_writer(path)
         self._lock = threading.Lock()
-        self._every, self._n = max(1, int(image_every)), 0
+        # 5 ms of slack: frames 66.7 ms apart, stamped to the millisecond, are kept every 3rd at 0.2 s
+        self._period_ns, self._last_ns = int(image_period_s * 1e9) - 5_000_000, None
         self.counts = {"images": 0, "odom": 0, "camera_info": 0}
         self.closed = False
 
@@ -202,9 +212,11 @@ class BagSink:
         return cb
 
     def image(self, msg) -> None:
+        t = stamp_ns(msg.header.stamp)
         with self._lock:
-            self._n += 1
-            take = (self._n - 1) % self._every == 0
+            take = self._last_ns is None or t - self._last_ns >= self._period_ns or t < self._last_ns
+            if take:
+                self._last_ns = t
         if take:
             self.writer("camera/image_raw", "images")(msg)
 
@@ -430,8 +442,8 @@ def experiment_graph(node_name: str, work: Path, log_dir: Path):
 
 def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, robot_file: Path | None, robot,
                       out_dir: Path | None, notes: list, sim_extra: tuple[str, ...] = ()) -> tuple[Path | None, dict]:
-    """``--calibration auto``: drive the calibration route recording a bag of camera/image_raw (every 3rd
-    frame), camera_info and odom (``--save-bag FILE`` keeps it), then ``raf calibrate --bag`` on it; with
+    """``--calibration auto``: drive the calibration route recording a bag of camera/image_raw (a frame per
+    IMAGE_PERIOD_S), camera_info and odom (``--save-bag FILE`` keeps it), then ``raf calibrate --bag`` on it; with
     ``--bag FILE``, no drive: ``raf calibrate`` on that recording. Returns the calibration file and result keys.
     ``sim_extra``: more ``raf sim`` options for the drive (the competition experiment's world: ``--round R
     --set perturb.NAME=VALUE``, so that the stand-in renders with the round's drawn camera)."""
