@@ -11,7 +11,7 @@ The perturbed robot file goes to ``raf simtwo run --robot FILE``, which writes i
 copy's AGV.xml (:func:`robotatfactory.simtwo_linux.scene.install_camera`). The drive is the localization
 experiment's calibration drive on SimTwo (:func:`._localization_record.calibration_drive`: the route
 ``calibration`` at ``--calibration-speed``, pure pursuit on SimTwo's ground truth, raf bridge on a private
-ROS graph, every 3rd camera frame and odom recorded to a bag), then ``raf calibrate --bag`` from the NOMINAL
+ROS graph, a camera frame per 0.2 s and odom recorded to a bag), then ``raf calibrate --bag`` from the NOMINAL
 camera; the result has the stand-in's keys (errors against the perturbed true camera, the targets) with
 ``simulator`` = simtwo. The stand-in's ``--route``, ``--laps``, ``--speed``, ``--every``, ``--wheel-error``
 and fit options do not apply (refused when given).
