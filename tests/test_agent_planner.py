@@ -262,3 +262,28 @@ def test_a_search_is_remembered_with_its_obstacles(field, geo):
         with pytest.raises(NoPath):
             PathPlanner(walled).plan(start, goal, empty)
     assert any(isinstance(v, NoPath) for v in walled.searches.values())
+
+
+def test_the_search_memo_is_bounded_for_every_kind_of_entry(field, geo, monkeypatch):
+    """Grid searches and string pulls both go through FieldObstacles.remember: past SEARCHES_KEPT entries the
+    memo starts again, whichever kind filled it, and the paths stay the same."""
+    from robotatfactory.agent import obstacles
+
+    empty, _, _ = geo
+    monkeypatch.setattr(obstacles, "SEARCHES_KEPT", 3)
+    ob = FieldObstacles(field, [])
+    planner = PathPlanner(ob)
+    reference = PathPlanner(FieldObstacles(field, [])).plan((-0.6, -0.35), (0.55, 0.3), empty).points
+    kinds, remember = set(), ob.remember
+
+    def spy(key, value):
+        kinds.add("pull" if key[0] == "shortcut" else "search")
+        out = remember(key, value)
+        assert len(ob.searches) <= 3
+        return out
+
+    monkeypatch.setattr(ob, "remember", spy)
+    for gx in (0.55, 0.5, 0.45, 0.4, 0.35):
+        planner.plan((-0.6, -0.35), (gx, 0.3), empty)
+    assert kinds == {"pull", "search"}
+    assert planner.plan((-0.6, -0.35), (0.55, 0.3), empty).points == reference

@@ -22,6 +22,8 @@ from scipy import ndimage
 
 from .footprint import PLATE_THICKNESS, Footprint
 
+SEARCHES_KEPT = 512  # planner searches remembered per obstacle set (FieldObstacles.searches)
+
 
 @dataclass(frozen=True)
 class PartObstacle:
@@ -104,7 +106,7 @@ class FieldObstacles:
         d = ndimage.distance_transform_edt(~occ) * res - half_diag
         self.clearance = np.where(occ, 0.0, np.maximum(d, 0.0))
         #: the planner's grid searches on these obstacles, by query (planner.PathPlanner._astar): the obstacles
-        #: never change once made, so neither does a search's result
+        #: never change once made, so neither does a search's result. Written through :meth:`remember`
         self.searches: dict = {}
 
     # ------------------------------------------------------------------------------------------ grid
@@ -143,34 +145,38 @@ class FieldObstacles:
         """:meth:`collides` for many positions at one heading (arrays of x and y, m): does any of them?"""
         if len(x) == 0:
             return False
-        (fx0, fx1), (fy0, fy1) = self.floor
         local = footprint.corners_at(0.0, 0.0, theta)  # (rects, 4, 2) at the heading, base_link at 0
         corners = local[None] + np.stack((x, y), axis=-1)[:, None, None, :]  # (poses, rects, 4, 2)
-        if (corners[..., 0].min() < fx0 or corners[..., 0].max() > fx1
-                or corners[..., 1].min() < fy0 or corners[..., 1].max() > fy1):
-            return True
         d = np.hypot(self._centres[:, 0][None] - x[:, None], self._centres[:, 1][None] - y[:, None])
         near = (d <= (self._radii + footprint.radius)[None]).any(axis=0)
-        quads = near[self._quad_index]
-        flat = corners.reshape(-1, 4, 2)
-        if quads.any() and _quads_overlap(flat, self._quads[quads], self._quad_axes[quads]).any():
-            return True
-        others = [self.polygons[k] for k in np.flatnonzero(near) if self.polygons[k].shape != (4, 2)]
-        return any(polygons_overlap(poly, ob) for poly in flat for ob in others)
+        return self._corners_collide(corners.reshape(-1, 4, 2), near, check_floor=True)
 
     def collides(self, footprint: Footprint, pose: tuple[float, float, float], ignore_floor: bool = False) -> bool:
         """Exact test: does the outline at ``pose`` overlap an obstacle or leave the floor?"""
-        (fx0, fx1), (fy0, fy1) = self.floor
         near = np.hypot(self._centres[:, 0] - pose[0], self._centres[:, 1] - pose[1]) <= self._radii + footprint.radius
-        quads = near[self._quad_index]
-        others = [self.polygons[k] for k in np.flatnonzero(near) if self.polygons[k].shape != (4, 2)]
-        corners = footprint.corners_at(*pose)
-        if not ignore_floor and (corners[..., 0].min() < fx0 or corners[..., 0].max() > fx1
-                                 or corners[..., 1].min() < fy0 or corners[..., 1].max() > fy1):
+        return self._corners_collide(footprint.corners_at(*pose), near, check_floor=not ignore_floor)
+
+    def _corners_collide(self, corners: np.ndarray, near: np.ndarray, check_floor: bool) -> bool:
+        """Do the rectangles ``corners`` (n, 4, 2) leave the floor (``check_floor``) or overlap an obstacle
+        flagged in ``near`` (a boolean per polygon: the only ones tested)?"""
+        (fx0, fx1), (fy0, fy1) = self.floor
+        if check_floor and (corners[..., 0].min() < fx0 or corners[..., 0].max() > fx1
+                            or corners[..., 1].min() < fy0 or corners[..., 1].max() > fy1):
             return True
+        quads = near[self._quad_index]
         if quads.any() and _quads_overlap(corners, self._quads[quads], self._quad_axes[quads]).any():
             return True
+        others = [self.polygons[k] for k in np.flatnonzero(near) if self.polygons[k].shape != (4, 2)]
         return any(polygons_overlap(poly, ob) for poly in corners for ob in others)
+
+    # ------------------------------------------------------------------------------------------ memo
+    def remember(self, key, value):
+        """Keep ``value`` under ``key`` in :attr:`searches` (at most :data:`SEARCHES_KEPT` entries: past that the
+        memo starts again) and return it."""
+        if len(self.searches) >= SEARCHES_KEPT:
+            self.searches.clear()
+        self.searches[key] = value
+        return value
 
 
 def _edge_normals(quads: np.ndarray) -> np.ndarray:

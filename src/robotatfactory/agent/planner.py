@@ -25,7 +25,6 @@ from .obstacles import FieldObstacles
 from .smooth import RADII, SmoothPath, smooth_path
 
 _NEIGHBOURS = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)]
-SEARCHES_KEPT = 512  # grid searches remembered per obstacle set (FieldObstacles.searches)
 
 
 class NoPath(RuntimeError):
@@ -158,9 +157,7 @@ class PathPlanner:
                 found = tuple(self._search(s, g, free, need))
             except NoPath as e:
                 found = e
-            if len(ob.searches) >= SEARCHES_KEPT:
-                ob.searches.clear()
-            ob.searches[key] = found
+            ob.remember(key, found)
         if isinstance(found, NoPath):
             raise NoPath(str(found))
         return list(found)
@@ -226,7 +223,7 @@ class PathPlanner:
         key = ("shortcut", tuple(pts), need)
         found = self.obstacles.searches.get(key)
         if found is None:
-            found = self.obstacles.searches[key] = tuple(self._pull(pts, need))
+            found = self.obstacles.remember(key, tuple(self._pull(pts, need)))
         return list(found)
 
     def _pull(self, pts: list, need: float) -> list:
