@@ -76,7 +76,9 @@ def test_fuzz_loss_and_restarts_on_the_real_simtwo(tmp_path):
     # restarts: SimTwo killed and restarted, the bridge killed and restarted, roscore restarted
     assert r[f"{p}restart_sim_process_start_to_first_frame_s"] <= 60
     assert r[f"{p}restart_sim_odom_back_s"] <= 1.0 and r[f"{p}restart_sim_clock_back_s"] <= 1.0
-    assert r[f"{p}restart_sim_image_back_s"] <= 5.0  # raf simtwo run opens SimTwo's Cameras window first
+    # raf simtwo run opens SimTwo's Cameras window first; its software GL's first frame came 4.7-7.7 s after the
+    # key press on a 2-core EPYC host (2026-11-29), under 5 s on faster ones
+    assert r[f"{p}restart_sim_image_back_s"] <= 12.0
     assert r[f"{p}restart_sim_odometry_resets"] == 1
     # control.pas: TimeMs - LastValidMs > COMMAND_TIMEOUT_MS (400), checked each 40 ms cycle: in SimTwo's ground
     # truth the wheels slow down in the first cycle more than the timeout after the last command, never before
