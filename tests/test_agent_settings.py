@@ -68,9 +68,11 @@ def test_the_round_agent_takes_the_settings_whole():
     assert default.limits == DriveLimits.from_robot(robot)
     assert default.carry_limits.w_max == Carrying.w_max
     a = RoundAgent(field, robot, agent_settings({"drive": {"v_max": 0.3, "k_heading": 6},
-                                                 "carry": {"w_max": 1.2}, "dock": {"approach_speed": 0.08}}))
+                                                 "carry": {"w_max": 1.2, "back_accel": 0.7},
+                                                 "dock": {"approach_speed": 0.08}}))
     assert (a.limits.v_max, a.limits.k_heading) == (0.3, 6.0)
     assert a.carry_limits.w_max == 1.2
+    assert default.docker.settings.a_back_carrying == Carrying.back_accel and a.docker.settings.a_back_carrying == 0.7
     assert a.docker.settings.v_dock == 0.08 and a.docker.approach_limits.v_max == 0.08
 
 

@@ -108,7 +108,8 @@ class RoundAgent:
         ds = self.settings.dock
         dock = DockSettings(v_dock=ds.approach_speed, v_place=ds.place_speed, magnet_early=ds.magnet_early,
                             press_time=ds.press_time,
-                            v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back)
+                            v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back,
+                            a_back_carrying=self.settings.carry.back_accel)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part, dock)
         # the place approach steers with a part on the magnet: no faster turning than carrying allows
         dl = self.docker

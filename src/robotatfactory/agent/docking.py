@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 from .follower import DriveLimits, PathFollower
 from .footprint import HOLD_GAP, PLATE_THICKNESS, pose_in_front, wrap
 from .recovery import StuckDetector
-from .settings import Docking
+from .settings import Carrying, Docking
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ class DockSettings:
     # m/s^2 and m/s: backing out with the part, the speed ramps up and down at this rate and ends at this speed
     # (SimTwo's magnet let the part go when the robot set off at 2 m/s^2 and stopped from 0.25 m/s at once:
     # 5 of 12 picks lost on round 1, docs/simtwo.md "The agent on SimTwo")
-    a_back_carrying: float = 0.4
+    a_back_carrying: float = Carrying.back_accel
     v_back_carrying_final: float = 0.03
     lookahead: float = 0.12  # m: the approach steers onto the slot's normal (0.06: more grazing with a late pose)
     magnet_early: bool = Docking.magnet_early  # the magnet on from the approach's start (false: at the grip)
