@@ -287,3 +287,49 @@ def test_the_search_memo_is_bounded_for_every_kind_of_entry(field, geo, monkeypa
         planner.plan((-0.6, -0.35), (gx, 0.3), empty)
     assert kinds == {"pull", "search"}
     assert planner.plan((-0.6, -0.35), (0.55, 0.3), empty).points == reference
+
+
+def test_the_swept_check_of_a_straight_line_is_exact(field, geo):
+    """:meth:`PathPlanner.swept_clear` checks the area the outline sweeps along a line at once (the hull of its
+    rectangles at both ends): on random lines it says clear only where the outline at every millimetre is clear,
+    and where the sampled check finds a touch it finds it too; a hexagon against quadrilaterals agrees with
+    :func:`polygons_overlap`; the hull of a rectangle moved along its own side has its four corners."""
+    from robotatfactory.agent.obstacles import _edge_normals, _quads_overlap
+    from robotatfactory.agent.planner import _hull8
+
+    rng = np.random.default_rng(11)
+    empty, carrying, _ = geo
+    ob = FieldObstacles(field, [PartObstacle(s.xy[0], s.xy[1], s.facing) for s in field.slots[::2]])
+    pl = PathPlanner(ob)
+    seen = {True: 0, False: 0}
+    for fp in (empty, carrying):
+        for _ in range(80):
+            a = rng.uniform((-0.8, -0.55), (0.8, 0.55))
+            b = a + rng.uniform(0.05, 0.5) * np.array([math.cos(h := rng.uniform(-math.pi, math.pi)), math.sin(h)])
+            swept = pl.swept_clear(a, b, fp, 0.01)
+            fine = not any(ob.collides(fp.inflated(0.01), (*(a + u * (b - a)), h))
+                           for u in np.linspace(0, 1, int(np.hypot(*(b - a)) / 0.001) + 2))
+            assert not swept or fine, (a, b)
+            if not pl.straight_clear(a, b, fp, 0.01):
+                assert not swept, (a, b)
+            seen[swept] += 1
+    assert seen[True] > 10 and seen[False] > 10  # both kinds of line were met
+    hexa = np.array([_hull8(np.concatenate([q, q + (0.1, 0.03)])) for q in ob._quads[:6]])
+    fast = _quads_overlap(hexa, ob._quads, _edge_normals(ob._quads))
+    slow = np.array([[polygons_overlap(p, q) for q in ob._quads] for p in hexa])
+    assert (fast == slow).all() and slow.any()
+    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    assert {tuple(p) for p in _hull8(np.concatenate([sq, sq + (2, 0)]))} == {(0, 0), (3, 0), (3, 1), (0, 1)}
+
+
+def test_the_least_clearance_of_many_segments_agrees_with_the_single_check(field, geo):
+    """``segments_clearance`` (every segment from a point at once, for the legs through grid points) says clear
+    exactly where ``segment_clear`` does, for radii around the clearances met."""
+    rng = np.random.default_rng(3)
+    ob = FieldObstacles(field, [PartObstacle(s.xy[0], s.xy[1], s.facing) for s in field.slots[::2]])
+    a = (0.05, 0.31)
+    ends = rng.uniform((-0.8, -0.55), (0.8, 0.55), (200, 2))
+    least = ob.segments_clearance(a, ends)
+    for r in (0.05, 0.1, 0.15):
+        assert [bool(v >= r) for v in least] == [ob.segment_clear(a, e, r) for e in ends]
+    assert 0 < (least >= 0.1).sum() < len(ends)

@@ -53,6 +53,13 @@ class Footprint:
         return max(float(np.hypot(*c)) for r in self.rects for c in r.corners())
 
     @cached_property
+    def inner(self) -> float:
+        """The largest distance (m) around base_link that the outline covers in every direction (the nearest edge
+        of a rectangle holding base_link): a point closer than this to anything means the outline touches it."""
+        return max((min(-r.x0, r.x1, -r.y0, r.y1) for r in self.rects if r.x0 <= 0 <= r.x1 and r.y0 <= 0 <= r.y1),
+                   default=0.0)
+
+    @cached_property
     def front(self) -> float:
         return max(r.x1 for r in self.rects)
 

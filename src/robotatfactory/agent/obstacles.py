@@ -140,6 +140,16 @@ class FieldObstacles:
         u = np.arange(n) / (n - 1)
         return not (self.clearance_of(a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1])) < radius).any()
 
+    def segments_clearance(self, a, ends: np.ndarray) -> np.ndarray:
+        """The least clearance (m) along each segment from ``a`` to each of ``ends`` (n, 2), sampled as
+        :meth:`segment_clear` samples (at least every half cell): ``>= radius`` where it would say clear."""
+        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
+        longest = float(np.max(np.hypot(ends[:, 0] - a[0], ends[:, 1] - a[1]), initial=0.0))
+        u = np.arange(n := max(2, int(longest / (self.resolution / 2)) + 1)) / (n - 1)
+        x = a[0] + u[None] * (ends[:, 0:1] - a[0])
+        y = a[1] + u[None] * (ends[:, 1:2] - a[1])
+        return self.clearance_of(x, y).min(axis=1)
+
     # ------------------------------------------------------------------------------------------ exact
     def collides_any(self, footprint: Footprint, x: np.ndarray, y: np.ndarray, theta: float) -> bool:
         """:meth:`collides` for many positions at one heading (arrays of x and y, m): does any of them?"""
@@ -147,6 +157,19 @@ class FieldObstacles:
             return False
         local = footprint.corners_at(0.0, 0.0, theta)  # (rects, 4, 2) at the heading, base_link at 0
         corners = local[None] + np.stack((x, y), axis=-1)[:, None, None, :]  # (poses, rects, 4, 2)
+        d = np.hypot(self._centres[:, 0][None] - x[:, None], self._centres[:, 1][None] - y[:, None])
+        near = (d <= (self._radii + footprint.radius)[None]).any(axis=0)
+        return self._corners_collide(corners.reshape(-1, 4, 2), near, check_floor=True)
+
+    def collides_poses(self, footprint: Footprint, x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> bool:
+        """:meth:`collides` for many poses at once (arrays of x, y and heading): does any of them?"""
+        if len(x) == 0:
+            return False
+        c, s = np.cos(theta), np.sin(theta)
+        loc = footprint._corners  # (rects, 4, 2) in base_link
+        cx = loc[None, ..., 0] * c[:, None, None] - loc[None, ..., 1] * s[:, None, None] + x[:, None, None]
+        cy = loc[None, ..., 0] * s[:, None, None] + loc[None, ..., 1] * c[:, None, None] + y[:, None, None]
+        corners = np.stack((cx, cy), axis=-1)  # (poses, rects, 4, 2)
         d = np.hypot(self._centres[:, 0][None] - x[:, None], self._centres[:, 1][None] - y[:, None])
         near = (d <= (self._radii + footprint.radius)[None]).any(axis=0)
         return self._corners_collide(corners.reshape(-1, 4, 2), near, check_floor=True)
@@ -186,18 +209,19 @@ def _edge_normals(quads: np.ndarray) -> np.ndarray:
 
 
 def _quads_overlap(a: np.ndarray, b: np.ndarray, b_axes: np.ndarray) -> np.ndarray:
-    """:func:`polygons_overlap` for convex quadrilaterals, every one of ``a`` (n, 4, 2) against every one of
-    ``b`` (m, 4, 2, edge normals ``b_axes``): (n, m) booleans. Touching counts as overlap."""
+    """:func:`polygons_overlap` for convex polygons, every one of ``a`` (n, k, 2: k corners in order, any k)
+    against every quadrilateral of ``b`` (m, 4, 2, edge normals ``b_axes``): (n, m) booleans. Touching counts
+    as overlap."""
     a_axes = _edge_normals(a)
     # projections on a's axes: a's corners (n, 4 axes, 4 corners), b's (n, m, 4, 4)
     pa = np.einsum("nad,ncd->nac", a_axes, a)
     pb = np.einsum("nad,mcd->nmac", a_axes, b)
-    sep = (pa.max(-1)[:, None] < pb.min(-1)) | (pb.max(-1) < pa.min(-1)[:, None])
+    sep = ((pa.max(-1)[:, None] < pb.min(-1)) | (pb.max(-1) < pa.min(-1)[:, None])).any(-1)
     # and on b's axes: b's corners (m, 4, 4), a's (n, m, 4, 4)
     qb = np.einsum("mad,mcd->mac", b_axes, b)
     qa = np.einsum("mad,ncd->nmac", b_axes, a)
-    sep |= (qa.max(-1) < qb.min(-1)[None]) | (qb.max(-1)[None] < qa.min(-1))
-    return ~sep.any(-1)
+    sep |= ((qa.max(-1) < qb.min(-1)[None]) | (qb.max(-1)[None] < qa.min(-1))).any(-1)
+    return ~sep
 
 
 def _inside_convex(poly: np.ndarray, X: np.ndarray, Y: np.ndarray, pad: float = 0.0) -> np.ndarray:

@@ -24,7 +24,43 @@ from .footprint import Footprint, pose_in_front, wrap
 from .obstacles import FieldObstacles
 from .smooth import RADII, SmoothPath, smooth_path
 
+#: m behind an approach pose where a leg may join the slot's normal (:meth:`PathPlanner.plan_to_pose`)
+PLAN_TO_POSE_DISTANCES = (0.3, 0.24, 0.19, 0.15, 0.12, 0.09, 0.06)
+#: rad: no corner sharper than this at the normal's point (a hairpin: two stops)
+PLAN_TO_POSE_MAX_TURN = 2.0
 _NEIGHBOURS = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)]
+
+
+def _hull8(pts: np.ndarray) -> np.ndarray:
+    """The convex hull of 8 points (8, 2) as 8 corners in order (the last repeated where it has fewer)."""
+    p = sorted(map(tuple, pts.tolist()))
+
+    def half(seq):
+        out = []
+        for q in seq:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (q[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(q)
+        return out[:-1]
+
+    hull = half(p) + half(reversed(p))
+    return np.array(hull + [hull[-1]] * (8 - len(hull)))
+
+
+def _segment_distance(points: np.ndarray, a, b) -> np.ndarray:
+    """Distance (m) of each of ``points`` (n, 2) from the segment a-b."""
+    ab = np.array([b[0] - a[0], b[1] - a[1]])
+    ap = points - np.asarray(a[:2], dtype=float)
+    u = np.clip(ap @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+    return np.hypot(*(ap - u[:, None] * ab).T)
+
+
+def turn_angle(a, b, c) -> float:
+    """rad turned at ``b`` driving from ``a`` through ``b`` to ``c`` ((x, y) each)."""
+    h1 = math.atan2(b[1] - a[1], b[0] - a[0])
+    h2 = math.atan2(c[1] - b[1], c[0] - b[0])
+    return abs(wrap(h2 - h1))
 
 
 class NoPath(RuntimeError):
@@ -266,21 +302,14 @@ class PathPlanner:
             del pts[1]
 
         def arc_clear(xy, psi) -> bool:
-            n = len(xy)
-            order = sorted(range(n), key=lambda i: abs(i - (n - 1) / 2))  # the bulge first
-            for i in order:
-                x, y = float(xy[i, 0]), float(xy[i, 1])
-                if ob.clearance_at(x, y) >= need:
-                    continue
-                if ob.collides(fp, (x, y, float(psi[i]))):
-                    return False
-            return True
+            near = ob.clearance_of(xy[:, 0], xy[:, 1]) < need  # only there can the exact outline touch anything
+            return not ob.collides_poses(fp, xy[near, 0], xy[near, 1], np.asarray(psi)[near])
 
         return smooth_path(pts, arc_clear, final_straight=final_straight, final_min_radius=final_min_radius,
                            radii=tuple(r for r in RADII if r >= min_radius))
 
-    def plan_to_pose(self, start, goal, footprint: Footprint, distances=(0.3, 0.24, 0.19, 0.15, 0.12, 0.09, 0.06),
-                     turn_cost: float = 0.08, max_turn: float = 2.0, join_inflate: float = 0.0,
+    def plan_to_pose(self, start, goal, footprint: Footprint, distances=PLAN_TO_POSE_DISTANCES,
+                     turn_cost: float = 0.08, max_turn: float = PLAN_TO_POSE_MAX_TURN, join_inflate: float = 0.0,
                      arc_join: float = 0.0, path: Path | None = None) -> tuple[Path, bool]:
         """A path from ``start`` (x, y) to the approach pose ``goal`` (x, y, theta facing the slot) whose last
         leg runs along the slot's normal from a point ``d`` m behind ``goal`` (one of ``distances`` whose
@@ -302,11 +331,7 @@ class PathPlanner:
         bx, by = -math.cos(goal[2]), -math.sin(goal[2])  # away from the slot
         cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.asarray(pts), axis=0).T))])
 
-        def turn(a, b, c) -> float:
-            h1 = math.atan2(b[1] - a[1], b[0] - a[0])
-            h2 = math.atan2(c[1] - b[1], c[0] - b[0])
-            return abs(wrap(h2 - h1))
-
+        turn = turn_angle
         best = None
         for d in distances:
             pre = (goal[0] + d * bx, goal[1] + d * by)
@@ -357,6 +382,18 @@ class PathPlanner:
         x, y = a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1])
         near = self.obstacles.clearance_of(x, y) < need  # only there can the exact outline touch anything
         return not self.obstacles.collides_any(fp, x[near], y[near], h)
+
+    def swept_clear(self, a, b, footprint: Footprint, inflate: float = 0.012) -> bool:
+        """:meth:`straight_clear` exactly, not sampled: the area the outline (grown by ``inflate``) sweeps moving
+        from ``a`` to ``b`` heading along the line (per rectangle, the convex hull of where it starts and ends)
+        overlaps nothing and stays on the floor. A few polygons, whatever the length: for checking many lines."""
+        fp = footprint.inflated(inflate)
+        h = math.atan2(b[1] - a[1], b[0] - a[0])
+        ends = np.concatenate([fp.corners_at(a[0], a[1], h), fp.corners_at(b[0], b[1], h)], axis=1)
+        hulls = np.array([_hull8(c) for c in ends])  # (rects, 8, 2)
+        ob = self.obstacles
+        near = _segment_distance(ob._centres, a, b) <= ob._radii + fp.radius
+        return not ob._corners_collide(hulls, near, check_floor=True)
 
     # ------------------------------------------------------------------------------------------ slots
     def approach_pose(self, slot, dock_distance: float, footprint: Footprint | float,

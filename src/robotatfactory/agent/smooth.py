@@ -22,6 +22,7 @@ import numpy as np
 from .footprint import wrap
 
 RADII = (0.6, 0.45, 0.35, 0.27, 0.2, 0.15, 0.11, 0.08, 0.06, 0.045, 0.035)  # m, tried largest first
+MIN_TURN = 0.2  # rad: a corner without an arc turning more than this is a stop (less: driven through on its line)
 
 
 @dataclass(frozen=True)
@@ -102,7 +103,7 @@ def fillet(corner, h_in: float, h_out: float, r: float, ds: float):
 
 
 def smooth_path(points, arc_clear: Callable[[np.ndarray, np.ndarray], bool] | None = None,
-                radii=RADII, ds: float = 0.01, max_deviation: float = 0.003, min_turn: float = 0.2,
+                radii=RADII, ds: float = 0.01, max_deviation: float = 0.003, min_turn: float = MIN_TURN,
                 final_straight: float = 0.0, final_min_radius: float = 0.0) -> SmoothPath:
     """Round the corners of the polyline ``points`` ((x, y), m). A corner that turns by more than
     ``min_turn`` rad and gets no arc is a stop (the robot turns in place there); a gentler one without an
