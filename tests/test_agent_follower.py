@@ -226,3 +226,32 @@ def test_a_given_top_speed_is_taken_as_given(robot):
     f.start([(0.0, 0.0), (1.2, 0.0)])
     outs, _ = drive_kinematic(f, (0.0, 0.0, 0.0), dt)
     assert max(o.v for o in outs) == pytest.approx(0.6, abs=1e-6)
+
+
+def test_the_estimate_of_a_paths_time_follows_the_kinematic_run(robot):
+    """:meth:`PathFollower.estimate` (the turns on the spot and the speed profile, no step run) is within 12 % of
+    the kinematic run's time on paths with stops, arcs and long turns, with the normal and the carrying limits,
+    and orders paths half a second apart as the run does."""
+    from robotatfactory.agent.smooth import smooth_path
+
+    dt = robot.control_period
+    base = DriveLimits.from_robot(robot)
+    carry = replace(base, w_max=1.5, alpha_max=6.0, long_spin=2.4, w_long_spin=1.1)
+    paths = [[(0.0, 0.0), (0.6, 0.0), (0.6, 0.3)], [(0.0, 0.0), (0.3, 0.4), (0.9, 0.4), (1.0, -0.2)],
+             [(0.0, 0.0), (-0.5, 0.1)], [(0.0, 0.0), (0.2, 0.0), (0.2, 0.2), (0.0, 0.2), (0.0, 0.5)]]
+    for lim in (base, carry):
+        runs, ests = [], []
+        for pts in paths:
+            sp = smooth_path(pts, radii=(0.2, 0.1), max_deviation=0.05)
+            f = PathFollower(lim, dt)
+            f.start(sp)
+            outs, _ = drive_kinematic(f, (0.0, 0.0, 0.0), dt)
+            assert outs[-1].done
+            runs.append(len(outs) * dt)
+            ests.append(PathFollower(lim, dt).estimate(sp, 0.0))
+        for r, e in zip(runs, ests):
+            assert e == pytest.approx(r, rel=0.12), (runs, ests)
+        for i in range(len(paths)):  # a difference of half a second or more comes out the same way
+            for j in range(len(paths)):
+                if runs[i] - runs[j] >= 0.5:
+                    assert ests[i] > ests[j], (runs, ests)

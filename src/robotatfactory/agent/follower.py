@@ -206,6 +206,29 @@ class PathFollower:
             v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * L.a_max * (p.s[i + 1] - p.s[i])))
         return v
 
+    def estimate(self, path: SmoothPath, heading: float, end_speed: float = 0.0) -> float:
+        """Seconds to drive ``path`` from standing at ``heading`` (rad), roughly and in a millisecond (no step run,
+        unlike a kinematic run of :meth:`step`): each piece a turn on the spot onto its first heading (at
+        ``w_max``, or ``w_long_spin`` past ``long_spin``; ``alpha_max``), then its speed profile driven up from
+        rest at ``a_max``. For ranking paths; the follower's feedback and ramps are left out. Replaces the path
+        being followed (:meth:`start`)."""
+        L = self.limits
+        self.start(path, end_speed=end_speed)
+        t, h = 0.0, float(heading)
+        for p, prof in zip(path.pieces, self._prof):
+            err = abs(wrap(float(p.psi[0]) - h))
+            w = L.w_long_spin if L.long_spin > 0 and L.w_long_spin > 0 and err > L.long_spin else L.w_max
+            t += err / w + w / L.alpha_max if err >= w * w / L.alpha_max else 2.0 * math.sqrt(err / L.alpha_max)
+            ds = np.diff(p.s)
+            v = prof.copy()
+            v[0] = 0.0
+            for i in range(1, len(v)):
+                v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2.0 * L.a_max * ds[i - 1]))
+            t += float(np.sum(ds / np.maximum(0.5 * (v[1:] + v[:-1]), CREEP_SPEED)))
+            h = float(p.psi[-1])
+        self.stop()
+        return t
+
     @property
     def done(self) -> bool:
         return self.phase == "done"
