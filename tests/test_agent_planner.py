@@ -170,7 +170,7 @@ def _leg_to(field, robot, slot: int, arc_join: float):
     from robotatfactory.agent.settings import agent_settings
     from robotatfactory.agent.state import SlotRef
 
-    legs = RoundAgent(field, robot, agent_settings({"legs": {"arc_join": arc_join}})).legs
+    legs = RoundAgent(field, robot, agent_settings({"legs": {"arc_join": arc_join, "via_grid": 0.0}})).legs
     ob = FieldObstacles(field, [])
     return legs, ob, legs.plan(ob, (-0.24, 0.33, 0.0), SlotRef("outgoing", slot), True, "place")
 
@@ -320,6 +320,34 @@ def test_the_swept_check_of_a_straight_line_is_exact(field, geo):
     assert (fast == slow).all() and slow.any()
     sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
     assert {tuple(p) for p in _hull8(np.concatenate([sq, sq + (2, 0)]))} == {(0, 0), (3, 0), (3, 1), (0, 1)}
+
+
+def test_a_carrying_leg_may_go_round_a_machine_through_a_grid_point(field, robot):
+    """``legs.via_grid``: carrying from incoming 4 to outgoing 4 the planner's leg runs between the machines, turning
+    the part one way and back (an S); through a grid point over machine B it turns one way only and takes
+    seconds less by the follower's kinematic run. That leg arrives along the slot's normal without a stop, and
+    driving it the exact outline touches nothing. Off (0), the leg is the planner's."""
+    from robotatfactory.agent.behaviour import RoundAgent
+    from robotatfactory.agent.settings import agent_settings
+    from robotatfactory.agent.state import FactoryState, SlotRef
+
+    def leg(grid):
+        legs = RoundAgent(field, robot, agent_settings({"legs": {"via_grid": grid}})).legs
+        ob = legs.obstacles(FactoryState.from_letters("BBBB"), exclude=SlotRef("incoming", 4))
+        pose = pose_in_front(field.slot("incoming", 4), legs.retreat(ob, SlotRef("incoming", 4), True))
+        return legs, ob, pose, legs.plan(ob, pose, SlotRef("outgoing", 4), True, "place")
+
+    legs, ob, pose, before = leg(0.0)
+    _, _, _, after = leg(0.05)
+    t0, t1 = legs.leg_time(before, pose, True), legs.leg_time(after, pose, True)
+    assert t1 < t0 - 1.0, (t0, t1)
+    assert after.aligned and after.smooth.stops == 0 and after.path.points[1][0] > 0.4  # (east of machine B)
+    fp = legs.footprint(True)
+    for p in after.smooth.pieces:
+        for (x, y), h in zip(p.xy, p.psi):
+            if math.hypot(x - pose[0], y - pose[1]) > 0.02:
+                assert not ob.collides(fp, (float(x), float(y), float(h))), (x, y, h)
+    assert abs(wrap(after.smooth.pieces[-1].psi[-1] - after.goal[2])) < 1e-6
 
 
 def test_the_least_clearance_of_many_segments_agrees_with_the_single_check(field, geo):

@@ -10,7 +10,8 @@ left out), the pose, the target slot and whether a part is carried. No side effe
 (:class:`~.planner.NoPath`, :class:`~.hybrid.NoCarryPath`) means.
 
 - :meth:`~LegPlanner.plan`: the usual leg (grid A* to the approach pose, arriving along the slot's normal
-  where it can, corners rounded into arcs);
+  where it can, corners rounded into arcs), or with ``legs.via_grid`` a faster one through a grid point
+  (:mod:`.vias`);
 - :meth:`~LegPlanner.plan_on_arcs`: a place leg of forward arcs and straight reversing only (``carry.arcs``);
 - :meth:`~LegPlanner.leg_time`: the seconds a leg would take (a kinematic run of the follower);
 - :meth:`~LegPlanner.escape_point`: the nearest point clear for the outline (a robot too close to something);
@@ -32,6 +33,7 @@ from .planner import NoPath, Path, PathPlanner
 from .settings import AgentSettings
 from .smooth import Piece, SmoothPath
 from .state import ZONES, FactoryState, SlotRef
+from .vias import via_candidates
 
 MACHINE_CLEARANCE = 0.2  # m from a machine input after placing (the machine needs > 0.17 m)
 BLOCKED_SPOT_SIDE = 0.06  # m, the square a blocked spot becomes on the map
@@ -64,6 +66,10 @@ class LegPlan:
 #: m behind the approach pose: where a leg may join the slot's normal on an arc (legs.arc_join): far enough out for
 #: the tightest arc before a place (a right angle at 8 cm) and the straight line after it
 ARC_JOIN_DISTANCES = (0.12, 0.15, 0.19, 0.24, 0.3)
+#: s a leg through a grid point (legs.via_grid) must save over the planner's leg to be taken instead
+VIA_MIN_GAIN = 0.2
+#: of the legs through a grid point (:mod:`.vias`), the best estimates timed by the follower's kinematic run
+VIA_TIMED = 2
 
 
 class LegPlanner:
@@ -131,12 +137,13 @@ class LegPlanner:
                 goals = [g2, goal]
         lg = self.settings.legs
         join = lg.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
+        final_straight = lg.place_straight if carrying else lg.pick_straight
+        final_min_radius = lg.place_min_radius if carrying else lg.pick_min_radius
         if lg.smooth:  # the last leg along the slot's normal: docking follows on at speed
 
             def smoothed(path, aligned):
-                return pl.smooth(path, fp, final_straight=(lg.place_straight if carrying else lg.pick_straight)
-                                 if aligned else 0.0, min_radius=lg.min_radius,
-                                 final_min_radius=lg.place_min_radius if carrying else lg.pick_min_radius)
+                return pl.smooth(path, fp, final_straight=final_straight if aligned else 0.0,
+                                 min_radius=lg.min_radius, final_min_radius=final_min_radius)
 
             for g in goals:  # the leg ending farther out if it can arrive along the normal there
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
@@ -160,7 +167,31 @@ class LegPlanner:
             goal = goals[0]
             path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
             sp, end_speed = path.points, 0.0
-        return LegPlan(path, sp, goal, aligned, end_speed, slot)
+        leg = LegPlan(path, sp, goal, aligned, end_speed, slot)
+        if lg.smooth and lg.via_grid > 0:
+            leg = self._via_leg(pl, pose, leg, goals, fp, smoothed, carrying, dock,
+                                (final_straight, final_min_radius)) or leg
+        return leg
+
+    def _via_leg(self, pl: PathPlanner, pose, leg: LegPlan, goals, fp: Footprint, smoothed, carrying: bool,
+                 dock: str, final: tuple[float, float]) -> LegPlan | None:
+        """``legs.via_grid``: the leg through one grid point (:mod:`.vias`) that the follower's kinematic run
+        (:meth:`leg_time`) finds at least ``VIA_MIN_GAIN`` s faster than ``leg``, of the ``VIA_TIMED`` best
+        estimated; else None."""
+        beat = self.leg_time(leg, pose, carrying) - VIA_MIN_GAIN
+        found = via_candidates(pl, fp, self.carry_limits if carrying else self.limits, self.dt, pose, goals,
+                               step=self.settings.legs.via_grid,
+                               join=self.settings.legs.join_inflate if carrying else 0.0, beat=beat,
+                               end_speed=self.entry_speed(dock), tail=lambda g: self._dock_tail(g, leg.slot, carrying),
+                               smoothed=lambda path: smoothed(path, True), final_straight=final[0],
+                               final_min_radius=final[1])
+        best = None
+        for c in found[:VIA_TIMED]:
+            cand = LegPlan(c.path, c.smooth, c.goal, True, self.entry_speed(dock), leg.slot)
+            t = self.leg_time(cand, pose, carrying, limit=beat - self._dock_tail(c.goal, leg.slot, carrying))
+            if t < beat:
+                beat, best = t, cand
+        return best
 
     @staticmethod
     def _arc_join_leg(pl, pose, goals, fp, join: float, arc_join: float, smoothed):
@@ -243,10 +274,12 @@ class LegPlanner:
             y += o.v * math.sin(th) * dt
             th += o.w * dt
             t += dt
-        slot = leg.slot
-        d_end = math.hypot(leg.goal[0] - slot.xy[0], leg.goal[1] - slot.xy[1]) - self.d_dock
-        v = self.entry_speed("place" if carrying else "pick")
-        return t + max(d_end, 0.0) / v
+        return t + self._dock_tail(leg.goal, leg.slot, carrying)
+
+    def _dock_tail(self, goal, slot, carrying: bool) -> float:
+        """s of the docking approach from the approach pose ``goal`` to ``slot``'s dock or place pose."""
+        d_end = math.hypot(goal[0] - slot.xy[0], goal[1] - slot.xy[1]) - self.d_dock
+        return max(d_end, 0.0) / self.entry_speed("place" if carrying else "pick")
 
     # ------------------------------------------------------------------------------------------ around a leg
     def escape_point(self, obstacles: FieldObstacles, pose, carrying: bool) -> Escape | None:
