@@ -80,10 +80,10 @@ def via_candidates(pl: PathPlanner, fp: Footprint, limits: DriveLimits, dt: floa
     least: dict = {}  # per end point: the least clearance of the line from it to each grid point
     swept: dict = {}
 
-    def line_clear(a, i: int) -> bool:  # the line between a and grid point i
+    def line_clear(a, i: int, circle: float) -> bool:  # the line between a and grid point i
         if a not in least:
             least[a] = ob.segments_clearance(a, XY)
-        if least[a][i] >= need - pl.margin:
+        if least[a][i] >= circle:
             return True
         if least[a][i] < inner:
             return False
@@ -103,7 +103,8 @@ def via_candidates(pl: PathPlanner, fp: Footprint, limits: DriveLimits, dt: floa
         if phi > PLAN_TO_POSE_MAX_TURN or (  # (no arc would fit before the straight line: a stop there)
                 phi >= MIN_TURN and final_min_radius * math.tan(phi / 2) > d - final_straight):
             continue
-        if not (line_clear((x, y), k) and line_clear(pre, k)):
+        # (the start may sit inside the margin, as the planner allows; the normal's point may not)
+        if not (line_clear((x, y), k, need - pl.margin) and line_clear(pre, k, need)):
             continue
         path = Path(((x, y), v, pre, tuple(g[:2])), need)
         sp = smoothed(path)
