@@ -295,7 +295,7 @@ def test_the_swept_check_of_a_straight_line_is_exact(field, geo):
     and where the sampled check finds a touch it finds it too; a hexagon against quadrilaterals agrees with
     :func:`polygons_overlap`; the hull of a rectangle moved along its own side has its four corners."""
     from robotatfactory.agent.obstacles import _edge_normals, _quads_overlap
-    from robotatfactory.agent.planner import _hull8
+    from robotatfactory.agent.obstacles import _hull8
 
     rng = np.random.default_rng(11)
     empty, carrying, _ = geo

@@ -82,6 +82,12 @@ class Footprint:
         R = np.array([[c, s], [-s, c]])  # row vectors: p_world = p_local @ R + t
         return self._corners @ R + (x, y)
 
+    def corners_at_poses(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """:meth:`corners_at` for many poses at once (arrays of x, y and heading): (poses, rectangles, 4, 2)."""
+        c, s = np.cos(theta)[:, None, None], np.sin(theta)[:, None, None]
+        lx, ly = self._corners[None, ..., 0], self._corners[None, ..., 1]
+        return np.stack((lx * c - ly * s + x[:, None, None], lx * s + ly * c + y[:, None, None]), axis=-1)
+
     def inflated(self, margin: float) -> Footprint:
         """Every rectangle grown by ``margin`` m on each side (a safety margin for exact checks)."""
         m = float(margin)

@@ -153,26 +153,26 @@ class FieldObstacles:
     # ------------------------------------------------------------------------------------------ exact
     def collides_any(self, footprint: Footprint, x: np.ndarray, y: np.ndarray, theta: float) -> bool:
         """:meth:`collides` for many positions at one heading (arrays of x and y, m): does any of them?"""
-        if len(x) == 0:
-            return False
-        local = footprint.corners_at(0.0, 0.0, theta)  # (rects, 4, 2) at the heading, base_link at 0
-        corners = local[None] + np.stack((x, y), axis=-1)[:, None, None, :]  # (poses, rects, 4, 2)
-        d = np.hypot(self._centres[:, 0][None] - x[:, None], self._centres[:, 1][None] - y[:, None])
-        near = (d <= (self._radii + footprint.radius)[None]).any(axis=0)
-        return self._corners_collide(corners.reshape(-1, 4, 2), near, check_floor=True)
+        return self.collides_poses(footprint, x, y, np.full(len(x), float(theta)))
 
     def collides_poses(self, footprint: Footprint, x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> bool:
         """:meth:`collides` for many poses at once (arrays of x, y and heading): does any of them?"""
         if len(x) == 0:
             return False
-        c, s = np.cos(theta), np.sin(theta)
-        loc = footprint._corners  # (rects, 4, 2) in base_link
-        cx = loc[None, ..., 0] * c[:, None, None] - loc[None, ..., 1] * s[:, None, None] + x[:, None, None]
-        cy = loc[None, ..., 0] * s[:, None, None] + loc[None, ..., 1] * c[:, None, None] + y[:, None, None]
-        corners = np.stack((cx, cy), axis=-1)  # (poses, rects, 4, 2)
+        corners = footprint.corners_at_poses(x, y, theta)  # (poses, rects, 4, 2)
         d = np.hypot(self._centres[:, 0][None] - x[:, None], self._centres[:, 1][None] - y[:, None])
         near = (d <= (self._radii + footprint.radius)[None]).any(axis=0)
         return self._corners_collide(corners.reshape(-1, 4, 2), near, check_floor=True)
+
+    def sweep_collides(self, footprint: Footprint, a, b) -> bool:
+        """Does the outline, moving straight from ``a`` to ``b`` (x, y) heading along the line, overlap an obstacle
+        or leave the floor? Exact, not sampled: per rectangle the convex hull of where it starts and ends (the area
+        a translated convex shape sweeps), a few polygons whatever the length."""
+        h = math.atan2(b[1] - a[1], b[0] - a[0])
+        ends = np.concatenate([footprint.corners_at(a[0], a[1], h), footprint.corners_at(b[0], b[1], h)], axis=1)
+        hulls = np.array([_hull8(c) for c in ends])  # (rects, 8, 2)
+        near = _segment_distance(self._centres, a, b) <= self._radii + footprint.radius
+        return self._corners_collide(hulls, near, check_floor=True)
 
     def collides(self, footprint: Footprint, pose: tuple[float, float, float], ignore_floor: bool = False) -> bool:
         """Exact test: does the outline at ``pose`` overlap an obstacle or leave the floor?"""
@@ -200,6 +200,31 @@ class FieldObstacles:
             self.searches.clear()
         self.searches[key] = value
         return value
+
+
+def _hull8(pts: np.ndarray) -> np.ndarray:
+    """The convex hull of 8 points (8, 2) as 8 corners in order (the last repeated where it has fewer)."""
+    p = sorted(map(tuple, pts.tolist()))
+
+    def half(seq):
+        out = []
+        for q in seq:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (q[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(q)
+        return out[:-1]
+
+    hull = half(p) + half(reversed(p))
+    return np.array(hull + [hull[-1]] * (8 - len(hull)))
+
+
+def _segment_distance(points: np.ndarray, a, b) -> np.ndarray:
+    """Distance (m) of each of ``points`` (n, 2) from the segment a-b."""
+    ab = np.array([b[0] - a[0], b[1] - a[1]])
+    ap = points - np.asarray(a[:2], dtype=float)
+    u = np.clip(ap @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+    return np.hypot(*(ap - u[:, None] * ab).T)
 
 
 def _edge_normals(quads: np.ndarray) -> np.ndarray:

@@ -31,31 +31,6 @@ PLAN_TO_POSE_MAX_TURN = 2.0
 _NEIGHBOURS = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)]
 
 
-def _hull8(pts: np.ndarray) -> np.ndarray:
-    """The convex hull of 8 points (8, 2) as 8 corners in order (the last repeated where it has fewer)."""
-    p = sorted(map(tuple, pts.tolist()))
-
-    def half(seq):
-        out = []
-        for q in seq:
-            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (q[1] - out[-2][1])
-                                     - (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0])) <= 0:
-                out.pop()
-            out.append(q)
-        return out[:-1]
-
-    hull = half(p) + half(reversed(p))
-    return np.array(hull + [hull[-1]] * (8 - len(hull)))
-
-
-def _segment_distance(points: np.ndarray, a, b) -> np.ndarray:
-    """Distance (m) of each of ``points`` (n, 2) from the segment a-b."""
-    ab = np.array([b[0] - a[0], b[1] - a[1]])
-    ap = points - np.asarray(a[:2], dtype=float)
-    u = np.clip(ap @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
-    return np.hypot(*(ap - u[:, None] * ab).T)
-
-
 def turn_angle(a, b, c) -> float:
     """rad turned at ``b`` driving from ``a`` through ``b`` to ``c`` ((x, y) each)."""
     h1 = math.atan2(b[1] - a[1], b[0] - a[0])
@@ -331,7 +306,6 @@ class PathPlanner:
         bx, by = -math.cos(goal[2]), -math.sin(goal[2])  # away from the slot
         cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.asarray(pts), axis=0).T))])
 
-        turn = turn_angle
         best = None
         for d in distances:
             pre = (goal[0] + d * bx, goal[1] + d * by)
@@ -345,12 +319,12 @@ class PathPlanner:
                 if math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) < 1e-6 or ob.segment_clear(pts[i], pre, r) or (
                         join_inflate > 0 and self.straight_clear(pts[i], pre, footprint, join_inflate)):
                     if math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) > 1e-6 and \
-                            turn(pts[i], pre, goal[:2]) > max_turn:
+                            turn_angle(pts[i], pre, goal[:2]) > max_turn:
                         continue  # a hairpin at the normal's point (two stops): worse than a final turn
                     cost = cum[i] + math.hypot(pts[i][0] - pre[0], pts[i][1] - pre[1]) + d
-                    cost += turn_cost * turn(pts[i], pre, goal[:2])
+                    cost += turn_cost * turn_angle(pts[i], pre, goal[:2])
                     if i > 0:
-                        cost += turn_cost * turn(pts[i - 1], pts[i], pre)
+                        cost += turn_cost * turn_angle(pts[i - 1], pts[i], pre)
                     if best is None or cost < best[0]:
                         best = (cost, i, pre)
         if best is None:
@@ -387,13 +361,7 @@ class PathPlanner:
         """:meth:`straight_clear` exactly, not sampled: the area the outline (grown by ``inflate``) sweeps moving
         from ``a`` to ``b`` heading along the line (per rectangle, the convex hull of where it starts and ends)
         overlaps nothing and stays on the floor. A few polygons, whatever the length: for checking many lines."""
-        fp = footprint.inflated(inflate)
-        h = math.atan2(b[1] - a[1], b[0] - a[0])
-        ends = np.concatenate([fp.corners_at(a[0], a[1], h), fp.corners_at(b[0], b[1], h)], axis=1)
-        hulls = np.array([_hull8(c) for c in ends])  # (rects, 8, 2)
-        ob = self.obstacles
-        near = _segment_distance(ob._centres, a, b) <= ob._radii + fp.radius
-        return not ob._corners_collide(hulls, near, check_floor=True)
+        return not self.obstacles.sweep_collides(footprint.inflated(inflate), a, b)
 
     # ------------------------------------------------------------------------------------------ slots
     def approach_pose(self, slot, dock_distance: float, footprint: Footprint | float,
