@@ -230,3 +230,48 @@ def test_the_offset_held_is_the_parts_from_the_magnets_centre_line_not_base_link
     # backing out along the normal through base_link, not onto the centre line's: steering onto it turned the
     # robot in the slot and swung the part 13 mm (whole stack: against machine A's rib, round 3 seeds 107, 113)
     assert swing < 0.010, swing
+
+
+@pytest.mark.parametrize("lateral_mm,placed", [(24, False), (-24, False), (6, True)])
+def test_a_place_that_would_meet_a_rib_is_not_entered(make_sim, field, robot, lateral_mm, placed):
+    """On the real SimTwo (round 1, legs through a grid point) the robot began a place 19 mm off the slot's normal
+    and turned 4 deg, its estimate right: it went in, the part met a rib and fell beside the slot. The place gate
+    (``dock.place_gate``) backs out along the normal with the part still held and reports ``off_line``; a few
+    millimetres off, it places."""
+    sim = make_sim(round_no=1, parts="XBXX")
+    run = Run(sim, field, robot)
+    fp, fc = robot_footprint(robot), carrying_footprint(robot, field.part)
+    d = dock_distance(robot, field.part)
+    src, dst = field.slot("incoming", 2), field.slot("outgoing", 3)
+    pl = PathPlanner(FieldObstacles(field, []))
+    sim.set_pose(*pl.approach_pose(src, d, fp))
+    o = run.dock(run.docker.start_pick, src, math.hypot(*(a - b for a, b in zip(pl.approach_pose(src, d, fc)[:2],
+                                                                                 src.xy))))
+    assert o.done and sim.held == 2
+    n = (math.sin(dst.facing), -math.cos(dst.facing))  # the robot's left, facing the slot
+    u = (math.cos(dst.facing), math.sin(dst.facing))  # out of the slot
+    ap = pl.approach_pose(dst, d, fc)
+    lat = lateral_mm / 1000 - run.docker.held_offset  # the part's centre this far to the left of the slot's
+    run.goto((ap[0] + lat * n[0], ap[1] + lat * n[1], ap[2]), fc, [])
+    assert sim.held == 2
+    start_along = (sim.pose[0] - dst.xy[0]) * u[0] + (sim.pose[1] - dst.xy[1]) * u[1]
+    retreat = math.hypot(*(a - b for a, b in zip(pl.approach_pose(dst, d, fp)[:2], dst.xy)))
+    nearest = math.inf  # m: the part's centre's least distance from the slot's centre along the normal
+    run.docker.start_place(dst, sim.pose, retreat)
+    for _ in range(1000):
+        o = run.docker.step(sim.pose, run.contact)
+        run.cycle(o.v, o.w, o.magnet)
+        px, py, _ = sim.part_pose(2)
+        nearest = min(nearest, (px - dst.xy[0]) * u[0] + (py - dst.xy[1]) * u[1])
+        if o.done or o.failed:
+            break
+    if placed:
+        assert o.done and not o.failed and sim.held is None
+        px, py, _ = sim.part_pose(2)
+        assert math.hypot(px - dst.xy[0], py - dst.xy[1]) < 0.012
+        return
+    assert o.failed == "off_line" and o.magnet and sim.held == 2  # the part still on the magnet
+    # it never went in: the part's centre stayed outside the ribs (3.5 cm out) plus its half depth
+    assert nearest > 0.035 + field.part.depth / 2 - 0.005, nearest
+    end_along = (sim.pose[0] - dst.xy[0]) * u[0] + (sim.pose[1] - dst.xy[1]) * u[1]
+    assert end_along == pytest.approx(start_along, abs=0.01)  # back where it started: room to plan again

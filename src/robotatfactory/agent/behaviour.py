@@ -107,7 +107,7 @@ class RoundAgent:
         self.carry_limits = replace(self.limits, **cl)
         ds = self.settings.dock
         dock = DockSettings(v_dock=ds.approach_speed, v_place=ds.place_speed, magnet_early=ds.magnet_early,
-                            press_time=ds.press_time,
+                            press_time=ds.press_time, place_gate=ds.place_gate,
                             v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back,
                             a_back_carrying=self.settings.carry.back_accel)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part, dock)
