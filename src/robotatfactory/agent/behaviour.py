@@ -32,7 +32,7 @@ from .docking import Docker, DockSettings
 from .floor import FloorRecovery, LostPart, Next
 from .follower import DriveLimits, PathFollower, ramp
 from .hybrid import NoCarryPath
-from .legs import LegPlan, LegPlanner
+from .legs import VIA_RANKED, LegPlan, LegPlanner
 from .obstacles import FieldObstacles, PartObstacle
 from .planner import NoPath
 from .recovery import Relocalizer, StuckDetector, uncertainty_of
@@ -357,15 +357,18 @@ class RoundAgent:
             return default, None
         obstacles = self._obstacles()
         best = None
-        for m in tied:
+        for m in tied:  # timed by the planner's legs; the chosen pick leg through a grid point if that is faster
             try:
-                leg = self.legs.plan(obstacles, pose, m.source, False, "pick")
-                cost = self.legs.leg_time(leg, pose, False) + self._carry_time(m)
+                leg = self.legs.plan(obstacles, pose, m.source, False, "pick", via=False)
+                t_leg = self.legs.leg_time(leg, pose, False)
+                cost = t_leg + self._carry_time(m)
             except NoPath:
                 continue
             if best is None or cost < best[0] - 1e-6:
-                best = (cost, m, leg)
-        return (best[1], best[2]) if best is not None else (default, None)
+                best = (cost, m, leg, t_leg)
+        if best is None:
+            return default, None
+        return best[1], self.legs.faster(obstacles, pose, best[2], False, "pick", best[3])[0]
 
     def _carry_time(self, m: Move) -> float:
         """Seconds of the carrying leg of ``m``: from the carrying approach pose at its source (where the robot
@@ -374,7 +377,7 @@ class RoundAgent:
         slot = self.field.slot(m.source.zone, m.source.number)
         fp = self.legs.footprint(True)
         start = self.legs.path_planner(obstacles, True).approach_pose(slot, self.d_dock, fp)
-        return self.legs.leg_time(self.legs.plan(obstacles, start, m.target, True, "place"), start, True)
+        return self.legs.leg_time(self.legs.plan(obstacles, start, m.target, True, "place", via=False), start, True)
 
     def _usable(self, dest: list) -> list:
         """Destinations without ``give_up_after`` - 1 failed places (else all: a slot is better than none)."""
@@ -592,7 +595,9 @@ class RoundAgent:
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
         """Start the leg to the destination of ``dest`` (best first) that takes the least time among those of
         the best rank (:meth:`TaskPolicy.destination_class`; every outgoing slot is of one rank), by
-        :meth:`.LegPlanner.leg_time`; with ``choose_by_time`` off, to ``self.target`` (or ``dest[0]``)."""
+        :meth:`.LegPlanner.leg_time` of the planner's legs, then the ``VIA_RANKED`` fastest through a grid point
+        where that is faster (:meth:`.LegPlanner.faster`, ``legs.via_grid``); with ``choose_by_time`` off, to
+        ``self.target`` (or ``dest[0]``)."""
         carrying = self.carrying is not None
         if not self.settings.tasks.choose_by_time or (carrying and self.settings.carry.arcs) or len(dest) < 2:
             if self.target not in dest:
@@ -608,22 +613,29 @@ class RoundAgent:
                 keep = set(self.policy.reserved_outgoing(self.state, self.task.source))
                 dest = [d for d in dest if d not in keep] or dest
         best_class = min(self.policy.destination_class(self.state, d) for d in dest)
-        best = None
+        timed = []
         obstacles = self._obstacles()
-        for d in dest:
+        for d in dest:  # timed by the planner's legs
             if self.policy.destination_class(self.state, d) != best_class:
                 continue
             try:
-                leg = self.legs.plan(obstacles, pose, d, carrying, _dock_of(mode))
+                leg = self.legs.plan(obstacles, pose, d, carrying, _dock_of(mode), via=False)
             except NoPath:
                 continue
-            cost = self.legs.leg_time(leg, pose, carrying)
-            if best is None or cost < best[0] - 1e-6:
-                best = (cost, d, leg)
-        if best is None:  # no path to any: the usual failure handling
+            timed.append((self.legs.leg_time(leg, pose, carrying), d, leg))
+        if not timed:  # no path to any: the usual failure handling
             self.target = dest[0]
             self._go(mode, pose)
             return
+        best = timed[0]
+        for c in timed[1:]:
+            if c[0] < best[0] - 1e-6:
+                best = c
+        # the fastest few through a grid point, where that is faster (legs.via_grid; a search costs several legs)
+        for cost, d, leg in sorted(timed, key=lambda c: c[0])[:VIA_RANKED]:
+            leg, cost = self.legs.faster(obstacles, pose, leg, carrying, _dock_of(mode), cost)
+            if cost < best[0] - 1e-6:
+                best = (cost, d, leg)
         self.target = best[1]
         self._start_leg(mode, best[2])
 

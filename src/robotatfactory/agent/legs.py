@@ -70,6 +70,25 @@ ARC_JOIN_DISTANCES = (0.12, 0.15, 0.19, 0.24, 0.3)
 VIA_MIN_GAIN = 0.2
 #: of the legs through a grid point (:mod:`.vias`), the best estimates timed by the follower's kinematic run
 VIA_TIMED = 2
+#: of the destinations a decision times by the planner's legs, the fastest this many are searched for a leg through
+#: a grid point (each search costs several planned legs: one destination's, not four, holds a real-time robot up)
+VIA_RANKED = 2
+
+
+@dataclass(frozen=True)
+class _LegContext:
+    """What planning a leg to one slot needs besides the pose: the planner on the obstacles, the outline, the
+    slot, the goals (the approach pose, a place's farther one first), the join's inflation, the final straight
+    and arc, and the smoothing with them (``smoothed(path, aligned)``)."""
+
+    planner: PathPlanner
+    footprint: Footprint
+    slot: object
+    goals: list
+    join: float
+    final_straight: float
+    final_min_radius: float
+    smoothed: Callable
 
 
 class LegPlanner:
@@ -121,30 +140,17 @@ class LegPlanner:
         return PathPlanner(obstacles, margin=self.settings.carry.margin if carrying else 0.01)
 
     # ------------------------------------------------------------------------------------------ legs
-    def plan(self, obstacles: FieldObstacles, pose, target: SlotRef, carrying: bool, dock: str) -> LegPlan:
+    def plan(self, obstacles: FieldObstacles, pose, target: SlotRef, carrying: bool, dock: str,
+             via: bool = True) -> LegPlan:
         """The leg from ``pose`` to ``target``'s approach pose, the ``dock`` ("pick" or "place") following on:
         arriving along the slot's normal where it can (then at the docking's entry speed), else with a turn
-        on the spot farther out. ``target``: a SlotRef, or a slot itself (:meth:`slot`). Raises NoPath."""
-        fp = self.footprint(carrying)
-        slot = self.slot(target)
-        pl = self.path_planner(obstacles, carrying)
-        goal = pl.approach_pose(slot, self.d_dock, fp)
-        goals = [goal]
-        if carrying and self.settings.legs.place_standoff > 0:  # a place: room to settle on the normal first
-            d = self.settings.legs.place_standoff
-            g2 = (goal[0] - d * math.cos(goal[2]), goal[1] - d * math.sin(goal[2]), goal[2])
-            if pl.is_free(g2[:2], fp):
-                goals = [g2, goal]
+        on the spot farther out; with ``legs.via_grid`` (and ``via``) the leg through a grid point instead
+        where that is faster (:meth:`faster`). ``target``: a SlotRef, or a slot itself (:meth:`slot`). Raises
+        NoPath."""
+        ctx = self._context(obstacles, target, carrying)
+        pl, fp, goals, join, smoothed = ctx.planner, ctx.footprint, ctx.goals, ctx.join, ctx.smoothed
         lg = self.settings.legs
-        join = lg.join_inflate if carrying else 0.0  # the empty robot: the turning circle everywhere
-        final_straight = lg.place_straight if carrying else lg.pick_straight
-        final_min_radius = lg.place_min_radius if carrying else lg.pick_min_radius
         if lg.smooth:  # the last leg along the slot's normal: docking follows on at speed
-
-            def smoothed(path, aligned):
-                return pl.smooth(path, fp, final_straight=final_straight if aligned else 0.0,
-                                 min_radius=lg.min_radius, final_min_radius=final_min_radius)
-
             for g in goals:  # the leg ending farther out if it can arrive along the normal there
                 path, aligned = pl.plan_to_pose(tuple(pose[:2]), g, fp, join_inflate=join)
                 if aligned:
@@ -167,30 +173,62 @@ class LegPlanner:
             goal = goals[0]
             path, aligned = pl.plan(tuple(pose[:2]), goal[:2], fp), False
             sp, end_speed = path.points, 0.0
-        leg = LegPlan(path, sp, goal, aligned, end_speed, slot)
-        if lg.smooth and lg.via_grid > 0:
-            leg = self._via_leg(pl, pose, leg, goals, fp, smoothed, carrying, dock,
-                                (final_straight, final_min_radius)) or leg
+        leg = LegPlan(path, sp, goal, aligned, end_speed, ctx.slot)
+        if via and lg.smooth and lg.via_grid > 0:
+            leg = self._via_leg(ctx, pose, leg, carrying, dock)[0]
         return leg
 
-    def _via_leg(self, pl: PathPlanner, pose, leg: LegPlan, goals, fp: Footprint, smoothed, carrying: bool,
-                 dock: str, final: tuple[float, float]) -> LegPlan | None:
+    def faster(self, obstacles: FieldObstacles, pose, leg: LegPlan, carrying: bool, dock: str,
+               seconds: float | None = None) -> tuple[LegPlan, float]:
+        """``legs.via_grid``: the leg through a grid point that is faster than ``leg`` (planned from ``pose``
+        with ``via`` false, taking ``seconds`` by :meth:`leg_time` if known) and its seconds, or ``leg`` and
+        its seconds. A decision that times several destinations plans them without it and asks this for the
+        best few: the search costs several planned legs (docs/benchmarks.md, "bench planning")."""
+        if not (self.settings.legs.smooth and self.settings.legs.via_grid > 0):
+            return leg, seconds if seconds is not None else self.leg_time(leg, pose, carrying)
+        return self._via_leg(self._context(obstacles, leg.slot, carrying), pose, leg, carrying, dock, seconds)
+
+    def _context(self, obstacles: FieldObstacles, target, carrying: bool) -> "_LegContext":
+        """What planning a leg to ``target`` needs besides the pose (:class:`_LegContext`)."""
+        fp = self.footprint(carrying)
+        slot = self.slot(target)
+        pl = self.path_planner(obstacles, carrying)
+        goal = pl.approach_pose(slot, self.d_dock, fp)
+        goals = [goal]
+        if carrying and self.settings.legs.place_standoff > 0:  # a place: room to settle on the normal first
+            d = self.settings.legs.place_standoff
+            g2 = (goal[0] - d * math.cos(goal[2]), goal[1] - d * math.sin(goal[2]), goal[2])
+            if pl.is_free(g2[:2], fp):
+                goals = [g2, goal]
+        lg = self.settings.legs
+        final_straight = lg.place_straight if carrying else lg.pick_straight
+        final_min_radius = lg.place_min_radius if carrying else lg.pick_min_radius
+
+        def smoothed(path, aligned):
+            return pl.smooth(path, fp, final_straight=final_straight if aligned else 0.0,
+                             min_radius=lg.min_radius, final_min_radius=final_min_radius)
+
+        return _LegContext(pl, fp, slot, goals, lg.join_inflate if carrying else 0.0,  # empty: the turning circle
+                           final_straight, final_min_radius, smoothed)
+
+    def _via_leg(self, ctx: "_LegContext", pose, leg: LegPlan, carrying: bool, dock: str,
+                 seconds: float | None = None) -> tuple[LegPlan, float]:
         """``legs.via_grid``: the leg through one grid point (:mod:`.vias`) that the follower's kinematic run
-        (:meth:`leg_time`) finds at least ``VIA_MIN_GAIN`` s faster than ``leg``, of the ``VIA_TIMED`` best
-        estimated; else None."""
-        beat = self.leg_time(leg, pose, carrying) - VIA_MIN_GAIN
-        found = via_candidates(pl, fp, self.carry_limits if carrying else self.limits, self.dt, pose, goals,
-                               step=self.settings.legs.via_grid,
-                               join=self.settings.legs.join_inflate if carrying else 0.0, beat=beat,
+        (:meth:`leg_time`) finds at least ``VIA_MIN_GAIN`` s faster than ``leg`` (``seconds``, if known), of the
+        ``VIA_TIMED`` best estimated, with its seconds; else ``leg`` and its seconds."""
+        t_leg = seconds if seconds is not None else self.leg_time(leg, pose, carrying)
+        beat = t_leg - VIA_MIN_GAIN
+        found = via_candidates(ctx.planner, ctx.footprint, self.carry_limits if carrying else self.limits, self.dt,
+                               pose, ctx.goals, step=self.settings.legs.via_grid, join=ctx.join, beat=beat,
                                end_speed=self.entry_speed(dock), tail=lambda g: self._dock_tail(g, leg.slot, carrying),
-                               smoothed=lambda path: smoothed(path, True), final_straight=final[0],
-                               final_min_radius=final[1])
-        best = None
+                               smoothed=lambda path: ctx.smoothed(path, True), final_straight=ctx.final_straight,
+                               final_min_radius=ctx.final_min_radius)
+        best = (leg, t_leg)
         for c in found[:VIA_TIMED]:
             cand = LegPlan(c.path, c.smooth, c.goal, True, self.entry_speed(dock), leg.slot)
             t = self.leg_time(cand, pose, carrying, limit=beat - self._dock_tail(c.goal, leg.slot, carrying))
             if t < beat:
-                beat, best = t, cand
+                beat, best = t, (cand, t)
         return best
 
     @staticmethod
