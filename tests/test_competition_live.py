@@ -75,7 +75,35 @@ def test_parts_as_a_tuple_are_part_1_to_n_and_unknown_ids_are_ignored():
     assert live.report().points == 1  # part 2 does not exist in this round: ignored
 
 
-@pytest.mark.parametrize("kw", [{"start_after": -1.0}, {"start_after": math.nan}, {"held_reach": 0.0}])
+@pytest.mark.parametrize("kw", [{"start_after": -1.0}, {"start_after": math.nan}, {"held_reach": 0.0},
+                                {"ready_timeout": -1.0}])
 def test_bad_settings_are_refused(kw):
     with pytest.raises(ConfigError):
         LiveReferee(FIELD, ROBOT, RoundSetup.make(1), **kw)
+
+
+def test_waiting_for_the_robot_the_run_starts_once_it_is_ready_or_at_the_timeout():
+    """SimTwo on a 2-core machine streams its camera seconds after its first frame: a robot without a camera fix
+    had no pose for 1.6-10 s of the run (stop 41). With ``wait_ready`` the run starts at the first cycle after
+    both ``start_after`` and :meth:`LiveReferee.set_ready`; a robot that never says it is ready gets the run at
+    ``ready_timeout``."""
+    live = LiveReferee(FIELD, ROBOT, RoundSetup.make(1, parts="BXXX"), start_after=1.0, wait_ready=True)
+    parts = _slot_parts(live)
+    for k in range(100):  # 4 s: past start_after, not ready
+        live.cycle(0.04 * (k + 1), k, START, parts, magnet=False)
+    assert not live.factory.started
+    live.set_ready()
+    assert live.ready_at == pytest.approx(4.0)
+    live.cycle(4.04, 100, START, parts, magnet=False)
+    assert live.factory.started and live.factory.start_time == pytest.approx(4.04) and not live.started_unready
+    early = LiveReferee(FIELD, ROBOT, RoundSetup.make(1, parts="BXXX"), start_after=1.0, wait_ready=True)
+    early.cycle(0.04, 0, START, parts, magnet=False)
+    early.set_ready()  # ready before start_after: the start waits for start_after
+    for k in range(1, 30):
+        early.cycle(0.04 * (k + 1), k, START, parts, magnet=False)
+    assert early.factory.start_time == pytest.approx(1.04)
+    never = LiveReferee(FIELD, ROBOT, RoundSetup.make(1, parts="BXXX"), start_after=1.0, wait_ready=True,
+                        ready_timeout=2.0)
+    for k in range(60):
+        never.cycle(0.04 * (k + 1), k, START, parts, magnet=False)
+    assert never.factory.started and never.factory.start_time == pytest.approx(2.04) and never.started_unready

@@ -25,6 +25,7 @@ examples:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ..competition.live import READY_TIMEOUT
     from ..ros.cli import add_node_arguments
 
     parser.add_argument("--round", type=int, default=1, choices=(1, 2, 3), help="round 1, 2 or 3 (default 1)")
@@ -35,6 +36,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=600.0, help="round length, s (default 600)")
     parser.add_argument("--start-after", type=float, default=3.0, metavar="S",
                         help="simulation seconds after the first frame before the run starts (default 3)")
+    parser.add_argument("--ready-topic", metavar="TOPIC", default="",
+                        help="wait for the robot: the run starts no earlier than the first message on TOPIC "
+                             "(geometry_msgs/PoseWithCovarianceStamped, e.g. pose: its localization has a pose), "
+                             "as a referee waits for a team's ready sign; at most " + f"{READY_TIMEOUT:g} s after the first "
+                             "frame (default: no wait)")
     parser.add_argument("--server-host", default="127.0.0.1", help="address the factory-state server binds")
     parser.add_argument("--server-port", type=int, default=SERVER_UDP_PORT,
                         help=f"factory-state server UDP port (default {SERVER_UDP_PORT})")
@@ -57,7 +63,7 @@ def run(args) -> int:
         field=getattr(args, "field", DEFAULT_FIELD), round=args.round, seed=args.seed, parts=args.parts,
         duration=args.duration, start_after=args.start_after, server_host=args.server_host,
         server_port=args.server_port, trace=args.trace, end_after_max=args.end_after_max,
-        status_every=args.status_every)))
+        status_every=args.status_every, ready_topic=args.ready_topic)))
     # the round's layout is checked now (a bad --parts is an error here, not in the node)
     from ..competition import RoundSetup
 

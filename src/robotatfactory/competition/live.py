@@ -7,7 +7,9 @@ optional ``Parts`` labels, docs/protocol.md) and the magnet as applied. :class:`
 cycles into the same :class:`~.factory.Factory` and :class:`~.referee.Referee` as the stand-in's:
 
 * **the start**: the run starts ``start_after`` s of simulation time after the first cycle (the organiser's
-  signal; the factory-state server answers STOP until then);
+  signal; the factory-state server answers STOP until then); with ``wait_ready``, not before the caller says
+  the robot is ready (:meth:`LiveReferee.set_ready`: a referee waits for a team's robot to be localized
+  before the start), or ``ready_timeout`` s after the first cycle at the latest;
 * **held**: SimTwo does not say which part the magnet holds; a part counts as held while the magnet is on
   and the part's centre is where a held part sits, ahead of the magnet's face (:meth:`LiveReferee.held`);
 * **the machines**: the factory's teleports (a processed part moved from a machine's input to its output)
@@ -34,15 +36,20 @@ from .rounds import RoundSetup
 TRACE_VERSION = 1  # robotatfactory.sim.trace's format
 #: a held part's centre may be this far (m) from where it sits when held flat against the magnet's face
 HELD_REACH = 0.03
+#: s of simulation time after the first cycle the run waits at most for the robot to be ready (``wait_ready``)
+READY_TIMEOUT = 60.0
 
 
 class LiveReferee:
     """Scores a run from reported cycles. See the module docstring."""
 
     def __init__(self, field, robot, setup: RoundSetup, *, start_after: float = 3.0,
-                 trace: str | Path | None = None, seed: int | None = None, held_reach: float = HELD_REACH):
+                 trace: str | Path | None = None, seed: int | None = None, held_reach: float = HELD_REACH,
+                 wait_ready: bool = False, ready_timeout: float = READY_TIMEOUT):
         if not (math.isfinite(start_after) and start_after >= 0):
             raise ConfigError(f"start_after must be >= 0 simulation seconds, got {start_after!r}")
+        if not (math.isfinite(ready_timeout) and ready_timeout >= 0):
+            raise ConfigError(f"ready_timeout must be >= 0 simulation seconds, got {ready_timeout!r}")
         if not (math.isfinite(held_reach) and held_reach > 0):
             raise ConfigError(f"held_reach must be a distance > 0 in metres, got {held_reach!r}")
         self.field, self.robot, self.setup = field, robot, setup
@@ -50,6 +57,10 @@ class LiveReferee:
         self.referee = Referee(self.factory)
         self.start_after = float(start_after)
         self.held_reach = float(held_reach)
+        self.ready = not wait_ready  # the robot is ready (set_ready), or nobody asked to wait for it
+        self.ready_timeout = float(ready_timeout)
+        self.ready_at: float | None = None  # simulation time of set_ready
+        self.started_unready = False  # the run started at the timeout, the robot never said it was ready
         # where a held part's centre sits in the robot's frame: its plate (2 mm, within the reach) against
         # the magnet's face
         self.held_x = float(robot.electromagnet["x"]) + field.part.depth / 2
@@ -67,6 +78,11 @@ class LiveReferee:
             self._write({"trace": TRACE_VERSION, "control_period": robot.control_period, "robot": robot.name,
                          "parts": {str(p): self.factory.part_type(p).letter for p in self.ids},
                          "round": setup.round_no, "seed": seed, "simulator": "reported (raf referee)"})
+
+    def set_ready(self) -> None:
+        """The robot is ready (its localization has a pose): the run may start (``wait_ready``)."""
+        if not self.ready:
+            self.ready, self.ready_at = True, self.t
 
     # ------------------------------------------------------------------------------------------ a cycle
     def held(self, pose, parts: dict[int, tuple[float, float, float]], magnet: bool) -> int | None:
@@ -98,7 +114,9 @@ class LiveReferee:
         by_id = dict(parts) if isinstance(parts, dict) else {k: tuple(p) for k, p in enumerate(parts, start=1)}
         by_id = {pid: p for pid, p in by_id.items() if pid in self.ids}
         if not self.factory.started and t >= self.t0 + self.start_after:
-            self.factory.start(t)
+            if self.ready or t >= self.t0 + max(self.ready_timeout, self.start_after):
+                self.started_unready = not self.ready
+                self.factory.start(t)
         held = self.held(pose, by_id, magnet)
         teleports = self.factory.step(t, {pid: (p[0], p[1]) for pid, p in by_id.items()}, (pose[0], pose[1]),
                                       () if held is None else (held,))

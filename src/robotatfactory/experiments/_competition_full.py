@@ -196,7 +196,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
             procs.raf("record", *record_cmd, env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
             procs.raf("referee", *field_args, "referee", "--round", str(round_no), "--seed", str(seed),
-                      "--start-after", str(START_AFTER), "--duration", str(FULL_DURATION[round_no]),
+                      "--start-after", str(START_AFTER), "--ready-topic", "pose",
+                      "--duration", str(FULL_DURATION[round_no]),
                       "--server-port", str(server_port), "--trace", str(trace_path), "--end-after-max",
                       str(END_AFTER_MAX), "--status-every", "5", env=env, may_exit=True)
             _wait_logged(procs, "referee", "running", 60.0)

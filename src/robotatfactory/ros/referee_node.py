@@ -19,7 +19,7 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
-from geometry_msgs.msg import PoseArray, Twist
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
@@ -49,6 +49,9 @@ class RefereeConfig:
     parts: str = ""  # incoming parts, slot 1 first (e.g. "RGBX"); "": the seeded draw
     duration: float = 600.0  # s of the round
     start_after: float = 3.0  # simulation s after the first frame before the run starts
+    # a topic (relative name, geometry_msgs/PoseWithCovarianceStamped) whose first message says the robot is ready
+    # (its localization's pose): the run starts no earlier (nor later than live.READY_TIMEOUT s); "": no wait
+    ready_topic: str = ""
     server_host: str = "127.0.0.1"
     server_port: int = SERVER_UDP_PORT
     trace: str = ""  # file for the ground-truth trace (raf sim --trace format); "": none
@@ -70,6 +73,8 @@ def config_from_params(p: dict) -> RefereeConfig:
         raise ConfigError(f"round must be 1, 2 or 3, got {cfg.round!r}")
     if not (isinstance(cfg.server_port, int) and 0 <= cfg.server_port < 65536):
         raise ConfigError(f"server_port must be 0..65535, got {cfg.server_port!r}")
+    if not isinstance(cfg.ready_topic, str):
+        raise ConfigError(f"ready_topic must be a topic name or empty, got {cfg.ready_topic!r}")
     for name in ("duration", "start_after", "status_every"):
         v = getattr(cfg, name)
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
@@ -85,7 +90,7 @@ class RefereeNode:
         self.field, self.robot = load_field(cfg.field), load_robot(cfg.robot)
         self.setup = RoundSetup.make(cfg.round, cfg.seed, cfg.parts or None, duration=cfg.duration)
         self.live = LiveReferee(self.field, self.robot, self.setup, start_after=cfg.start_after,
-                                trace=cfg.trace or None, seed=cfg.seed)
+                                trace=cfg.trace or None, seed=cfg.seed, wait_ready=bool(cfg.ready_topic))
         self.lock = threading.Lock()
         self.gt: OrderedDict[int, tuple[float, float, float]] = OrderedDict()
         self.enc = (0, 0)
@@ -111,6 +116,9 @@ class RefereeNode:
                      node.subscribe("cmd_vel", Twist, self.on_cmd, QoS.RELIABLE, 5),
                      node.subscribe("electromagnet", Bool, self.on_magnet_cmd, QoS.RELIABLE, 5),
                      node.subscribe("ground_truth/parts", PoseArray, self.on_parts, QoS.RELIABLE, 20)]
+        if self.cfg.ready_topic:
+            self.subs.append(node.subscribe(self.cfg.ready_topic, PoseWithCovarianceStamped, self.on_ready,
+                                            QoS.RELIABLE, 1))
         self.server.start()
         self._worker = threading.Thread(target=self._teleporter, name="raf-referee-teleports", daemon=True)
         self._worker.start()
@@ -145,6 +153,15 @@ class RefereeNode:
             k = self.robot.ticks_per_rev / (2 * math.pi)
             self.enc = (int(round(msg.position[0] * k)), int(round(msg.position[1] * k)))
 
+    def on_ready(self, msg: PoseWithCovarianceStamped) -> None:
+        with self.lock:
+            first = not self.live.ready
+            self.live.set_ready()
+            t = self.live.t
+        if first:
+            self.node.info(f"raf referee: the robot is ready (a message on {self.cfg.ready_topic}) at t = "
+                           f"{0.0 if t is None else t:.2f} s")
+
     def on_magnet(self, msg: Bool) -> None:
         self.magnet = bool(msg.data)
 
@@ -178,7 +195,9 @@ class RefereeNode:
             max_held = self.cfg.end_after_max >= 0 and self.live.max_held_for(self.cfg.end_after_max)
             over = self.live.over()
         if not started and self.live.factory.started:
-            self.node.info(f"raf referee: run started at t = {t:.2f} s")
+            self.node.info(f"raf referee: run started at t = {t:.2f} s" + (
+                f" (the robot never said it was ready on {self.cfg.ready_topic})" if self.live.started_unready
+                else ""))
         for tp in teleports:
             self._teleports.put(tp)
         if report is not None:
