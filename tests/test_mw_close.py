@@ -6,6 +6,7 @@ private domain id), on rosutil's test node in this process:
 * a ``sim/*`` call that waits for a slow simulator does not hold up ``cmd_vel``: the commands still reach the
   bridge's replies to the simulator while the call is pending (ROS 2's one-threaded executor answered the
   call in the callback before: cmd_vel waited for it);
+* ROS 2: a service waits 3 s (data/fastdds.xml) for a new client's response reader before it drops the answer;
 * a whole number given where a parameter's default is a real becomes a real (ROS 2 types parameters
   strictly): overrides, parameter files and the nodes' ``given`` settings, the rule in one place.
 """
@@ -276,3 +277,84 @@ def test_whole_numbers_given_for_reals_become_reals_on_ros2(tmp_path):
     assert out["bridge_unset"] == [283, 283.0, "float"]
     assert out["agent"] == [2.0, "float", "float", True]
     assert out["localization"] == [3.0, "float", 7.0, "float"]
+
+
+ROS2_LATE_READER_SERVER = textwrap.dedent("""
+    import json, sys, threading, time, warnings
+    from robotatfactory.ros.mw import ros2
+    from std_srvs.srv import Trigger
+
+    asked, out = [], []
+    def show(message, category, filename, lineno, file=None, line=None):
+        if "failed to send response" not in str(message) or not asked:
+            return
+        out.append(str(message))
+        print(json.dumps({"waited_s": time.monotonic() - asked[0], "warning": str(message)}), flush=True)
+    warnings.showwarning = show
+    warnings.filterwarnings("always", message="failed to send response")
+    node = ros2.init_node("raf_late_reader", signals=False)
+    def answer(req, resp):
+        asked.append(time.monotonic())
+        resp.success = True
+        return resp
+    node.service("late_reader", Trigger, answer)
+    spinner = node.spin_in_background("spin")
+    print("ready", flush=True)
+    t = time.monotonic()
+    while not out and time.monotonic() - t < 30:
+        time.sleep(0.05)
+    node.finish("done", spinner)
+""")
+
+ROS2_LATE_READER_CLIENT = textwrap.dedent("""
+    import rclpy
+    from std_srvs.srv import Trigger
+    rclpy.init()
+    node = rclpy.create_node("raf_late_reader_client")
+    cli = node.create_client(Trigger, "/late_reader")
+    cli.wait_for_service(timeout_sec=3.0)  # False (its reader never matches), but the request side has matched
+    fut = cli.call_async(Trigger.Request())
+    rclpy.spin_until_future_complete(node, fut, timeout_sec=6.0)
+    print("answered" if fut.done() else "unanswered", flush=True)
+""")
+
+# a client whose response reader never matches the service's response writer (another partition): to the
+# service it is a client whose reader has not been discovered yet, for as long as the service waits
+NEVER_MATCHING_READER = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <data_reader profile_name="client"><qos><partition><names><name>elsewhere</name></names></partition></qos>
+  </data_reader>
+</profiles>
+"""
+
+
+def test_a_ros2_service_waits_seconds_for_a_new_clients_reader(tmp_path):
+    """ROS 2 (Fast DDS): a service answers a client only once its response writer has matched the client's
+    response reader; data/fastdds.xml's "service" profile lets it wait 3 s for that instead of Fast DDS's
+    100 ms, after which the answer is dropped (a new client's first call on a busy machine went unanswered:
+    CI, /reset_simulation). Provoked with a client whose reader never matches: the service (the node layer's,
+    answering in a worker) gives up after about 3 s, not 0.1 s."""
+    import importlib.util
+
+    from robotatfactory.ros.master import PrivateDomain
+
+    py = sys.executable if importlib.util.find_spec("rclpy") else str(ROOT / ".venv-ros2" / "bin" / "python")
+    profile = tmp_path / "client.xml"
+    profile.write_text(NEVER_MATCHING_READER)
+    with PrivateDomain() as dom:
+        env = dom.env()
+        env.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
+        env.pop("FASTDDS_DEFAULT_PROFILES_FILE", None)
+        server = subprocess.Popen([py, "-c", ROS2_LATE_READER_SERVER], env=env, cwd=ROOT, text=True,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            assert server.stdout.readline().strip() == "ready", server.stderr.read()[-3000:]
+            client = subprocess.run([py, "-c", ROS2_LATE_READER_CLIENT], cwd=ROOT, capture_output=True, text=True,
+                                    timeout=60, env=dict(env, FASTRTPS_DEFAULT_PROFILES_FILE=str(profile)))
+            out, err = server.communicate(timeout=60)
+        finally:
+            server.kill()
+    assert client.stdout.strip() == "unanswered", client.stderr[-3000:]
+    got = json.loads(out.strip().splitlines()[-1])
+    assert "client will not receive response" in got["warning"], got
+    assert 2.5 < got["waited_s"] < 4.5, got
