@@ -179,9 +179,9 @@ def test_stuck_detector():
 def test_an_unsure_pose_at_the_end_of_a_leg_to_a_place_stops_to_look_first(field, robot, std_m, looks):
     """On the real SimTwo the one place (of 76) whose estimate was less sure than 4.3 mm as it began (18.6 mm)
     began 36 mm off by the truth, and its part fell beside the slot. On the last PLACE_LOOK m of a leg to a place a
-    position std above ``dock.place_uncertainty`` (10 mm) stops the robot, with its part, until the estimate is
-    sure again; 4 mm (SimTwo's usual) does not."""
-    from robotatfactory.agent.behaviour import PLACE_LOOK
+    position std above ``recovery.place_uncertainty_limit`` (10 mm) stops the robot, with its part, until the
+    estimate is sure again; 4 mm (SimTwo's usual) does not."""
+    from robotatfactory.agent.settings import PLACE_LOOK
 
     agent = RoundAgent(field, robot)
     bot = KinRobot(field, robot)

@@ -37,14 +37,11 @@ from .obstacles import FieldObstacles, PartObstacle
 from .planner import NoPath
 from .recovery import Relocalizer, StuckDetector, uncertainty_of
 from .refind import Scan
-from .settings import AgentSettings
+from .settings import PLACE_LOOK, AgentSettings
 from .state import FactoryState, SlotRef
 from .tasks import Done, Move, TaskPolicy, Wait
 
 
-#: m: the last stretch of a leg to a place on which a pose less sure than dock.place_uncertainty stops the robot to
-#: look at markers (the last straight and room to brake before the part reaches the slot)
-PLACE_LOOK = 0.15
 #: x dock.timeout: a floor pick still under way this long after it started is given up outright (a failed try),
 #: on top of the back-out at dock.timeout that every docking shares: the back-out itself may get nowhere (on the
 #: stand-in a floor pick backed into a wall for 280 s before this limit; a pick or a place backs out along its
@@ -202,7 +199,8 @@ class RoundAgent:
     def on_state(self, state: FactoryState, t: float) -> None:
         """A fresh server state seen at time ``t`` (s)."""
         self._last_poll = t
-        if self.state is not None and self.mode == "decide" and self.task is not None and not self.state.same_slots(state):
+        if (self.state is not None and self.mode == "decide" and self.task is not None
+                and not self.state.same_slots(state)):
             self._event(t, f"server state changed: {state}")
         self.state, self.state_time = state, t
         seen = self.delays.update(state, t)
@@ -283,7 +281,8 @@ class RoundAgent:
             o = self.follower.step(pose)
             if self._unsure_before_place(o, unc):
                 self._start_relocalize(pose, f"pose unsure before the place ({unc[0] * 1000:.0f} mm): stopping to "
-                                             "look at markers", 0.6 * self.settings.dock.place_uncertainty)
+                                             "look at markers",
+                                       0.6 * self.settings.recovery.place_uncertainty_limit)
                 return self._brake()
             if o.off_path:  # far off the path (a slip, a push): plan again from here
                 self._event(self.t, f"{o.off_path * 100:.0f} cm off the path: re-planning")
@@ -420,16 +419,17 @@ class RoundAgent:
 
     def _unsure_before_place(self, o, unc) -> bool:
         """On the last ``PLACE_LOOK`` m of a leg to a place, the pose estimate less sure than
-        ``dock.place_uncertainty`` (position std; not again within a relocalize_timeout of a look that timed
-        out). On the real SimTwo the one place in 76 that began with a std above 4.3 mm (18.6 mm) began 36 mm off
-        by the truth and dropped its part beside the slot; on the stand-in's whole stack at most 2.2 mm in 363."""
-        lim = self.settings.dock.place_uncertainty
+        ``recovery.place_uncertainty_limit`` (position std; not again within a relocalize_timeout of a look that
+        timed out). On the real SimTwo the one place in 76 that began with a std above 4.3 mm (18.6 mm) began 36 mm
+        off by the truth and dropped its part beside the slot; on the stand-in's whole stack at most 2.2 mm in
+        363."""
+        lim = self.settings.recovery.place_uncertainty_limit
         return (lim > 0 and self.mode == "to_place" and unc is not None and unc[0] > lim
                 and o.remaining < PLACE_LOOK and self.t >= self._reloc_quiet_until)
 
     def _relocalize(self, pose, unc) -> AgentCommand:
         """Standing still, turn towards markers until the uncertainty is back below the target (60 % of the
-        limits, or of ``dock.place_uncertainty`` before a place) for 5 cycles, or relocalize_timeout; then re-plan
+        limits, or of ``place_uncertainty_limit`` before a place) for 5 cycles, or relocalize_timeout; then re-plan
         the interrupted leg from here. With a part on the magnet it does not turn."""
         rc = self.settings.recovery
         calm = unc is None or (unc[0] <= self._calm_below and unc[1] <= 0.6 * rc.heading_uncertainty_limit)

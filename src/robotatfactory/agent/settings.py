@@ -35,15 +35,11 @@ class Docking:
     press_time: float = setting(0.4, "s: picking, after the contact the robot drives on to the dock pose for at "
                                      "most this long, squaring a part that stands out of its slot against the "
                                      "slot's back wall (0: it stops at the contact)", lo=0.0, hi=2.0)
-    place_uncertainty: float = setting(0.01, "m (position std of the pose estimate): on the last 15 cm of a leg to "
-                                             "a place, a less sure pose stops the robot to look at markers until "
-                                             "the std is at most 60 % of this (real SimTwo: 2.2 mm median, 4.3 max "
-                                             "in 75 good places, 18.6 before the one that dropped its part; 0: off)",
-                                      lo=0.0, hi=0.5)
     place_gate: float = setting(0.015, "m: a place whose carried part is more than this to the side of the slot's "
                                        "centre line (the pose estimate) before it reaches the slot is not "
                                        "entered: the robot backs out along the normal and plans the place again "
-                                       "(on SimTwo a part 27 mm off met a rib and fell beside the slot; 0: off)", lo=0.0, hi=0.1)
+                                       "(on SimTwo a part 27 mm off met a rib and fell beside the slot; 0: off)",
+                                 lo=0.0, hi=0.1)
 
 
 @dataclass(frozen=True)
@@ -127,6 +123,11 @@ class Tasks:
                                            "slots nearest machine B's outputs to the parts still to come from there")
 
 
+#: m: the last stretch of a leg to a place on which a pose less sure than recovery.place_uncertainty_limit stops
+#: the robot to look at markers (the last straight and room to brake before the part reaches the slot)
+PLACE_LOOK = 0.15
+
+
 @dataclass(frozen=True)
 class Recovery:
     """Getting out of trouble (``recovery.*``)."""
@@ -138,6 +139,11 @@ class Recovery:
                                              "a pose that has a covariance)", lo=0.0, hi=10.0, lo_open=True)
     heading_uncertainty_limit: float = setting(0.1, "rad (heading std), likewise", lo=0.0, hi=math.pi,
                                                lo_open=True)
+    place_uncertainty_limit: float = setting(0.01, f"m (position std): on the last {PLACE_LOOK * 100:.0f} cm of a "
+                                                   "leg to a place, a less sure pose stops the robot to look at "
+                                                   "markers until the std is at most 60 % of this (real SimTwo: 2.2 "
+                                                   "mm median, 4.3 max in 75 good places, 18.6 before the one that "
+                                                   "dropped its part; 0: off)", lo=0.0, hi=0.5)
     relocalize_timeout: float = setting(12.0, "s looking at markers before it goes on regardless", lo=0.0,
                                         hi=600.0)
     replans: int = setting(2, "re-plans of one leg around a blocked spot before the leg counts as failed", lo=0,
