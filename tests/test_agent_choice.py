@@ -92,3 +92,36 @@ def test_the_next_part_is_the_one_picked_and_carried_soonest(field, robot):
     nearest = chosen[False].target
     assert nearest == SlotRef("incoming", 1) != agent.target
     assert times[nearest] > times[agent.target]
+
+
+
+def test_a_picked_parts_destination_is_chosen_while_it_backs_out(monkeypatch):
+    """``tasks.choose_ahead``: the choice of a picked part's destination (a leg planned and timed to each free
+    one: 0.85 s in round 1's longest cycle) runs on a thread while the robot grips and backs out, from where the
+    back-out ends, and is taken there: in real time the robot no longer stands with its part for it. Bare round
+    1: every choice after a pick with two or more destinations ran on that thread (none with the option off),
+    and the round goes as it does with the choice made after the back-out: the same parts to the same slots."""
+    import threading
+
+    from robotatfactory.experiments.competition import play_round
+
+    fastest = RoundAgent._fastest
+    runs = {}
+    for ahead in (True, False):
+        where = []
+
+        def recorded(self, *args, _where=where, **kw):
+            _where.append(threading.current_thread().name)
+            return fastest(self, *args, **kw)
+
+        monkeypatch.setattr(RoundAgent, "_fastest", recorded)
+        r = play_round(1, 100, record_path=True, agent={"tasks": {"choose_ahead": ahead}})
+        assert r["points"] == r["max_points"] and r["collision_checks_hit"] == 0
+        if ahead:
+            assert r["choices_ahead"] >= 3 and set(where) == {"raf-ahead"} and len(where) == r["choices_ahead"]
+        else:
+            assert r["choices_ahead"] == 0 and where and "raf-ahead" not in where
+        runs[ahead] = ([text for _t, text, *_ in r["events"] if text.startswith(("placed", "picked"))],
+                       r["last_score_s"])
+    assert runs[True][0] == runs[False][0]  # the same parts to the same slots, in the same order
+    assert abs(runs[True][1] - runs[False][1]) < 0.5, runs

@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 from ..competition.parts import PartType
+from .ahead import Ahead
 from .delay import DelayEstimator, lanes_of
 from .docking import Docker, DockSettings
 from .floor import FloorRecovery, LostPart, Next
@@ -42,6 +43,9 @@ from .state import FactoryState, SlotRef
 from .tasks import Done, Move, TaskPolicy, Wait
 
 
+#: (m, rad): a destination chosen ahead from where the back-out was to end is taken where it ends this near that
+#: pose (the choice compares the legs from there; the chosen leg is planned from where the robot is)
+AHEAD_POSE = (0.03, 0.1)
 #: x dock.timeout: a floor pick still under way this long after it started is given up outright (a failed try),
 #: on top of the back-out at dock.timeout that every docking shares: the back-out itself may get nowhere (on the
 #: stand-in a floor pick backed into a wall for 280 s before this limit; a pick or a place backs out along its
@@ -77,6 +81,7 @@ class AgentCounters:
     replans_off_path: int = 0  # legs planned again because the robot was far off its path
     parts_refound: int = 0  # searches for a lost part in which the LIDAR found it on the floor
     floor_picks: int = 0  # lost parts picked up from the floor again
+    choices_ahead: int = 0  # picked parts' destinations chosen while backing out (tasks.choose_ahead)
     floor_pick_failures: int = 0  # floor picks that failed (no contact, not held, blocked, no path, timeout)
     parts_left: int = 0  # lost parts left on the floor after recovery.refind_tries failed floor picks
 
@@ -119,6 +124,8 @@ class RoundAgent:
         # a part dropped on the floor: found and picked up again (modes search, to_floor, floor_pick)
         self.floor = FloorRecovery(f, r, self.settings, self.limits, self.dt, self.legs, dock, self.counters,
                                    self._event, self._obstacles, self._mapped)
+        self.ahead = Ahead()  # a picked part's destination, chosen while the robot backs out (_choose_ahead)
+        self._ahead_pick = -math.inf
         self.mode = "wait_start"
         self.state: FactoryState | None = None
         self.state_time = -math.inf
@@ -298,6 +305,9 @@ class RoundAgent:
         if self.mode in ("pick", "place", "floor_pick"):
             o = self._docking().step(pose, contact)
             self.magnet = o.magnet
+            if self.mode == "pick" and o.phase == "grip" and self._ahead_pick != self._mode_t0:
+                self._ahead_pick = self._mode_t0  # once a pick (its start)
+                self._choose_ahead()
             if self.mode == "place" and not o.magnet and self._released_t is None:
                 self._released_t = self.t  # the part is free from now: the delay is measured from here
                 self._release_pose = tuple(pose[:3])
@@ -545,15 +555,16 @@ class RoundAgent:
         self.follower.stop()
         self._floor_next(self.floor.failed(self.t, reason), pose)
 
-    def _go(self, mode: str, pose) -> None:
+    def _go(self, mode: str, pose, obstacles: FieldObstacles | None = None) -> None:
         """Plan the leg to ``self.target`` from ``pose`` and start it in ``mode`` (``to_pick`` / ``to_place``);
-        no path: :meth:`_no_leg`. ``to_floor``: the lost part on the floor (:meth:`_go_floor`)."""
+        no path: :meth:`_no_leg`. ``to_floor``: the lost part on the floor (:meth:`_go_floor`). ``obstacles``:
+        the field as it is now, if already made (its remembered searches are reused)."""
         if mode == "to_floor":
             self._go_floor(pose)
             return
         carrying = self.carrying is not None
         self.follower.limits = self.limits if not carrying else self.carry_limits
-        obstacles = self._obstacles()
+        obstacles = obstacles if obstacles is not None else self._obstacles()
         if carrying and self.settings.carry.arcs and self._go_on_arcs(mode, pose, obstacles):
             return
         try:
@@ -616,51 +627,89 @@ class RoundAgent:
         self.mode, self._mode_t0 = "escape", self.t
 
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
-        """Start the leg to the destination of ``dest`` (best first) that takes the least time among those of
-        the best rank (:meth:`TaskPolicy.destination_class`; every outgoing slot is of one rank), by
-        :meth:`.LegPlanner.leg_time` of the planner's legs, then the ``VIA_RANKED`` fastest through a grid point
-        where that is faster (:meth:`.LegPlanner.faster`, ``legs.via_grid``); with ``choose_by_time`` off, to
-        ``self.target`` (or ``dest[0]``)."""
+        """Start the leg to the destination of ``dest`` (best first) that takes the least time
+        (:meth:`_fastest`); with ``choose_by_time`` off, to ``self.target`` (or ``dest[0]``)."""
         carrying = self.carrying is not None
         if not self.settings.tasks.choose_by_time or (carrying and self.settings.carry.arcs) or len(dest) < 2:
             if self.target not in dest:
                 self.target = dest[0]
             self._go(mode, pose)
             return
-        if (carrying and self.settings.tasks.reserve_outgoing and self.carrying is PartType.BLUE
-                and isinstance(self.task, Move)):
-            if self.policy.is_output(self.task.source):  # the slots it reaches turning one way only
-                near = self.policy.outgoing_near_outputs(self.state)[:2]
-                dest = [d for d in dest if d in near] or dest
-            else:  # leave those to the parts still to come out of the machines
-                keep = set(self.policy.reserved_outgoing(self.state, self.task.source))
-                dest = [d for d in dest if d not in keep] or dest
-        best_class = min(self.policy.destination_class(self.state, d) for d in dest)
-        timed = []
-        obstacles = self._obstacles()
-        for d in dest:  # timed by the planner's legs
-            if self.policy.destination_class(self.state, d) != best_class:
-                continue
-            try:
-                leg = self.legs.plan(obstacles, pose, d, carrying, _dock_of(mode), via=False)
-            except NoPath:
-                continue
-            timed.append((self.legs.leg_time(leg, pose, carrying), d, leg))
-        if not timed:  # no path to any: the usual failure handling
-            self.target = dest[0]
+        target, leg = self._fastest(mode, pose, dest, self.state, self.carrying, self.task, self._obstacles())
+        self.target = target
+        if leg is None:  # no path to any: the usual failure handling
             self._go(mode, pose)
             return
+        self._start_leg(mode, leg)
+
+    def _choose_ahead(self) -> None:
+        """Gripping a part: start choosing its destination (:meth:`_fastest`) on a thread (:class:`.Ahead`),
+        from the pose where the back-out will end and the inputs the choice after it would have
+        (:meth:`_dock_done` takes it when those are still the inputs: :meth:`_ahead_still`)."""
+        if not (self.settings.tasks.choose_ahead and self.settings.tasks.choose_by_time
+                and not self.settings.carry.arcs and isinstance(self.task, Move)):
+            return
+        task, part = self.task, self.task.part
+        state = self.state.with_slot(task.source, None)
+        dest = self._usable(self.policy.destinations(state, part))
+        if len(dest) < 2:
+            return
+        blocked = tuple(b for b in self.blocked_spots if b[2] > self.t)
+        floor = tuple(self.floor.obstacles(True))
+        obstacles = self.legs.obstacles(state, list(blocked), None, list(floor))
+        pose = self.docker.retreat_pose()
+        key = (pose, tuple(dest), state, blocked, floor)
+        self.ahead.start(key, lambda: (self._fastest("to_place", pose, dest, state, part, task, obstacles)[0],
+                                       obstacles))
+
+    def _ahead_still(self, key, pose, dest: list) -> bool:
+        """The choice started ahead (``key``: the pose it was made from, the destinations, the state, the blocked
+        spots and the parts on the floor) holds for ``pose`` and ``dest`` now: within ``AHEAD_POSE`` of that pose
+        and the same inputs."""
+        at, was_dest, state, blocked, floor = key
+        return (math.hypot(pose[0] - at[0], pose[1] - at[1]) <= AHEAD_POSE[0]
+                and abs(math.remainder(pose[2] - at[2], 2 * math.pi)) <= AHEAD_POSE[1]
+                and was_dest == tuple(dest) and state.same_slots(self.state)
+                and blocked == tuple(b for b in self.blocked_spots if b[2] > self.t)
+                and floor == tuple(self.floor.obstacles(True)))
+
+    def _fastest(self, mode: str, pose, dest: list, state: FactoryState, carrying: PartType | None, task,
+                 obstacles: FieldObstacles) -> tuple[SlotRef, LegPlan | None]:
+        """The destination of ``dest`` (best first) whose leg from ``pose`` takes the least time among those of
+        the best rank (:meth:`TaskPolicy.destination_class` in ``state``; every outgoing slot is of one rank), by
+        :meth:`.LegPlanner.leg_time` of the planner's legs, then the ``VIA_RANKED`` fastest through a grid point
+        where that is faster (:meth:`.LegPlanner.faster`, ``legs.via_grid``), and its leg (None: no path to
+        any, ``dest[0]``). Reads only its arguments and the agent's settings: :class:`~.ahead.Ahead` runs it on
+        a thread while the robot backs out with the part (:meth:`_choose_ahead`)."""
+        if self.settings.tasks.reserve_outgoing and carrying is PartType.BLUE and isinstance(task, Move):
+            if self.policy.is_output(task.source):  # the slots it reaches turning one way only
+                near = self.policy.outgoing_near_outputs(state)[:2]
+                dest = [d for d in dest if d in near] or dest
+            else:  # leave those to the parts still to come out of the machines
+                keep = set(self.policy.reserved_outgoing(state, task.source))
+                dest = [d for d in dest if d not in keep] or dest
+        best_class = min(self.policy.destination_class(state, d) for d in dest)
+        timed = []
+        for d in dest:  # timed by the planner's legs
+            if self.policy.destination_class(state, d) != best_class:
+                continue
+            try:
+                leg = self.legs.plan(obstacles, pose, d, carrying is not None, _dock_of(mode), via=False)
+            except NoPath:
+                continue
+            timed.append((self.legs.leg_time(leg, pose, carrying is not None), d, leg))
+        if not timed:
+            return dest[0], None
         best = timed[0]
         for c in timed[1:]:
             if c[0] < best[0] - 1e-6:
                 best = c
         # the fastest few through a grid point, where that is faster (legs.via_grid; a search costs several legs)
         for cost, d, leg in sorted(timed, key=lambda c: c[0])[:VIA_RANKED]:
-            leg, cost = self.legs.faster(obstacles, pose, leg, carrying, _dock_of(mode), cost)
+            leg, cost = self.legs.faster(obstacles, pose, leg, carrying is not None, _dock_of(mode), cost)
             if cost < best[0] - 1e-6:
                 best = (cost, d, leg)
-        self.target = best[1]
-        self._start_leg(mode, best[2])
+        return best[1], best[2]
 
     def _start_leg(self, mode: str, leg: LegPlan) -> None:
         """Drive the planned leg ``leg`` in ``mode``, with a time budget."""
@@ -741,6 +790,12 @@ class RoundAgent:
                 self.mode, self.need_state_after = "decide", self.t
                 return
             self._leg_replans = 0
+            chosen = self.ahead.take(lambda key: self._ahead_still(key, pose, dest))
+            if chosen is not None:  # chosen while backing out, for this pose and these inputs: the leg from here
+                self.counters.choices_ahead += 1
+                self.target, obstacles = chosen
+                self._go("to_place", pose, obstacles)
+                return
             self._go_fastest("to_place", pose, dest)
             return
         self.counters.places += 1

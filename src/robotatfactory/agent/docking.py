@@ -294,6 +294,11 @@ class Docker:
         self._failing = reason
         self._back(pose)
 
+    def retreat_pose(self) -> tuple[float, float, float]:
+        """Where the back-out of the manoeuvre under way ends (base_link x, y, theta: facing the slot, moved
+        sideways by the held part's offset as the back-out is)."""
+        return self._shifted(pose_in_front(self._slot, self._retreat))
+
     def _back(self, pose) -> None:
         """Back straight out along the slot's normal to ``retreat`` m from its centre."""
         back = pose_in_front(self._slot, self._retreat)

@@ -362,6 +362,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "parts_lost": cnt.parts_lost,
             "parts_refound": cnt.parts_refound, "floor_picks": cnt.floor_picks,
             "floor_pick_failures": cnt.floor_pick_failures, "parts_left": cnt.parts_left,
+            "choices_ahead": cnt.choices_ahead,
             "agent_done": agent.mode == "done", "sim_s": sim.time, "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
