@@ -191,7 +191,10 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
         if not compose:
             procs.raf("bridge", *field_args, *bridge_cmd, env=env)
             procs.raf("localize", *field_args, *localize_cmd, env=env)
-        record_cmd = ["record", "-o", str(bag_path), "--topics", "pose", "cmd_vel", "--format", fmt]
+        # the pose and the commands (the figures), and what the filter made of each camera fix and its counters
+        # (why a pose ran away: SimTwo, round 3, 55 mm off for 4 s at a std of 2-3 mm after a stall)
+        record_cmd = ["record", "-o", str(bag_path), "--topics", "pose", "cmd_vel", "aruco/fixes/filter_accepted",
+                      "aruco/fixes/filter_rejected", "diagnostics", "--format", fmt]
         if not compose:
             procs.raf("record", *record_cmd, env=env)
         if simtwo:  # the referee: raf sim's factory, referee and trace, from SimTwo's reports; it ends the run
