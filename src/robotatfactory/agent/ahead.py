@@ -22,19 +22,14 @@ class Ahead:
         self._key = None
         self._job: Future | None = None
 
-    @property
-    def pending(self) -> bool:
-        """A job was started and not taken or dropped since."""
-        return self._job is not None
-
-    def start(self, key, fn: Callable, *args) -> None:
-        """Run ``fn(*args)`` on a thread of its own for ``key`` (a job not taken is dropped: its thread ends on
-        its own, its result unused)."""
+    def start(self, key, fn: Callable[[], object]) -> None:
+        """Run ``fn()`` on a thread of its own for ``key`` (a job not taken is dropped: its thread ends on its
+        own, its result unused)."""
         fut: Future = Future()
 
         def run() -> None:
             try:
-                fut.set_result(fn(*args))
+                fut.set_result(fn())
             except BaseException as e:  # noqa: BLE001 - handed to the taker: raised where the job is taken
                 fut.set_exception(e)
 

@@ -396,13 +396,25 @@ class RoundAgent:
         ok = [d for d in dest if self.place_failed.get(d, 0) < self.settings.tasks.give_up_after - 1]
         return ok or dest
 
-    def _obstacles(self, exclude: SlotRef | None = None) -> FieldObstacles:
-        """The field as legs are planned on now: the parts of the last state (but the one in ``exclude``), the
-        blocked spots still remembered (those past their time are forgotten here) and the parts lying on the
-        floor."""
+    def _obstacles(self, exclude: SlotRef | None = None, state: FactoryState | None = None,
+                   carrying: bool | None = None) -> FieldObstacles:
+        """The field as legs are planned on now: the parts of ``state`` (default the last state; but the one in
+        ``exclude``), the blocked spots still remembered (those past their time are forgotten here) and the
+        parts lying on the floor (as seen carrying a part or not; default: whether the robot carries one)."""
         self.blocked_spots = [b for b in self.blocked_spots if b[2] > self.t]
-        return self.legs.obstacles(self.state, self.blocked_spots, exclude,
-                                   self.floor.obstacles(self.carrying is not None))
+        blocked, floor = self._place_inputs(self.carrying is not None if carrying is None else carrying)
+        return self.legs.obstacles(self.state if state is None else state, list(blocked), exclude, list(floor))
+
+    def _place_inputs(self, carrying: bool) -> tuple[tuple, tuple]:
+        """What legs are planned on besides the state: the blocked spots not past their time and the parts lying
+        on the floor (as seen carrying a part or not)."""
+        return tuple(b for b in self.blocked_spots if b[2] > self.t), tuple(self.floor.obstacles(carrying))
+
+    def _by_time(self, dest: list, carrying: bool) -> bool:
+        """The destination of ``dest`` is chosen by time (:meth:`_fastest`): ``tasks.choose_by_time`` on, a
+        choice to make, and not carrying on arcs (``carry.arcs`` plans its own leg)."""
+        return (self.settings.tasks.choose_by_time and len(dest) >= 2
+                and not (carrying and self.settings.carry.arcs))
 
     def _mapped(self, floor: list[PartObstacle]) -> FieldObstacles:
         """The last state's parts, the blocked spots as remembered (:meth:`_obstacles` forgets those past their
@@ -629,8 +641,7 @@ class RoundAgent:
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
         """Start the leg to the destination of ``dest`` (best first) that takes the least time
         (:meth:`_fastest`); with ``choose_by_time`` off, to ``self.target`` (or ``dest[0]``)."""
-        carrying = self.carrying is not None
-        if not self.settings.tasks.choose_by_time or (carrying and self.settings.carry.arcs) or len(dest) < 2:
+        if not self._by_time(dest, self.carrying is not None):
             if self.target not in dest:
                 self.target = dest[0]
             self._go(mode, pose)
@@ -646,19 +657,16 @@ class RoundAgent:
         """Gripping a part: start choosing its destination (:meth:`_fastest`) on a thread (:class:`.Ahead`),
         from the pose where the back-out will end and the inputs the choice after it would have
         (:meth:`_dock_done` takes it when those are still the inputs: :meth:`_ahead_still`)."""
-        if not (self.settings.tasks.choose_ahead and self.settings.tasks.choose_by_time
-                and not self.settings.carry.arcs and isinstance(self.task, Move)):
+        if not (self.settings.tasks.choose_ahead and isinstance(self.task, Move)):
             return
         task, part = self.task, self.task.part
         state = self.state.with_slot(task.source, None)
         dest = self._usable(self.policy.destinations(state, part))
-        if len(dest) < 2:
+        if not self._by_time(dest, True):
             return
-        blocked = tuple(b for b in self.blocked_spots if b[2] > self.t)
-        floor = tuple(self.floor.obstacles(True))
-        obstacles = self.legs.obstacles(state, list(blocked), None, list(floor))
+        obstacles = self._obstacles(state=state, carrying=True)
         pose = self.docker.retreat_pose()
-        key = (pose, tuple(dest), state, blocked, floor)
+        key = (pose, tuple(dest), state, *self._place_inputs(True))
         self.ahead.start(key, lambda: (self._fastest("to_place", pose, dest, state, part, task, obstacles)[0],
                                        obstacles))
 
@@ -670,8 +678,7 @@ class RoundAgent:
         return (math.hypot(pose[0] - at[0], pose[1] - at[1]) <= AHEAD_POSE[0]
                 and abs(math.remainder(pose[2] - at[2], 2 * math.pi)) <= AHEAD_POSE[1]
                 and was_dest == tuple(dest) and state.same_slots(self.state)
-                and blocked == tuple(b for b in self.blocked_spots if b[2] > self.t)
-                and floor == tuple(self.floor.obstacles(True)))
+                and (blocked, floor) == self._place_inputs(True))
 
     def _fastest(self, mode: str, pose, dest: list, state: FactoryState, carrying: PartType | None, task,
                  obstacles: FieldObstacles) -> tuple[SlotRef, LegPlan | None]:
