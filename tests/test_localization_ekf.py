@@ -243,6 +243,31 @@ def test_reinitialises_after_the_robot_is_moved():
     assert _err(ekf, run.truth[-1][1:])[0] < 0.01
 
 
+def test_beacons_accepted_meanwhile_do_not_stop_the_cameras_reinitialisation():
+    """The filter 8 cm off along x; a beacon seen as the estimate predicts it (associated from the filter's own
+    pose) is accepted at every scan; the camera's confident fixes at the truth are gated, and after
+    ``reinit_after_gated`` of them in a row the filter restarts at the truth."""
+    cfg = EkfConfig(reinit_after_gated=4)
+    ekf = Ekf(cfg)
+    ekf.initialise(0.0, (0.08, 0.0, 0.0), np.diag([1e-6, 1e-6, 1e-6]))
+    beacon = np.array([[0.0, 0.6]])
+    truth = (0.0, 0.0, 0.0)
+    ekf.odometry_pose(0.0, truth)
+    outcomes = []
+    for k in range(1, 9):
+        t = 0.1 * k
+        ekf.odometry_pose(t, truth)
+        # the beacon as seen from the estimate: range and bearing it predicts (so it is accepted)
+        x, y, th = ekf.pose()
+        rng, brg = math.hypot(beacon[0, 0] - x, beacon[0, 1] - y), math.atan2(beacon[0, 1] - y, beacon[0, 0] - x) - th
+        assert ekf.beacons(t - 0.02, [(rng, brg, 1e-6, 1e-6)], beacon).accepted
+        outcomes.append(ekf.pose_fix(t, truth, R_CAM).reason)
+        if outcomes[-1] == reasons.REINITIALISED:
+            break
+    assert outcomes == [reasons.GATED] * 3 + [reasons.REINITIALISED], outcomes
+    assert abs(ekf.pose()[0]) < 0.01
+
+
 def test_final_outcomes_of_fixes_are_reported_once_they_leave_the_history():
     run = Run(seed=5)
     ekf = Ekf(EkfConfig(history_s=1.0))

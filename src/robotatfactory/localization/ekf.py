@@ -27,6 +27,7 @@
 - **Re-initialisation**: uninitialised until the first confident fix; re-initialised from a confident fix
   that is gated after a long time without accepted fixes (``reinit_after_s``) or after
   ``reinit_after_gated`` gated confident fixes in a row (the filter was wrong, e.g. the robot was moved).
+  Both count camera fixes only: a scan fix or a beacon, matched from the filter's own pose, leaves them.
 - **Final outcomes**: a camera fix can be gated when it arrives and accepted after a later (late-stamped)
   measurement is inserted before it, or the other way round; its outcome is final when it leaves the
   history. :meth:`Ekf.pop_finished_fixes` hands out those final outcomes (the experiment counts accepted
@@ -562,7 +563,10 @@ class Ekf:
                 d2s.append(d2)
         if not used:
             return s, UpdateResult(False, reasons.GATED if gated else reasons.NUMERICAL)
-        return replace(s, x=x, P=P, last_fix_t=s.t, gated_run=0), UpdateResult(True, None, float(np.mean(d2s)), used)
+        # like a scan fix, beacons are associated from the filter's own pose and leave the camera's outage clock
+        # and gated run alone: accepted while the pose is wrong along what they do not see, they would stop the
+        # camera's re-initialisation for good
+        return replace(s, x=x, P=P), UpdateResult(True, None, float(np.mean(d2s)), used)
 
 
 def beacon_model(x: np.ndarray, beacon_xy, laser_xy=(0.0, 0.0), laser_yaw: float = 0.0):
