@@ -12,7 +12,7 @@ from robotatfactory.agent.footprint import PLATE_THICKNESS, robot_footprint, wra
 from robotatfactory.agent.obstacles import FieldObstacles
 from robotatfactory.agent.refind import FoundPart, Scan, find_part, fit_box, lost_spot
 from robotatfactory.agent.settings import agent_settings
-from robotatfactory.agent.state import SlotRef
+from robotatfactory.agent.state import FactoryState, SlotRef
 from robotatfactory.competition.parts import PartType
 
 from test_agent_recovery import KinRobot
@@ -381,3 +381,19 @@ def test_a_part_the_server_does_not_list_after_its_place_is_found_and_placed_aga
         c = agent.counters
         assert (c.parts_lost, c.floor_picks, c.places) == (1, 1, 2) and c.parts_refound >= 1, events_after(agent, t0)
         assert bot.floor is None and agent.lost is None
+
+
+def test_a_state_polled_in_the_cycle_of_a_decision_is_not_one_after_it(field, robot):
+    """The caller polls the server, then steps the agent, in one cycle: a state polled in the cycle a place ended
+    in was taken before it. The agent asks for (and waits for) one polled later: the first state after a place
+    decides whether the part is in its slot (a state from before it would always say so, the agent having
+    entered its own expectation)."""
+    agent = RoundAgent(field, robot)
+    st = FactoryState.from_letters("XBXX")
+    agent.on_state(st, 5.0)
+    agent.t, agent.mode, agent.need_state_after = 5.0, "decide", 5.0  # decided on in the cycle at 5.0 s
+    assert agent.wants_state
+    agent.step(5.0, (0.0, -0.3, 0.0), False)
+    assert agent.mode == "decide" and agent.state_time == 5.0  # waits for a later state
+    agent.on_state(st, 5.04)
+    assert not agent.wants_state

@@ -201,7 +201,7 @@ class RoundAgent:
         if self.mode == "done":
             return False
         # also while driving: the delay estimate is only as sharp as the polls are frequent
-        return self.state_time < self.need_state_after or self.t - self._last_poll >= self.settings.tasks.state_period
+        return self.state_time <= self.need_state_after or self.t - self._last_poll >= self.settings.tasks.state_period
 
     def on_state(self, state: FactoryState, t: float) -> None:
         """A fresh server state seen at time ``t`` (s)."""
@@ -253,7 +253,7 @@ class RoundAgent:
         if self.mode == "search":
             return self._search_step(pose)
         if self.mode == "decide":
-            if self.state_time < self.need_state_after:
+            if self.state_time <= self.need_state_after:  # (a state polled in the cycle it was asked for came before)
                 return self._brake()
             self._decide(pose)
             if self.mode == "decide" or self.mode == "done":
@@ -635,7 +635,7 @@ class RoundAgent:
         """Drive straight to ``point`` (mode ``escape``), backwards when it lies behind; then decide again from
         there, or go on to the part on the floor."""
         behind = (point[0] - pose[0]) * math.cos(pose[2]) + (point[1] - pose[1]) * math.sin(pose[2]) < 0
-        self.follower.start([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=no_spin)
+        self._follow([tuple(pose[:2]), point], final_heading=None, reverse=behind, no_spin=no_spin)
         self.mode, self._mode_t0 = "escape", self.t
 
     def _go_fastest(self, mode: str, pose, dest: list) -> None:
@@ -724,10 +724,10 @@ class RoundAgent:
         self.path = path
         self.follower.limits = self.limits if self.carrying is None else self.carry_limits
         if self.settings.legs.smooth:
-            self.follower.start(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2],
-                                end_speed=leg.end_speed)
+            self._follow(leg.smooth, final_heading=None if leg.end_speed > 0 else leg.goal[2],
+                         end_speed=leg.end_speed)
         else:
-            self.follower.start(leg.smooth, final_heading=leg.goal[2])
+            self._follow(leg.smooth, final_heading=leg.goal[2])
         self.mode = mode
         self._mode_t0 = self.t
         self.stuck.reset()
@@ -748,7 +748,7 @@ class RoundAgent:
         sp = leg.smooth
         self.path = leg.path
         self.follower.limits = replace(self.limits, a_lat=self.settings.carry.a_lat)  # gentle arcs: the part slides
-        self.follower.start(sp, final_heading=None, end_speed=leg.end_speed, no_spin=True)
+        self._follow(sp, final_heading=None, end_speed=leg.end_speed, no_spin=True)
         self.mode = mode
         self._mode_t0 = self.t
         self.stuck.reset()
@@ -860,6 +860,11 @@ class RoundAgent:
         return self.floor.docker if self.mode == "floor_pick" else self.docker
 
     # ------------------------------------------------------------------------------------------ output
+    def _follow(self, path, **kw) -> None:
+        """Start the follower on ``path`` from the speeds last commanded (:meth:`_brake`, the relocalizer and the
+        docker command without it: its own would be those it was stopped at)."""
+        self.follower.start(path, speeds=(self._v, self._w), **kw)
+
     def _cmd(self, v: float, w: float) -> AgentCommand:
         self._v, self._w = v, w
         return AgentCommand(v, w, self.magnet)

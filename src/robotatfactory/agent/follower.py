@@ -152,13 +152,16 @@ class PathFollower:
         return self.path.points
 
     def start(self, path, final_heading: float | None = None, reverse: bool = False,
-              end_speed: float = 0.0, no_spin: bool = False) -> None:
+              end_speed: float = 0.0, no_spin: bool = False, speeds: tuple[float, float] | None = None) -> None:
         """A new path: a :class:`SmoothPath` or (x, y) waypoints (m; the first is where the robot is).
         ``end_speed`` (m/s) > 0: the path ends without stopping (no final heading then), ``done`` is
         reported when its end is passed. ``no_spin``: never turn on the spot (carrying a part on SimTwo's
         magnet): the turn rate stays within ``spin_curvature`` times the speed, plus the feedback's
         ``spin_slack``; the path's pieces must start along the robot's heading (:mod:`.hybrid`). The
-        commanded speeds carry over (no jump when a path replaces another while moving)."""
+        commanded speeds carry over (no jump when a path replaces another while moving): this follower's own,
+        or ``speeds``, the (v, w) last commanded (v > 0 forwards), where the commands came from elsewhere since
+        its last step (the caller braked or turned by itself: the follower would set off from the speed it was
+        stopped at)."""
         if not isinstance(path, SmoothPath):
             path = smooth_path(path)
         self.path = path
@@ -166,6 +169,8 @@ class PathFollower:
         self.reverse = reverse
         self.end_speed = float(end_speed)
         self.no_spin = bool(no_spin)
+        if speeds is not None:
+            self.v, self.w = (-float(speeds[0]) if reverse else float(speeds[0])), float(speeds[1])
         self.k = 0
         self._s, self._i = 0.0, 0
         self._spinning = False
