@@ -70,6 +70,10 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
     assert 0.0 <= runs[0]["command_delay_median_s"] <= 0.12
     assert (tmp_path / "round1_seed0_full_stack.png").stat().st_size > 10_000
     assert sum(text.startswith("picked") for _, text, _, _ in runs[0]["events"]) == 4
+    # the agent's counters, read from its last /diagnostics in the bag: the picks, and the destinations chosen
+    # on the thread while backing out (tasks.choose_ahead; round 1 has a choice after every pick)
+    assert res["full_stack_tuned_r1_s0_picks"] == runs[0]["picks"] == 4, runs[0].get("counters_note")
+    assert 1 <= res["full_stack_tuned_r1_s0_choices_ahead"] <= 4
 
 
 def test_localize_settings_are_checked_before_any_run():

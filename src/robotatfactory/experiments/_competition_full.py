@@ -91,6 +91,20 @@ def read_commands(bag_path: Path, topic: str = "cmd_vel") -> list[tuple[float, f
         return [(t * 1e-9, m.linear.x, m.angular.z) for _topic, t, m in bag.messages(names)]
 
 
+def read_agent_counters(bag_path: Path, topic: str = "diagnostics", name: str = "raf agent") -> dict[str, int]:
+    """The agent's counters (:class:`~robotatfactory.agent.behaviour.AgentCounters`: picks, choices made
+    ahead, ...) as its last ``name`` status on ``topic`` reported them: every integer value of that status."""
+    from ..ros.bags import find_topic, open_bag
+
+    last = None
+    with open_bag(bag_path) as bag:
+        for _topic, _t, m in bag.messages(find_topic(bag.topics, topic)):
+            last = next((s for s in m.status if s.name == name), last)
+    if last is None:
+        raise ValueError(f"no {name!r} status on {topic}")
+    return {kv.key: int(kv.value) for kv in last.values if kv.value.lstrip("-").isdigit()}
+
+
 def command_delays(commands: list[tuple[float, float, float]], trace) -> list[float]:
     """Seconds from each command's publication (its bag time) to the start of the first control cycle that
     ran it (the trace's ``cmd``): the loop's command latency. Commands never run (replaced before the next
@@ -365,6 +379,12 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
         delays = command_delays(read_commands(bag_path), trace)
     except Exception:  # noqa: BLE001 - as for the poses
         delays = []
+    try:  # what the agent counted (its last /diagnostics): choices made ahead on the thread, ...
+        counters = read_agent_counters(bag_path)
+        out["choices_ahead"] = counters["choices_ahead"]
+        out["picks"] = counters["picks"]
+    except Exception as e:  # noqa: BLE001 - as for the poses
+        out["counters_note"] = f"no agent counters: {type(e).__name__}: {e}"
     out["command_delay_median_s"] = statistics.median(delays) if delays else math.nan
     out["command_delay_p95_s"] = _percentile(delays, 95)
     errs = pose_errors(poses, trace)

@@ -31,7 +31,9 @@ separately: every key carries the set, ``{mode}_{set}_r{round}_...`` (``other`` 
 ``--first-seed``), and the table has a line per set and round.
 
 Per run (keys ``{mode}_{set}_r{round}_s{seed}_...``): score and maximum score, the referee's delivery time
-(when the final score was reached and held), points the referee took back (``points_lost``), referee rule notes, picks attempted / failed, places, timeouts, collisions of the robot's outline
+(when the final score was reached and held), points the referee took back (``points_lost``), referee rule notes, picks attempted / failed, places, timeouts, the picks and those whose destination was
+chosen on a thread while the robot backed out (``choices_ahead``, ``tasks.choose_ahead``; on the whole stack
+from the agent's last ``/diagnostics`` in the run's bag), collisions of the robot's outline
 with walls or ribs, or beyond the floor's 2 cm overhang allowance (``floor``), checked every 5 cycles, parts pushed (a part not on the magnet moving 2 mm - 5 cm
 within 5 cycles: a push, not a machine's teleport), where each part was let go (``release_offset_max_m``:
 its offset from the nearest slot's normal, the line through the slot's centre along its facing; parts let go
@@ -362,7 +364,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "parts_lost": cnt.parts_lost,
             "parts_refound": cnt.parts_refound, "floor_picks": cnt.floor_picks,
             "floor_pick_failures": cnt.floor_pick_failures, "parts_left": cnt.parts_left,
-            "choices_ahead": cnt.choices_ahead,
+            "choices_ahead": cnt.choices_ahead, "picks": cnt.picks,
             "agent_done": agent.mode == "done", "sim_s": sim.time, "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
@@ -577,6 +579,11 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_picks_attempted"] = r["picks_attempted"]
         out[f"{p}_pick_failures"] = r["pick_failures"]
         out[f"{p}_timeouts"] = r["timeouts"]
+        if "choices_ahead" in r:  # a picked part's destination chosen on the thread (tasks.choose_ahead)
+            out[f"{p}_choices_ahead"] = r["choices_ahead"]
+            out[f"{p}_picks"] = r["picks"]
+        elif r.get("counters_note"):
+            out[f"{p}_counters_note"] = r["counters_note"]
         if mode.endswith("full_stack"):
             out[f"{p}_logs"] = r.get("logs", "")
             for k in ("pose_error_docking_max_m", "pose_error_docking_median_m", "pose_error_median_m",
@@ -630,6 +637,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_parts_knocked_out_target_met"] = knocked == 0 and not any("error" in r for r in rs)
         out[f"{p}_points_lost"] = sum(int(r.get("points_lost", 0)) for r in rs)  # the referee took them back
         out[f"{p}_pick_failures"] = sum(int(r.get("pick_failures", 0)) for r in rs)
+        if any("choices_ahead" in r for r in rs):  # of the picks, those whose destination was chosen ahead
+            out[f"{p}_choices_ahead"] = sum(int(r.get("choices_ahead", 0)) for r in rs)
+            out[f"{p}_picks"] = sum(int(r.get("picks", 0)) for r in rs)
         out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
         offsets = sorted(o for r in rs for o in r.get("release_offsets_m", ()))
         out[f"{p}_releases_in_slots"] = len(offsets)
