@@ -67,3 +67,40 @@ def test_where_a_part_is_let_go_is_its_offset_from_the_slots_normal_a_drop_is_no
     assert res["bare_truth_heldout_r1_release_offset_max_m"] == 0.01
     assert res["bare_truth_heldout_r1_s101_release_offset_max_m"] == 0.01
     assert "6.0/10.0" in competition.table("bare_truth", [run, dict(run, seed=101, release_offsets_m=[0.002, 0.010])])
+
+
+def test_a_turn_on_the_spot_with_a_part_is_measured_against_the_odometry(field, robot):
+    """Turning on the spot at 1.5 rad/s (the encoders' ticks), the truth 3 % farther (a 90 deg turn: 2.7 deg
+    beyond), standing still after: the slip is +2.7 deg measured 0.5 s after the turn, in either direction;
+    the same turn without a part, and a short one with it, are not measured."""
+    import math
+
+    from robotatfactory.experiments._competition_observe import RunObserver as Obs
+    from robotatfactory.localization.odometry import DiffDriveOdometry
+
+    odo = DiffDriveOdometry(robot)
+    metres_per_tick = robot.wheel_radius * odo.rad_per_tick
+
+    def turn(obs, held, angle, t0=0.0, seq0=0):
+        """Cycles of a turn by ``angle`` rad (by the encoders) at 1.5 rad/s, then 1 s still; the truth 3 % farther."""
+        dt, w = robot.control_period, math.copysign(1.5, angle)
+        n = int(round(abs(angle) / 1.5 / dt))
+        th_odo, seq, t = 0.0, seq0, t0
+        for k in range(-1, n + int(1.0 / dt)):  # (a still cycle first)
+            if 0 <= k < n:
+                th_odo += w * dt
+            ticks = round(th_odo * odo.track / 2 / metres_per_tick)  # each wheel: +- track/2 per radian
+            obs.cycle(t, seq, (0.0, -0.3, 1.03 * th_odo), held, (-ticks, ticks), {})
+            seq, t = seq + 1, t + dt
+        return t, seq
+
+    for angle in (math.pi / 2, -math.pi / 2):
+        obs = Obs(field, robot)
+        turn(obs, 3, angle)
+        (slip,) = obs.figures()["carry_turn_slip_deg"]
+        # from the first cycle the odometry sees turning: 3 % of the turn less that cycle's (a tick: 0.1 deg)
+        assert math.isclose(slip, 0.03 * math.degrees(abs(angle) - 1.5 * robot.control_period), abs_tol=0.2), slip
+    obs = Obs(field, robot)
+    t, seq = turn(obs, None, math.pi / 2)  # empty
+    turn(obs, 3, math.radians(10), t, seq)  # too short
+    assert obs.figures()["carry_turn_slip_deg"] == []

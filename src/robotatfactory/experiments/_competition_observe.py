@@ -8,8 +8,10 @@ at the check before, not on the magnet then or now: the issue's target is none),
 not on the magnet moving 2 mm - 5 cm within 5 cycles: a push, not a machine's teleport), where each part was let
 go (its offset from the nearest slot's normal, the line through the slot's centre along its facing: how far
 beside its slot the agent put it), the wheel odometry's error against the truth over each
-second per metre driven, the time split per agent activity (when the caller knows it), and for the figures the
-path and the animation frames.
+second per metre driven, how far each turn on the spot with a part went beyond the odometry's (``carry_turn_slip_deg``:
+the truth's heading change less the odometry's from the turn's start to ``SPIN_AFTER`` s after its end, positive
+where the robot turned farther, turns of at least ``SPIN_MIN`` only; the turn told by the odometry's speeds), the
+time split per agent activity (when the caller knows it), and for the figures the path and the animation frames.
 """
 from __future__ import annotations
 
@@ -18,6 +20,9 @@ import math
 CHECK_EVERY = 5  # cycles between collision and push checks (and path samples)
 RELEASE_NEAR = 0.1  # m: a part let go farther than this from every slot's centre was dropped, not placed
 SLIP_EVERY = 25  # cycles per odometry-slip interval (1 s)
+SPIN_AFTER = 0.5  # s after a turn on the spot with a part ends: its slip is measured then (the robot slides on)
+SPIN_MIN = math.radians(20)  # rad: shorter turns on the spot are not measured
+SPIN_V, SPIN_W = 0.02, 0.3  # m/s, rad/s: a turn on the spot by the odometry's speeds (|v| below, |w| above)
 
 
 class RunObserver:
@@ -52,6 +57,8 @@ class RunObserver:
         self._prev = None
         self.slip: list[tuple] = []  # per second: (position error m, heading error rad, truth's length m, t)
         self.twist = (0.0, 0.0)  # odometry's latest body speeds (m/s, rad/s)
+        self._spin: list | None = None  # a turn on the spot with a part: [odometry, truth heading at its start, end t]
+        self.carry_turn_slip: list[float] = []  # deg per such turn (see the module docstring)
 
     def cycle(self, t: float, seq: int, pose, held: int | None, enc, parts, activity: str | None = None) -> None:
         """One control cycle's truth: time, cycle number, robot pose, the held part's id, the encoder totals,
@@ -70,6 +77,7 @@ class RunObserver:
         else:
             o = self._odo.update(enc[0], enc[1], t)
             self.twist = (o.v, o.w)
+            self._carry_turn(t, o, pose, held)
             if seq % SLIP_EVERY == 0:
                 now = ((o.x, o.y, o.theta), tuple(pose))
                 if self._prev is not None:
@@ -111,6 +119,28 @@ class RunObserver:
                     self.pushes.append((round(t, 2), round(px, 3), round(py, 3), round(1000 * d, 1), activity))
             self._last_xy[pid] = (px, py, "held" if held == pid else "")
 
+    def _carry_turn(self, t: float, o, pose, held) -> None:
+        """Follow turns on the spot with a part (the odometry's speeds): at ``SPIN_AFTER`` s after one ends, how
+        far the truth turned beyond the odometry (deg, positive: farther, in the turn's direction)."""
+        on = held is not None and abs(o.v) < SPIN_V and abs(o.w) > SPIN_W
+        spin = self._spin
+        if spin is None:
+            if on:
+                self._spin = [o.theta, pose[2], None]
+            return
+        if on:
+            spin[2] = None  # (still turning, or turning again before the slip was measured: one turn)
+            return
+        if spin[2] is None:
+            spin[2] = t
+        if t < spin[2] + SPIN_AFTER:
+            return
+        self._spin = None
+        truth = math.remainder(pose[2] - spin[1], 2 * math.pi)
+        if abs(truth) >= SPIN_MIN:
+            slip = math.remainder(truth - (o.theta - spin[0]), 2 * math.pi)
+            self.carry_turn_slip.append(round(math.degrees(math.copysign(1.0, truth) * slip), 3))
+
     def _release_offset(self, part_pose) -> tuple[str, float, float]:
         """The slot nearest to a part let go at ``part_pose``: its name, the part's signed offset from the slot's
         normal (m, positive to the left of the facing) and its distance from the slot's centre (m)."""
@@ -132,7 +162,8 @@ class RunObserver:
                "release_offsets_m": [round(abs(r[3]), 4) for r in self.releases if r[4] <= RELEASE_NEAR],
                "odometry_error_per_m": sum(s[0] for s in self.slip) / moved if moved > 0 else 0.0,
                "odometry_error_max_per_s_m": max((s[0] for s in self.slip), default=0.0),
-               "odometry_heading_error_max_per_s_rad": max((s[1] for s in self.slip), default=0.0)}
+               "odometry_heading_error_max_per_s_rad": max((s[1] for s in self.slip), default=0.0),
+               "carry_turn_slip_deg": list(self.carry_turn_slip)}
         if self.split:
             out["time_split"] = {k: round(v, 2) for k, v in sorted(self.split.items())}
         if self.record_path:

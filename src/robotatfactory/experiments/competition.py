@@ -41,7 +41,10 @@ more than 0.1 m from every slot are left out), and the wheel odometry's error ag
 each second (``odometry_error_per_m``: the sum of those errors over the distance driven; slip that ground
 truth hides from the agent but the EKF would not). Per round: success rate at maximum score, median and
 worst time of the last scoring delivery, the release offsets' median, p90 and maximum over every part let go
-in a slot (``..._release_offset_median_m``, the table's ``release mm p50/max``), and the targets of the issue:
+in a slot (``..._release_offset_median_m``, the table's ``release mm p50/max``), how far the robot's turns on
+the spot with a part went beyond the odometry's, 0.5 s after each (``..._carry_turn_slip_mean_deg``, ``_sd_deg``,
+``_p95_abs_deg``, over ``..._carry_turns``: the slip the EKF's carrying model is for, the stand-in's against
+SimTwo's), and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts knocked out of slots;
@@ -660,6 +663,12 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         splits = [r["time_split"] for r in rs if r.get("time_split")]
         for act in sorted({a for sp in splits for a in sp}):  # where the time went (RoundAgent.activity)
             out[f"{p}_time_{act}_median_s"] = round(statistics.median(sp.get(act, 0.0) for sp in splits), 2)
+        slips = [x for r in rs for x in r.get("carry_turn_slip_deg", ())]
+        if slips:  # turns on the spot with a part: how far the truth went beyond the odometry (the EKF's model)
+            out[f"{p}_carry_turns"] = len(slips)
+            out[f"{p}_carry_turn_slip_mean_deg"] = round(statistics.mean(slips), 2)
+            out[f"{p}_carry_turn_slip_sd_deg"] = round(statistics.stdev(slips), 2) if len(slips) > 1 else 0.0
+            out[f"{p}_carry_turn_slip_p95_abs_deg"] = round(_quantile(sorted(abs(x) for x in slips), 0.95), 2)
         odo = [r["odometry_error_per_m"] for r in rs if "odometry_error_per_m" in r]
         if odo:  # slip: the pose would suffer from it on the EKF, not here (ground truth)
             out[f"{p}_odometry_error_per_m_median"] = round(statistics.median(odo), 4)
