@@ -19,6 +19,7 @@ def main(out: str, what: str = "odom,image") -> None:
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Image
 
+    from ..ros.messages import diagnostic_values
     from ..ros.mw import QoS, api
     from ..ros.mw.base import stamp_ns
 
@@ -59,7 +60,7 @@ def main(out: str, what: str = "odom,image") -> None:
     def on_diag(m):
         for st in m.status:
             if st.name.endswith("sensor stream"):
-                diag.update({kv.key: kv.value for kv in st.values})
+                diag.update(diagnostic_values(st))
 
     if "odom" in wanted:
         from diagnostic_msgs.msg import DiagnosticArray

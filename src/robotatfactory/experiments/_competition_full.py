@@ -95,6 +95,7 @@ def read_agent_counters(bag_path: Path, topic: str = "diagnostics", name: str = 
     """The agent's counters (:class:`~robotatfactory.agent.behaviour.AgentCounters`: picks, choices made
     ahead, ...) as its last ``name`` status on ``topic`` reported them: every integer value of that status."""
     from ..ros.bags import find_topic, open_bag
+    from ..ros.messages import diagnostic_values
 
     last = None
     with open_bag(bag_path) as bag:
@@ -102,7 +103,7 @@ def read_agent_counters(bag_path: Path, topic: str = "diagnostics", name: str = 
             last = next((s for s in m.status if s.name == name), last)
     if last is None:
         raise ValueError(f"no {name!r} status on {topic}")
-    return {kv.key: int(kv.value) for kv in last.values if kv.value.lstrip("-").isdigit()}
+    return {k: int(v) for k, v in diagnostic_values(last).items() if v.lstrip("-").isdigit()}
 
 
 def command_delays(commands: list[tuple[float, float, float]], trace) -> list[float]:

@@ -403,6 +403,7 @@ def _bridge_counters(rig: SoakRig) -> dict:
     """The bridge's stream counters from its ``/diagnostics`` (its own account, for reference)."""
     from diagnostic_msgs.msg import DiagnosticArray
 
+    from ..ros.messages import diagnostic_values
     from ..ros.mw import QoS
 
     got: dict = {}
@@ -411,7 +412,7 @@ def _bridge_counters(rig: SoakRig) -> dict:
     def cb(m):
         for st in m.status:
             if st.name.endswith("sensor stream"):
-                got.update({kv.key: kv.value for kv in st.values})
+                got.update(diagnostic_values(st))
                 ev.set()
 
     sub = rig.obs.node.subscribe("/diagnostics", DiagnosticArray, cb, QoS.RELIABLE, 20)

@@ -115,10 +115,11 @@ class Watch:
             self.images.append((time.monotonic(), self._ms(m.header.stamp)))
 
     def _diag(self, m):
+        from ..ros.messages import diagnostic_values
+
         with self.lock:
             for st in m.status:
-                self.diag[st.name] = {kv.key: kv.value for kv in st.values} | {"_level": st.level,
-                                                                               "_message": st.message}
+                self.diag[st.name] = diagnostic_values(st) | {"_level": st.level, "_message": st.message}
 
     def stream_diag(self) -> dict:
         with self.lock:

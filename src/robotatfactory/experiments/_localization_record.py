@@ -115,10 +115,12 @@ class Recorder:
             self.bag.close()
 
     def _on_diag(self, msg):
+        from ..ros.messages import diagnostic_values
+
         for st in msg.status:
             if "raf_localization" in st.name:
                 with self.lock:
-                    self.diag.update({kv.key: kv.value for kv in st.values})
+                    self.diag.update(diagnostic_values(st))
 
     @staticmethod
     def _planar(msg) -> tuple[float, float, float, float]:

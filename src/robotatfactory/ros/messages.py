@@ -262,3 +262,9 @@ def diagnostic_status(name: str, level: int, message: str, hardware_id: str, val
           for k, v in values.items()]
     return DiagnosticStatus(level=api().diag_level(level_int(level)), name=name, message=message,
                             hardware_id=hardware_id, values=kv)
+
+
+def diagnostic_values(status) -> dict[str, str]:
+    """The values of a DiagnosticStatus (a middleware's or a bag's) as ``{key: text}``: what
+    :func:`diagnostic_status` wrote, read back."""
+    return {kv.key: kv.value for kv in status.values}

@@ -50,7 +50,7 @@ def from_msg(m: DiagnosticArray) -> list[Pace]:
     for st in m.status:
         at = {"hello": HELLO, "ready": READY}.get(st.message, t)
         try:
-            out.append(Pace(st.name, at, {kv.key: int(kv.value) for kv in st.values}))
+            out.append(Pace(st.name, at, {k: int(v) for k, v in rm.diagnostic_values(st).items()}))
         except ValueError:  # not a count: not a pace message
             continue
     return out
