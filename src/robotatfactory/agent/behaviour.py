@@ -401,8 +401,8 @@ class RoundAgent:
         """The field as legs are planned on now: the parts of ``state`` (default the last state; but the one in
         ``exclude``), the blocked spots still remembered (those past their time are forgotten here) and the
         parts lying on the floor (as seen carrying a part or not; default: whether the robot carries one)."""
-        self.blocked_spots = [b for b in self.blocked_spots if b[2] > self.t]
         blocked, floor = self._place_inputs(self.carrying is not None if carrying is None else carrying)
+        self.blocked_spots = list(blocked)
         return self.legs.obstacles(self.state if state is None else state, list(blocked), exclude, list(floor))
 
     def _place_inputs(self, carrying: bool) -> tuple[tuple, tuple]:

@@ -16,6 +16,7 @@ time split per agent activity (when the caller knows it), and for the figures th
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 CHECK_EVERY = 5  # cycles between collision and push checks (and path samples)
 RELEASE_NEAR = 0.1  # m: a part let go farther than this from every slot's centre was dropped, not placed
@@ -23,6 +24,16 @@ SLIP_EVERY = 25  # cycles per odometry-slip interval (1 s)
 SPIN_AFTER = 0.5  # s after a turn on the spot with a part ends: its slip is measured then (the robot slides on)
 SPIN_MIN = math.radians(20)  # rad: shorter turns on the spot are not measured
 SPIN_V, SPIN_W = 0.02, 0.3  # m/s, rad/s: a turn on the spot by the odometry's speeds (|v| below, |w| above)
+
+
+@dataclass
+class _Spin:
+    """A turn on the spot with a part being followed: the odometry's and the truth's headings at its start (rad)
+    and when it ended (s; None while turning)."""
+
+    odometry0: float
+    truth0: float
+    ended: float | None = None
 
 
 class RunObserver:
@@ -57,7 +68,7 @@ class RunObserver:
         self._prev = None
         self.slip: list[tuple] = []  # per second: (position error m, heading error rad, truth's length m, t)
         self.twist = (0.0, 0.0)  # odometry's latest body speeds (m/s, rad/s)
-        self._spin: list | None = None  # a turn on the spot with a part: [odometry, truth heading at its start, end t]
+        self._spin: _Spin | None = None  # a turn on the spot with a part being followed
         self.carry_turn_slip: list[float] = []  # deg per such turn (see the module docstring)
 
     def cycle(self, t: float, seq: int, pose, held: int | None, enc, parts, activity: str | None = None) -> None:
@@ -126,19 +137,19 @@ class RunObserver:
         spin = self._spin
         if spin is None:
             if on:
-                self._spin = [o.theta, pose[2], None]
+                self._spin = _Spin(o.theta, pose[2])
             return
         if on:
-            spin[2] = None  # (still turning, or turning again before the slip was measured: one turn)
+            spin.ended = None  # (still turning, or turning again before the slip was measured: one turn)
             return
-        if spin[2] is None:
-            spin[2] = t
-        if t < spin[2] + SPIN_AFTER:
+        if spin.ended is None:
+            spin.ended = t
+        if t < spin.ended + SPIN_AFTER:
             return
         self._spin = None
-        truth = math.remainder(pose[2] - spin[1], 2 * math.pi)
+        truth = math.remainder(pose[2] - spin.truth0, 2 * math.pi)
         if abs(truth) >= SPIN_MIN:
-            slip = math.remainder(truth - (o.theta - spin[0]), 2 * math.pi)
+            slip = math.remainder(truth - (o.theta - spin.odometry0), 2 * math.pi)
             self.carry_turn_slip.append(round(math.degrees(math.copysign(1.0, truth) * slip), 3))
 
     def _release_offset(self, part_pose) -> tuple[str, float, float]:
