@@ -275,3 +275,36 @@ def test_a_place_that_would_meet_a_rib_is_not_entered(make_sim, field, robot, la
     assert nearest > 0.035 + field.part.depth / 2 - 0.005, nearest
     end_along = (sim.pose[0] - dst.xy[0]) * u[0] + (sim.pose[1] - dst.xy[1]) * u[1]
     assert end_along == pytest.approx(start_along, abs=0.01)  # back where it started: room to plan again
+
+
+
+@pytest.mark.parametrize("lateral_mm,failed", [(30, "off_line"), (-30, "off_line"), (4, "no_contact")])
+def test_a_pick_whose_bumper_would_meet_a_rib_is_not_driven_on(make_sim, field, robot, lateral_mm, failed):
+    """On the stand-in (whole stack, round 3) a pick's approach at machine A met no part by the dock pose (the part
+    deeper in its slot than the map says) and drove on 19 mm off the slot's normal: the contact switch's bumper went
+    in between the ribs and touched one. The pick gate (``dock.pick_gate``) looks once, 6 mm before the dock pose:
+    that far off, the robot goes no farther, backs out with the magnet off and reports ``off_line`` (the caller tries
+    again from a fresh approach); a few millimetres off, it drives on (here to an empty slot: ``no_contact``)."""
+    sim = make_sim(round_no=1, parts="BXXX")  # incoming slot 3 is empty: no contact stops the approach
+    run = Run(sim, field, robot)
+    fp = robot_footprint(robot)
+    d = dock_distance(robot, field.part)
+    slot = field.slot("incoming", 3)
+    u = (math.cos(slot.facing), math.sin(slot.facing))
+    n = (math.sin(slot.facing), -math.cos(slot.facing))
+    ap = PathPlanner(FieldObstacles(field, [])).approach_pose(slot, d, fp)
+    lat = lateral_mm / 1000
+    sim.set_pose(ap[0] + lat * n[0], ap[1] + lat * n[1], ap[2])
+    deepest = math.inf  # base_link's least distance from the slot's centre along its normal
+    run.docker.start_pick(slot, sim.pose, math.hypot(ap[0] - slot.xy[0], ap[1] - slot.xy[1]))
+    for _ in range(1000):
+        o = run.docker.step(sim.pose, run.contact)
+        run.cycle(o.v, o.w, o.magnet)
+        deepest = min(deepest, (sim.pose[0] - slot.xy[0]) * u[0] + (sim.pose[1] - slot.xy[1]) * u[1])
+        if o.done or o.failed:
+            break
+    assert o.failed == failed and not o.magnet and sim.held is None
+    if failed == "off_line":
+        assert deepest > d - 0.001, deepest  # never past the dock pose: the bumper stayed out of the ribs
+    else:
+        assert deepest < d - 0.003, deepest  # on past the dock pose, towards where the part would be

@@ -41,3 +41,33 @@ def test_after_every_retry_missed_the_task_is_decided_again(field, robot):
     assert agent.counters.pick_failures == 2 and agent.counters.picks == 0
     assert sum(e.startswith("docking to pick") for _, e in agent.events) == 2
     assert agent.failures  # the slot's failures counted (given up after tasks.give_up_after)
+
+
+def test_a_pick_gated_off_the_line_is_tried_again_from_a_fresh_approach(field, robot):
+    """The robot pushed 30 mm sideways as its first pick approach begins (a lost command, a slip: the stand-in's
+    round 3 came in 19 mm off) reaches the pick gate's point still off the slot's centre line: it does not drive on
+    between the ribs (``off_line``), backs out, plans the leg to the approach pose again and picks."""
+    import math
+
+    agent = RoundAgent(field, robot)
+    bot = KinRobot(field, robot)
+    pushed, modes = [], []
+
+    def until(a):
+        modes.append(a.mode)
+        if a.mode == "pick" and not pushed:
+            s = a.field.slot(a.target.zone, a.target.number)
+            n = (math.sin(s.facing), -math.cos(s.facing))
+            x, y, th = bot.pose
+            bot.pose = (x + 0.03 * n[0], y + 0.03 * n[1], th)
+            pushed.append(a.t)
+        return a.counters.picks == 1
+
+    run(agent, bot, until)
+    assert pushed and agent.counters.picks == 1 and bot.held
+    failed = [e for _, e in agent.events if "failed: off_line" in e]
+    assert len(failed) == 1 and failed[0].startswith("pick at ")
+    assert sum(e.startswith("docking to pick") for _, e in agent.events) == 2  # a second, fresh approach
+    seq = [m for i, m in enumerate(modes) if i == 0 or m != modes[i - 1]]
+    first = seq.index("pick")
+    assert seq[first:first + 3] == ["pick", "to_pick", "pick"]  # at once, not after deciding again

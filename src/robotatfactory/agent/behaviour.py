@@ -112,7 +112,7 @@ class RoundAgent:
         self.carry_limits = replace(self.limits, **cl)
         ds = self.settings.dock
         dock = DockSettings(v_dock=ds.approach_speed, v_place=ds.place_speed, magnet_early=ds.magnet_early,
-                            press_time=ds.press_time, place_gate=ds.place_gate,
+                            press_time=ds.press_time, place_gate=ds.place_gate, pick_gate=ds.pick_gate,
                             v_back_carrying=self.settings.carry.back_speed or DockSettings.v_back,
                             a_back_carrying=self.settings.carry.back_accel)
         self.docker = Docker(self.limits, self.dt, float(r.electromagnet["x"]), f.part, dock)
@@ -839,7 +839,7 @@ class RoundAgent:
             self.counters.pick_failures += 1
             self.magnet = False
             self.attempts += 1
-            if reason == "no_contact" and self.attempts < self.settings.dock.retries:
+            if reason in ("no_contact", "off_line") and self.attempts < self.settings.dock.retries:
                 self._go("to_pick", pose)  # back to the approach pose, then try again
                 return
             if reason == "part_lost" and self.settings.recovery.refind and isinstance(self.task, Move):

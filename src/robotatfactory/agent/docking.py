@@ -14,6 +14,9 @@ The contact switch stays pressed while a part hangs on the magnet (the part's bo
 is also the confirmation that the part came along: released after backing out = the part was lost.
 No contact by the end of the approach: the robot backs out, then reports ``no_contact`` (the caller
 retries or re-localizes).
+An approach that has not met its part ``PICK_ENTRY`` m before the dock pose with base_link more than
+``pick_gate`` m to the side of the slot's centre line goes no farther (the contact switch's bumper would go in
+between the ribs): the robot backs out and reports ``off_line`` (the caller tries again from a fresh approach).
 
 **Place:** drive straight to the place pose (the carried part's centre on the slot centre: the dock
 distance with the magnet's hold gap), stop, electromagnet off, wait ``settle`` s, back out to ``retreat``.
@@ -37,6 +40,11 @@ from .settings import Carrying, Docking
 #: meets the ends of a warehouse's ribs (3.5 cm out from the slot's centre; the part's half depth 3 cm): the place
 #: gate (``DockSettings.place_gate``) looks at the part's offset until the part gets there
 PLACE_ENTRY = 0.065
+#: m out from the dock pose where a pick approach that has not met its part yet is looked at once by the pick gate
+#: (``DockSettings.pick_gate``): past the dock pose the contact switch's bumper goes in between the slot's ribs
+#: (12 mm clearance either side), and braking at the approach speed takes about 6 mm. (The contact switch is
+#: reported a cycle or two after the predicted pose has passed it: the gate looks at nearly every pick.)
+PICK_ENTRY = 0.006
 
 
 @dataclass(frozen=True)
@@ -73,6 +81,9 @@ class DockSettings:
     # the part is outside the slot (PLACE_ENTRY); farther off, the place is not entered: it backs out along the
     # normal and fails with "off_line" (0: off)
     place_gate: float = Docking.place_gate
+    # m: picking, an approach that has not met the part by PICK_ENTRY m out from the dock pose, base_link more than
+    # this to the side of the slot's centre line, backs out and fails with "off_line" (0: off; a floor pick: no ribs)
+    pick_gate: float = Docking.pick_gate
 
 
 @dataclass(frozen=True)
@@ -84,7 +95,7 @@ class DockOutput:
     magnet: bool
     phase: str  # approach, press (picking), grip, release, back, confirm, done, failed
     done: bool = False
-    failed: str | None = None  # no_contact, part_lost, still_held, blocked, timeout, off_line (placing)
+    failed: str | None = None  # no_contact, part_lost, still_held, blocked, timeout, off_line
 
 
 class Docker:
@@ -115,6 +126,7 @@ class Docker:
         self.held_offset = 0.0  # m: the held part's centre to the right of the magnet's centre line, estimated
         self._shift = 0.0
         self._lateral: list[tuple[float, float]] = []  # picking: (base_link's, the centre line's) offsets
+        self._pick_gated = False  # picking: the pick gate has looked (it looks once)
 
     # ------------------------------------------------------------------------------------------ geometry
     def dock_distance(self) -> float:
@@ -148,6 +160,7 @@ class Docker:
         self._steps = 0
         self._shift = self.held_offset if mode == "place" and self.settings.compensate_offset else 0.0
         self._lateral = []
+        self._pick_gated = False
         self._start_along = self._along(pose)
         target = self._shifted(pose_in_front(slot, distance))
         self.follower.limits = self.approach_limits if mode == "pick" else self.place_limits
@@ -199,6 +212,18 @@ class Docker:
         psi = wrap(pose[2] - self._slot.facing - math.pi)  # the robot's turn from facing the slot
         return abs(self._base_offset(pose) - self._shift + lp * math.sin(psi)) > gate
 
+    def _pick_off_line(self, pose) -> bool:
+        """Picking, the approach not yet at its part ``PICK_ENTRY`` m out from the dock pose (looked at once, the
+        first cycle there): base_link is more than ``pick_gate`` m to the side of the slot's centre line. A contact
+        before that point is pressed on to the dock pose only, where the robot has 5 cm either side."""
+        gate = self.settings.pick_gate
+        if gate <= 0 or self.phase != "approach" or self._pick_gated:
+            return False
+        if self._along(pose) > self.dock_distance() + PICK_ENTRY:
+            return False
+        self._pick_gated = True
+        return abs(self._base_offset(pose)) > gate
+
     def _on_normal(self, pose, ahead: float = 0.01) -> tuple[float, float]:
         """``pose`` brought onto the slot's normal, at least ``ahead`` m out from the dock pose."""
         s = self._slot
@@ -219,6 +244,11 @@ class Docker:
             if self.mode == "place" and self._off_line(pose):
                 # the part would meet a rib (SimTwo, round 1: 19 mm off and turned 4 deg, it fell beside the slot)
                 self._retreat = max(self._retreat, self._start_along)  # back to where the leg ended: room to turn
+                self.abort(pose, "off_line")
+                return self._out(0.0, 0.0)
+            if self.mode == "pick" and not contact and self._pick_off_line(pose):
+                # the bumper would go in between the ribs off the line (stand-in, round 3: 19 mm off, it touched
+                # machine A's rib): back out and try again from a fresh approach
                 self.abort(pose, "off_line")
                 return self._out(0.0, 0.0)
             out = self.follower.step(pose)

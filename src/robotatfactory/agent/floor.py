@@ -127,7 +127,7 @@ class FloorRecovery:
         self.counters, self._event, self._obstacles, self._mapped = counters, event, obstacles, mapped
         # a part on the floor: no ribs to guide it, nothing behind it; approached slower, the magnet on early
         self.docker = Docker(limits, dt, float(robot.electromagnet["x"]), field.part,
-                             replace(dock, v_dock=settings.recovery.refind_speed))
+                             replace(dock, v_dock=settings.recovery.refind_speed, pick_gate=0.0))
         self.lost: LostPart | None = None  # a part that fell off the magnet, being recovered
         self.left: list[PartObstacle] = []  # lost parts left on the floor: obstacles while carrying
         self.pick_lost: LostPart | None = None  # a pick that let its part go: on the floor if not in its slot

@@ -40,6 +40,13 @@ class Docking:
                                        "entered: the robot backs out along the normal and plans the place again "
                                        "(on SimTwo a part 27 mm off met a rib and fell beside the slot; 0: off)",
                                  lo=0.0, hi=0.1)
+    pick_gate: float = setting(0.015, "m: a pick approach that has not met its part 6 mm before the dock pose, "
+                                      "base_link more than this to the side of the slot's centre line (the pose "
+                                      "estimate), is not driven on: past the dock pose the contact switch's bumper "
+                                      "goes in between the ribs (12 mm clearance either side); it backs out and "
+                                      "tries again from a fresh approach (stand-in, round 3: 19 mm off, it touched "
+                                      "machine A's rib; 12 mm also stopped picks 7 mm off by the truth, the "
+                                      "estimate 13-14 mm; 0: off)", lo=0.0, hi=0.1)
 
 
 @dataclass(frozen=True)
