@@ -58,6 +58,11 @@ class Run:
         raise AssertionError("dock timed out")
 
 
+def _slot_axes(facing: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """A slot's unit vectors: u out of the slot, n the robot's left as it faces the slot."""
+    return (math.cos(facing), math.sin(facing)), (math.sin(facing), -math.cos(facing))
+
+
 @pytest.fixture
 def make_sim(field, robot):
     sims = []
@@ -160,8 +165,7 @@ def test_a_part_standing_out_of_its_slot_turned_is_pressed_square_before_the_gri
     ap = PathPlanner(FieldObstacles(field, [PartObstacle(*slot.xy, slot.facing)])).approach_pose(slot, d, fp)
     retreat = math.hypot(*(a - b for a, b in zip(
         PathPlanner(FieldObstacles(field, [])).approach_pose(slot, d, fc)[:2], slot.xy)))
-    n = (math.sin(slot.facing), -math.cos(slot.facing))  # the robot's left, facing the slot
-    u = (math.cos(slot.facing), math.sin(slot.facing))  # out of the slot
+    u, n = _slot_axes(slot.facing)
     lat, out = lateral_mm / 1000, out_mm / 1000  # to the robot's left; out from the back wall
     twist = {}
     for name, settings in (("stop at contact", DockSettings(magnet_early=True, press_time=0.0)),
@@ -202,8 +206,7 @@ def test_the_offset_held_is_the_parts_from_the_magnets_centre_line_not_base_link
     d = dock_distance(robot, field.part)
     retreat = math.hypot(*(a - b for a, b in zip(
         PathPlanner(FieldObstacles(field, [])).approach_pose(slot, d, fc)[:2], slot.xy)))
-    n = (math.sin(slot.facing), -math.cos(slot.facing))  # the robot's left, facing the slot
-    u = (math.cos(slot.facing), math.sin(slot.facing))  # out of the slot
+    u, n = _slot_axes(slot.facing)
     psi = math.radians(turn_deg)
     along = d + 0.012
     lat = -along * math.tan(psi)  # base_link off the normal, its centre line through the slot's centre
@@ -248,8 +251,7 @@ def test_a_place_that_would_meet_a_rib_is_not_entered(make_sim, field, robot, la
     o = run.dock(run.docker.start_pick, src, math.hypot(*(a - b for a, b in zip(pl.approach_pose(src, d, fc)[:2],
                                                                                  src.xy))))
     assert o.done and sim.held == 2
-    n = (math.sin(dst.facing), -math.cos(dst.facing))  # the robot's left, facing the slot
-    u = (math.cos(dst.facing), math.sin(dst.facing))  # out of the slot
+    u, n = _slot_axes(dst.facing)
     ap = pl.approach_pose(dst, d, fc)
     lat = lateral_mm / 1000 - run.docker.held_offset  # the part's centre this far to the left of the slot's
     run.goto((ap[0] + lat * n[0], ap[1] + lat * n[1], ap[2]), fc, [])
@@ -290,8 +292,7 @@ def test_a_pick_whose_bumper_would_meet_a_rib_is_not_driven_on(make_sim, field, 
     fp = robot_footprint(robot)
     d = dock_distance(robot, field.part)
     slot = field.slot("incoming", 3)
-    u = (math.cos(slot.facing), math.sin(slot.facing))
-    n = (math.sin(slot.facing), -math.cos(slot.facing))
+    u, n = _slot_axes(slot.facing)
     ap = PathPlanner(FieldObstacles(field, [])).approach_pose(slot, d, fp)
     lat = lateral_mm / 1000
     sim.set_pose(ap[0] + lat * n[0], ap[1] + lat * n[1], ap[2])

@@ -2,6 +2,8 @@
 out, plans the leg to the slot's approach pose again from where it stands and docks a second time; after
 ``dock.retries`` misses the task is decided again. The kinematic robot of tests/test_agent_recovery.py, its
 contact switch held open for the first approaches."""
+import math
+
 from test_agent_recovery import KinRobot, run
 
 from robotatfactory.agent.behaviour import RoundAgent
@@ -47,7 +49,6 @@ def test_a_pick_gated_off_the_line_is_tried_again_from_a_fresh_approach(field, r
     """The robot pushed 30 mm sideways as its first pick approach begins (a lost command, a slip: the stand-in's
     round 3 came in 19 mm off) reaches the pick gate's point still off the slot's centre line: it does not drive on
     between the ribs (``off_line``), backs out, plans the leg to the approach pose again and picks."""
-    import math
 
     agent = RoundAgent(field, robot)
     bot = KinRobot(field, robot)
