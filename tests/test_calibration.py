@@ -76,6 +76,50 @@ def test_floor_markers_alone_are_flagged_degenerate(frames, field, robot):
     assert any("wall markers" in n for n in res.notes)
 
 
+@pytest.fixture(scope="module")
+def simtwo_floor():
+    """SimTwo's case: a GLScene camera (fx = fy, centred principal point) 3 % and 1 degree off the nominal one,
+    and only floor markers in view (docs/calibration.md)."""
+    fld, robot = load_field("simtwo2022"), load_robot("simtwo")
+    truth = cal.perturbed_robot(robot, fx_pct=3, fy_pct=3, cx_px=0, cy_px=0, pitch_deg=1)
+    frames = cal.synthetic_frames(fld, truth.camera, random_poses(fld, 70, seed=5), noise_px=0.4, seed=6)
+    floor = [cal.FrameData(f.stamp, [d for d in f.detections if fld.marker(d.id).kind == "floor"], f.odom)
+             for f in frames]
+    return fld, robot, truth, floor
+
+
+def test_floor_markers_with_the_principal_point_held_and_square_pixels_are_enough(simtwo_floor):
+    """Floor markers leave fx, fy, cy and the pitch on a line; holding cx, cy (GLScene's centred principal point)
+    and the square-pixel prior take it away. Without the prior the same data are still degenerate."""
+    fld, robot, truth, floor = simtwo_floor
+    free = tuple(p for p in cal.DEFAULT_FREE if p not in ("cx", "cy"))
+    res = cal.calibrate(floor, fld, robot, cal.CalibrationConfig(free=free))
+    e = cal.compare(res.camera, truth.camera)
+    assert res.wall_detections == 0 and res.degenerate == ()
+    assert abs(e["fx_error_pct"]) < 0.1 and abs(e["fy_error_pct"]) < 0.1 and abs(e["pitch_error_deg"]) < 0.05
+    assert res.sigma["fx"] < 0.01 * truth.camera.fx
+    loose = cal.calibrate(floor, fld, robot, cal.CalibrationConfig(free=free, aspect_sigma=0.0))
+    assert "pitch_down_deg" in loose.degenerate and loose.sigma["fx"] > 10 * res.sigma["fx"]
+    # the principal point free again: cy and the pitch are the line's (the prior alone does not close it)
+    both = cal.calibrate(floor, fld, robot)
+    assert "cy" in both.degenerate and "pitch_down_deg" in both.degenerate
+
+
+def test_the_square_pixel_prior_yields_to_wall_markers(frames, field, robot, truth, fitted):
+    """The truth's pixels are 1 % from square (fx +3 %, fy +2 %): with wall markers in view the prior moves the
+    fit by less than a tenth of that."""
+    free = cal.calibrate(frames, field, robot, cal.CalibrationConfig(aspect_sigma=0.0))
+    assert abs(fitted.camera.fy / fitted.camera.fx - free.camera.fy / free.camera.fx) < 0.001
+    assert abs(fitted.camera.fy / fitted.camera.fx - truth.camera.fy / truth.camera.fx) < 0.001
+
+
+def test_raf_calibrate_refuses_to_hold_an_unknown_parameter(tmp_path):
+    from robotatfactory.commands import calibrate
+
+    with pytest.raises(ConfigError, match="--hold fz"):
+        calibrate.run(_calibrate_args(tmp_path / "none.bag", tmp_path / "c.yaml", hold="cx,fz"))
+
+
 def test_without_odometry_the_forward_offset_is_held(frames, field, robot):
     no_odo = [cal.FrameData(f.stamp, f.detections, None) for f in frames]
     res = cal.calibrate(no_odo, field, robot)
@@ -258,7 +302,8 @@ def _write_bag(path, images, odom=()):
 def _calibrate_args(bag, out, **kw):
     a = dict(bag=str(bag), live=False, duration=60.0, image_topic="camera/image_raw", odom_topic="odom",
              out=str(out), json=None, robot="simtwo", initial=None, every=1, max_frames=1500, fit_distortion=False,
-             no_forward=False, field="rules2026", corner_refinement="apriltag")
+             no_forward=False, field="rules2026", corner_refinement="apriltag", hold="",
+             aspect_sigma=cal.CalibrationConfig.aspect_sigma)
     a.update(kw)
     return argparse.Namespace(**a)
 

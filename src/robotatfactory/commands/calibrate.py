@@ -11,17 +11,21 @@ Estimate the camera calibration from frames of the robot moving on the field: ev
 corners against the field map, one joint least-squares fit over all frames with the robot's poses unknown
 (odometry, when recorded, ties consecutive poses). Writes a YAML file that `raf bridge --calibration FILE`
 and `raf localize --calibration FILE` load. The data must contain wall markers (floor markers alone cannot
-separate focal length, height and pitch) and turns (for the forward offset); docs/calibration.md.
+separate focal length, height and pitch, unless the principal point is held: --hold cx,cy on SimTwo) and
+turns (for the forward offset); docs/calibration.md.
 
 examples:
   raf calibrate --bag drive.bag --out calib.yaml
   raf --field simtwo2022 calibrate --bag drive.bag --image-topic /camera/image_raw --odom-topic /odom --out calib.yaml --json fit.json
   raf calibrate --live --duration 60 --out calib.yaml          # while the robot drives round the field
   raf --middleware ros2 calibrate --live --duration 60 --out calib.yaml   # the same on ROS 2
+  raf --field simtwo2022 calibrate --bag drive.bag --hold cx,cy --out calib.yaml   # SimTwo: centred principal point
 """
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ..localization.calibration import CalibrationConfig
+
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument("--bag", metavar="PATH", help="a recording with camera images (and odometry): a ROS 1 .bag, a "
                      "rosbag2 directory or a .mcap/.db3 file (raf record)")
@@ -42,6 +46,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use at most N images (default 1500)")
     parser.add_argument("--fit-distortion", action="store_true", help="also estimate k1, k2 (SimTwo's camera has none)")
     parser.add_argument("--no-forward", action="store_true", help="hold the camera's forward offset")
+    parser.add_argument("--hold", default="", metavar="P[,P...]",
+                        help="camera parameters to hold at the robot file's (or --initial's) values, of "
+                             "fx,fy,cx,cy,z,pitch_down_deg,roll_deg; on SimTwo: cx,cy (GLScene renders the principal "
+                             "point at the image centre, and floor markers alone leave it degenerate with the pitch)")
+    parser.add_argument("--aspect-sigma", type=float, default=CalibrationConfig.aspect_sigma, metavar="F",
+                        help="prior on the pixels' aspect ratio fy/fx towards the initial camera's, relative 1 sigma "
+                             f"(default {CalibrationConfig.aspect_sigma:g}: square pixels unless the data say "
+                             "otherwise; 0: no prior)")
     parser.add_argument("--corner-refinement", default="apriltag", choices=("apriltag", "subpix", "contour", "none"),
                         help="ArUco corner refinement (default apriltag: 3-4x less corner scatter than subpix and no "
                              "shrinking of the markers on rendered frames; docs/calibration.md)")
@@ -54,11 +66,19 @@ def run(args) -> int:
 
     from ..errors import ConfigError
     from ..field import load_field
-    from ..localization.calibration import CalibrationConfig, calibrate, compare, load_calibration, write_calibration
+    from ..localization.calibration import (DEFAULT_FREE, CalibrationConfig, calibrate, compare, load_calibration,
+                                            write_calibration)
     from ..robot import load_robot
 
     if args.every < 1 or args.max_frames < 1:
         raise ConfigError("--every and --max-frames must be >= 1")
+    hold = [p.strip() for p in args.hold.split(",") if p.strip()]
+    bad = sorted(set(hold) - set(DEFAULT_FREE))
+    if bad:
+        raise ConfigError(f"--hold {','.join(bad)}: not a fitted camera parameter; of {','.join(DEFAULT_FREE)}")
+    cfg = CalibrationConfig(free=tuple(p for p in DEFAULT_FREE if p not in hold), fit_distortion=args.fit_distortion,
+                            fit_forward=not args.no_forward, aspect_sigma=args.aspect_sigma)
+    cfg.check()
     fld = load_field(args.field)
     try:
         robot = load_robot(args.robot)
@@ -105,7 +125,6 @@ def run(args) -> int:
     frames = [FrameData(s, d, o) for (s, d), o in zip(kept, interpolate_odometry(odom, [s for s, _ in kept]))]
     print(f"raf calibrate: {n_images} images from {source}, {len(frames)} with markers of field {fld.name}, "
           f"{len(odom)} odometry messages", flush=True)
-    cfg = CalibrationConfig(fit_distortion=args.fit_distortion, fit_forward=not args.no_forward)
     res = calibrate(frames, fld, robot, cfg)
     path = write_calibration(args.out, res)
     c = res.camera

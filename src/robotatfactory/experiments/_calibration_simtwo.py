@@ -11,14 +11,16 @@ The perturbed robot file goes to ``raf simtwo run --robot FILE``, which writes i
 copy's AGV.xml (:func:`robotatfactory.simtwo_linux.scene.install_camera`). The drive is the localization
 experiment's calibration drive on SimTwo (:func:`._localization_record.calibration_drive`: the route
 ``calibration`` at ``--calibration-speed``, pure pursuit on SimTwo's ground truth, raf bridge on a private
-ROS graph, a camera frame per 0.2 s and odom recorded to a bag), then ``raf calibrate --bag`` from the NOMINAL
-camera; the result has the stand-in's keys (errors against the perturbed true camera, the targets) with
-``simulator`` = simtwo. The stand-in's ``--route``, ``--laps``, ``--speed``, ``--every``, ``--wheel-error``
+ROS graph, a camera frame per 0.2 s and odom recorded to a bag), then ``raf calibrate --bag --hold cx,cy``
+from the NOMINAL camera (the principal point held at the image centre, where GLScene renders it:
+:data:`~robotatfactory.simtwo_linux.scene.CALIBRATION_HOLD`); the result has the stand-in's keys (errors
+against the perturbed true camera, the targets) with ``simulator`` = simtwo. The stand-in's ``--route``, ``--laps``, ``--speed``, ``--every``, ``--wheel-error``
 and fit options do not apply (refused when given).
 
-Expected: SimTwo's scene shows the calibration drive no wall marker, and floor markers alone cannot separate
-focal length, mount height and pitch (docs/calibration.md, "Wall markers"), so the targets may be missed;
-``wall_detections`` says how many wall markers the fit had.
+SimTwo's scene shows the calibration drive few or no wall markers; floor markers alone leave focal length,
+pitch and the principal point's cy on a line (docs/calibration.md, "Wall markers"). The held principal point
+and the square-pixel prior (``aspect_sigma``) take that line away; ``wall_detections`` says how many wall
+markers the fit had.
 """
 from __future__ import annotations
 
@@ -111,7 +113,7 @@ def result_keys(calib: Path, truth) -> dict:
 def run(args, out_dir: Path | None) -> dict:
     from ..localization.calibration import write_robot_json
     from ..robot import load_robot
-    from ..simtwo_linux.scene import field_for_simtwo, focal_length_mm
+    from ..simtwo_linux.scene import CALIBRATION_HOLD, field_for_simtwo, focal_length_mm
     from ._localization_record import calibration_drive, experiment_graph
     from .localization import REAL, Plan
 
@@ -133,7 +135,7 @@ def run(args, out_dir: Path | None) -> dict:
     # the work folder (the ~100 MB bag) goes when the drive finished; logs live in out_dir/logs with --out
     with experiment_graph("raf_experiment_calibration", work, log_dir) as graph:
         calib, keys = calibration_drive(largs, plan, graph, log_dir, work, robot_file, nominal,
-                                        Path(out_dir) if out_dir else None, notes)
+                                        Path(out_dir) if out_dir else None, notes, hold=CALIBRATION_HOLD)
         out.update(result_keys(calib, truth.camera))
         out.update({
             "simulator": "simtwo", "field": field, "middleware": graph.middleware,

@@ -212,6 +212,12 @@ def scene_camera(agv_xml: Path) -> dict:
             "focal": float(m.group(1)) if m else 50.0}  # Viewer.pas 3326: 50 when the element is missing
 
 
+#: the camera parameters ``raf calibrate --hold`` keeps at the robot file's values on SimTwo: GLScene's frustum
+#: is symmetric, so the principal point is the image centre (:func:`camera_refusals`); held, the floor markers
+#: that SimTwo's calibration drive sees leave no degenerate direction (docs/calibration.md)
+CALIBRATION_HOLD = ("cx", "cy")
+
+
 def camera_refusals(camera) -> list[str]:
     """Why SimTwo's GLScene camera cannot be ``camera`` (a robot file's CameraSpec): an ideal pinhole with a
     symmetric frustum (fx = fy, the principal point at the image's centre), 640 x 480, no roll (the camera's

@@ -34,7 +34,12 @@ What the data must contain (degeneracies):
   homographies differ only by a planar motion, which leaves 5 identifiable combinations of the 7 camera
   parameters. Markers on a second plane at a known height (the field's wall markers, vertical, 0.1 m up,
   facing four directions) break it: the data must contain wall markers in a good share of the frames, seen
-  at several places in the image.
+  at several places in the image. Without them, what closes the line is knowledge of the camera: a
+  principal point held where it is known to be (``free`` without cx, cy: SimTwo's GLScene camera renders it
+  at the image centre) together with square pixels (``aspect_sigma``, a prior on fy/fx, on by default; wall
+  markers, when seen, outweigh it). Measured on synthetic floor-only frames of SimTwo's camera 3 % and
+  1 degree off: 0.0 % in fx and fy, 0.003 degrees in pitch with both; 2 % in fy and a degenerate pitch with
+  neither; the prior alone still leaves cy and the pitch on a line.
 * The forward offset of the camera is absorbed by the per-frame poses (shifting every pose along its heading
   reproduces the same views) unless the poses are tied together: with odometry and turns (the camera moves on
   a circle of radius ``x`` when the robot turns on the spot) it is observable; without odometry it is held.
@@ -92,6 +97,10 @@ class CalibrationConfig:
         "fx": 0.2, "fy": 0.2, "cx": 0.1, "cy": 0.1,  # relative to fx (cx, cy: fraction of the width)
         "x": 0.05, "y": 0.05, "z": 0.05, "pitch_down_deg": 10.0, "roll_deg": 10.0,
         "k1": 0.5, "k2": 0.5, "p1": 0.05, "p2": 0.05, "k3": 0.5, "corner_bias_px": 1.0})
+    # prior on the pixels' aspect ratio fy / fx towards the initial camera's (relative, 1 sigma; 0: off). Square
+    # pixels are what SimTwo's GLScene camera renders and nearly every real camera has; floor markers alone leave
+    # fx, fy and the pitch on a line (module doc) that this prior crosses
+    aspect_sigma: float = 0.005
     degenerate_ratio: float = 0.3  # a parameter whose sigma exceeds this share of its prior's is "degenerate"
     min_frames: int = 10
     min_detections: int = 40
@@ -107,6 +116,8 @@ class CalibrationConfig:
         for k in ("sigma_px", "huber_sigmas", "outlier_px", "odom_sigma_xy_m", "odom_sigma_theta_deg"):
             if not float(getattr(self, k)) > 0:
                 raise ConfigError(f"calibration: {k} must be > 0, got {getattr(self, k)!r}")
+        if not float(self.aspect_sigma) >= 0:
+            raise ConfigError(f"calibration: aspect_sigma must be >= 0 (0: no prior), got {self.aspect_sigma!r}")
 
 
 # -------------------------------------------------------------------------------------------- the result
@@ -276,6 +287,10 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
     LS = np.array([q[3] for q in links], dtype=float).reshape(-1, 3)
     v0 = camera_vector(cam0)
     prior_sig = np.array([_prior_sigma(k, cam0, cfg) for k in free])
+    # the aspect prior's row: log(fy / fx) against the initial camera's, when both are free
+    aspect = ((free.index("fx"), free.index("fy")) if cfg.aspect_sigma > 0 and "fx" in free and "fy" in free
+              else None)
+    n_asp = 1 if aspect else 0
     nC = len(fidx)
     n_det_all = len(dets)
     inlier = np.array([d[3] for d in dets], dtype=bool)
@@ -303,9 +318,12 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
                                wrap_angle(b[:, 2] - a[:, 2] - LD[:, 2])], axis=1) / LS
                 out.append(lr.ravel())
             out.append((z[:nC] - v0[fidx]) / prior_sig)
+            if aspect:
+                ix, iy = aspect
+                out.append([(math.log(z[iy] / z[ix]) - math.log(cam0.fy / cam0.fx)) / cfg.aspect_sigma])
             return np.concatenate(out)
 
-        n_rows = 2 * M + 3 * len(links) + nC
+        n_rows = 2 * M + 3 * len(links) + nC + n_asp
         r_i, c_i = [], []
         rows = np.arange(2 * M)
         r_i.append(np.repeat(rows, nC))  # every corner: the camera block
@@ -321,6 +339,9 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
             c_i.append(cc)
         r_i.append(2 * M + 3 * len(links) + np.arange(nC))
         c_i.append(np.arange(nC))
+        if aspect:
+            r_i.append(np.full(2, 2 * M + 3 * len(links) + nC))
+            c_i.append(np.array(aspect))
         # the Jacobian's sparsity: the coordinates of ``jac``'s values, block by block in the order it fills them
         J_rows, J_cols = np.concatenate(r_i), np.concatenate(c_i)
 
@@ -361,6 +382,9 @@ def calibrate(frames: Iterable[FrameData], fld: Field, robot: RobotSpec, cfg: Ca
                 blk /= LS[:, :, None]
                 data.append(blk.ravel())
             data.append(1.0 / prior_sig)
+            if aspect:
+                ix, iy = aspect
+                data.append(np.array([-1.0 / z[ix], 1.0 / z[iy]]) / cfg.aspect_sigma)
             return coo_matrix((np.concatenate(data), (J_rows, J_cols)), shape=(n_rows, nC + 3 * nF)).tocsr()
 
         fun.jac = jac
