@@ -123,7 +123,7 @@ def test_parse_set():
 def test_flat_params_round_trip():
     c = load_config({"udp": {"port": 9999}})
     flat = c.flat_params()
-    assert flat["udp/port"] == 9999 and flat["camera/xyz"] == [0.05, 0.0, 0.1165]
+    assert flat["udp/port"] == 9999 and flat["camera/xyz"] == [0.05, 0.0, 0.1169]
     nested: dict = {}
     for k, v in flat.items():
         d = nested

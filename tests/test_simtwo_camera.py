@@ -39,9 +39,9 @@ def test_perturbed_camera_goes_into_the_scene_copys_agv_xml(tmp_path):
     focal = _num(elem, "focal", "length")
     assert focal == pytest.approx(226.8 * 1.03 * 25.4 / (2 * 96), abs=1e-5)  # 30.9039 mm
     assert 2 * focal * 96 / 25.4 == pytest.approx(cam.fx, abs=1e-3)  # what GLScene renders at 96 dpi
-    assert _num(elem, "rot_deg", "x") == pytest.approx(121.0)  # 90 + the pitch down (31 deg)
+    assert _num(elem, "rot_deg", "x") == pytest.approx(121.0)  # the scene's 120 + the pitch's +1 deg
     assert (_num(elem, "rot_deg", "y"), _num(elem, "rot_deg", "z")) == (0.0, 90.0)
-    # pos is on the BasePlate solid: the nominal 0.1165 m above the floor is pos z 0.1
+    # pos is on the BasePlate solid: the nominal camera's height is the scene's pos z 0.1
     assert (_num(elem, "pos", "x"), _num(elem, "pos", "y"), _num(elem, "pos", "z")) == pytest.approx(
         (0.045, 0.0, 0.11))
     assert "<solid id='BasePlate'/>" in elem and "<frame decimation='4'/>" in elem
@@ -101,7 +101,7 @@ def test_calibration_on_simtwo_perturbs_what_simtwo_renders():
     cs.check_args(a)
     cam = cs.true_robot(a).camera
     assert (cam.fx, cam.fy, cam.cx, cam.cy, cam.pitch_down_deg) == pytest.approx((233.604, 233.604, 319.5, 239.5,
-                                                                                   31.0))
+                                                                                   30.64))
     for bad in (["--cx-px", "4"], ["--cy-px", "-3"], ["--fy-pct", "2"], ["--roll-deg", "1"], ["--laps", "2"],
                 ["--wheel-error", "0,0"]):
         with pytest.raises(ConfigError, match="--simulator simtwo"):
@@ -130,9 +130,10 @@ def test_calibration_experiment_on_simtwo_reports_the_stand_ins_keys(tmp_path):
     """One calibration drive on the real SimTwo with its camera perturbed (fx, fy +3 %, pitch +1 deg) and raf
     calibrate from the nominal camera with the principal point held at the image centre (GLScene's) and the
     square-pixel prior: the stand-in's keys, against the perturbed camera. Before the hold (floor markers alone
-    leave fx, fy, cy and the pitch on a line) a CI run ended 6.4 % off in fx; with it, 2026-11-30 (3 runs,
-    docs/calibration.md): fx -0.26..+0.02 %, fy -0.77..-0.25 %, pitch -0.38..-0.29 deg, nothing degenerate,
-    110-126 markers, 1 on a wall. About 90 s with SimTwo's start."""
+    leave fx, fy, cy and the pitch on a line) a CI run ended 6.4 % off in fx; with it and the robot file's camera
+    as SimTwo renders it (29.64 deg), 2026-11-30 (2 runs, docs/calibration.md): fx, fy within 0.08 %, pitch
+    -0.06..-0.02 deg (sigma 0.05-0.12), nothing degenerate, 132-186 markers, 0-2 on walls. About 90 s with
+    SimTwo's start."""
     out = tmp_path / "cal"
     r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "calibration", "--simulator", "simtwo",
                         "--out", str(out)], capture_output=True, text=True, timeout=900, cwd=str(ROOT))
@@ -143,11 +144,12 @@ def test_calibration_experiment_on_simtwo_reports_the_stand_ins_keys(tmp_path):
               "pitch_error_target_met", "residual_px_rms", "wall_detections", "fx_true_px", "pitch_true_deg"):
         assert k in res, k
     assert res["simulator"] == "simtwo" and res["fx_true_px"] == pytest.approx(233.604)
-    assert res["pitch_true_deg"] == pytest.approx(31.0) and res["cx_true_px"] == pytest.approx(319.5)
+    assert res["pitch_true_deg"] == pytest.approx(30.64) and res["cx_true_px"] == pytest.approx(319.5)
     # detections follow SimTwo's camera rate (software rendering): 60 on a host that renders at half the speed
     assert res["detections"] > 30 and res["residual_px_rms"] < 1.0
-    # well posed with cx, cy held: nothing degenerate, and closer to the truth than the nominal camera (2.9 %,
-    # 1 deg) in fx, fy and the pitch; the pitch's -0.3 deg is SimTwo's own (docs/calibration.md), so not 0.1
+    # well posed with cx, cy held: nothing degenerate, and most of the way from the nominal camera (2.9 %, 1 deg)
+    # to the truth: within 0.6 % and 0.4 deg (the targets, 0.3 % and 0.1 deg, were met by both runs measured, but
+    # a run with no wall marker has a pitch sigma of 0.12 deg)
     assert res["degenerate_params"] == "none" and res["cx_error_px"] == 0.0 and res["cy_error_px"] == 0.0
-    assert abs(res["fx_error_pct"]) < 1.0 and abs(res["fy_error_pct"]) < 1.5 and abs(res["pitch_error_deg"]) < 0.7
+    assert abs(res["fx_error_pct"]) < 0.6 and abs(res["fy_error_pct"]) < 0.6 and abs(res["pitch_error_deg"]) < 0.4
     assert (out / "calibration.yaml").exists() and (out / "robot_true.json").exists()
