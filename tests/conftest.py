@@ -22,6 +22,19 @@ def robot():
     return load_robot()
 
 
+@pytest.fixture(scope="session")
+def scene_camera_robot():
+    """The robot with the camera SimTwo's scene states (AGV.xml: 30 deg down, 0.1165 m up), not the one SimTwo was
+    measured to render (the robot file's 29.64 deg, 0.1169 m since 2026-11-30): what tests made or posed with the
+    scene's numbers before that keep."""
+    from dataclasses import replace
+
+    from robotatfactory.robot import load_robot
+
+    r = load_robot()  # (not the robot fixture: a test module may override that one)
+    return replace(r, camera=replace(r.camera, pitch_down_deg=30.0, xyz=(0.05, 0.0, 0.1165)))
+
+
 @pytest.fixture
 def raf_cmd():
     """The raf command line as a list, run with this interpreter."""

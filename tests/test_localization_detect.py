@@ -14,17 +14,12 @@ POSES = [(-0.725, -0.4, math.pi / 2), (0.1, 0.08, 0.3), (0.55, -0.25, 2.5), (-0.
 
 
 @pytest.fixture(scope="module")
-def robot():
-    """The detector's test camera: the SimTwo scene's numbers (30 deg down, 0.1165 m), fixed here so that a
-    measured update of the robot file's camera does not move the poses' markers under the tests. (At the robot
-    file's 29.64 deg marker 58 in the second pose, 0.21 m away, shows a bottom border 2-3 px thick after the
-    blur and is missed, by OpenCV's default parameters too.)"""
-    from dataclasses import replace
-
-    from robotatfactory.robot import load_robot
-
-    r = load_robot()
-    return replace(r, camera=replace(r.camera, pitch_down_deg=30.0, xyz=(0.05, 0.0, 0.1165)))
+def robot(scene_camera_robot):
+    """The detector's test camera: the SimTwo scene's numbers, fixed here so that a measured update of the robot
+    file's camera does not move the poses' markers under the tests. (At the robot file's 29.64 deg marker 58 in
+    the second pose, 0.21 m away, shows a bottom border 2-3 px thick after the blur and is missed, by OpenCV's
+    default parameters too.)"""
+    return scene_camera_robot
 
 
 @pytest.fixture(scope="module")

@@ -14,8 +14,8 @@ experiment's calibration drive on SimTwo (:func:`._localization_record.calibrati
 ROS graph, a camera frame per 0.2 s and odom recorded to a bag), then ``raf calibrate --bag --hold cx,cy``
 from the NOMINAL camera (the principal point held at the image centre, where GLScene renders it:
 :data:`~robotatfactory.simtwo_linux.scene.CALIBRATION_HOLD`); the result has the stand-in's keys (errors
-against the perturbed true camera, the targets) with ``simulator`` = simtwo. The stand-in's ``--route``, ``--laps``, ``--speed``, ``--every``, ``--wheel-error``
-and fit options do not apply (refused when given).
+against the perturbed true camera, the targets) with ``simulator`` = simtwo. The stand-in's ``--route``,
+``--laps``, ``--speed``, ``--every``, ``--wheel-error`` and fit options do not apply (refused when given).
 
 SimTwo's scene shows the calibration drive few or no wall markers; floor markers alone leave focal length,
 pitch and the principal point's cy on a line (docs/calibration.md, "Wall markers"). The held principal point
