@@ -77,8 +77,9 @@ def test_the_next_part_is_the_one_picked_and_carried_soonest(field, robot):
     sp = field.start_pose
     pose = (sp.x, sp.y, sp.theta)
     chosen = {}
-    for by_time in (True, False):
-        agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": by_time}}))
+    for by_time in (True, False):  # on the planner's legs: the test's sum does not search grid points
+        agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": by_time},
+                                                         "legs": {"via_grid": 0.0}}))
         agent.on_state(state, 0.0)
         agent._decide(pose)
         assert agent.mode == "to_pick" and agent.target == agent.task.source

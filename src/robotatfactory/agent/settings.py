@@ -75,10 +75,10 @@ class Legs:
                                      "an arc along which the exact outline grown by this is clear, instead of a "
                                      "turn on the spot with the part (0: off; its measured effect: docs/benchmarks.md)",
                               lo=0.0, hi=0.2)
-    via_grid: float = setting(0.0, "m: a leg may instead run straight to one point of a grid this fine and on "
-                                   "to the slot's normal, where the follower's kinematic run finds that faster "
-                                   "(a carrying turn is slow: over a machine, not in an S between them; 0: off; "
-                                   "0.05 measured in docs/agent.md)", lo=0.0, hi=0.5)
+    via_grid: float = setting(0.05, "m: a leg may instead run straight to one point of a grid this fine and on "
+                                    "to the slot's normal, where the follower's kinematic run finds that faster "
+                                    "(a carrying turn is slow: over a machine, not in an S between them; 0: off, "
+                                    "the default until stop 46: docs/agent.md)", lo=0.0, hi=0.5)
 
 
 @dataclass(frozen=True)
