@@ -1,5 +1,7 @@
 """RoundAgent's choice of a carried part's destination: the free slot its leg reaches soonest (a kinematic run
 of the follower on each planned leg), outgoing slots kept for the parts still to come from machine B."""
+import math
+
 import pytest
 
 from robotatfactory.agent.behaviour import RoundAgent
@@ -62,24 +64,26 @@ def test_outgoing_slots_are_kept_for_the_parts_from_machine_b(field, robot, pend
 
 def _pick_and_carry_time(agent, pose, m):
     """The test's own sum for a move: the pick leg from ``pose``, then the carrying leg from the slot's carrying
-    approach pose (where the robot backs out to) to the move's target."""
+    approach pose (where the robot backs out to) to the move's target, both the planner's legs (a choice is timed
+    by those; ``legs.via_grid`` then only makes the chosen pick leg faster)."""
     legs = agent.legs
-    t_pick = legs.leg_time(legs.plan(agent._obstacles(), pose, m.source, False, "pick"), pose, False)
+    t_pick = legs.leg_time(legs.plan(agent._obstacles(), pose, m.source, False, "pick", via=False), pose, False)
     after = agent.state.with_slot(m.source, None)
     obstacles = legs.obstacles(after)
     start = legs.path_planner(obstacles, True).approach_pose(agent.field.slot(m.source.zone, m.source.number),
                                                              legs.d_dock, legs.footprint(True))
-    return t_pick + legs.leg_time(legs.plan(obstacles, start, m.target, True, "place"), start, True)
+    return t_pick + legs.leg_time(legs.plan(obstacles, start, m.target, True, "place", via=False), start, True)
 
 
-def test_the_next_part_is_the_one_picked_and_carried_soonest(field, robot):
+@pytest.mark.parametrize("via_grid", [0.0, 0.05])
+def test_the_next_part_is_the_one_picked_and_carried_soonest(field, robot, via_grid):
     state = FactoryState.from_letters("BBBB")
     sp = field.start_pose
     pose = (sp.x, sp.y, sp.theta)
     chosen = {}
-    for by_time in (True, False):  # on the planner's legs: the test's sum does not search grid points
+    for by_time in (True, False):
         agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": by_time},
-                                                         "legs": {"via_grid": 0.0}}))
+                                                         "legs": {"via_grid": via_grid}}))
         agent.on_state(state, 0.0)
         agent._decide(pose)
         assert agent.mode == "to_pick" and agent.target == agent.task.source
@@ -93,7 +97,35 @@ def test_the_next_part_is_the_one_picked_and_carried_soonest(field, robot):
     nearest = chosen[False].target
     assert nearest == SlotRef("incoming", 1) != agent.target
     assert times[nearest] > times[agent.target]
+    # the pick leg driven is the chosen one's, through a grid point where that is faster (legs.via_grid)
+    legs, obstacles = agent.legs, agent._obstacles()
+    plain = legs.plan(obstacles, pose, agent.target, False, "pick", via=False)
+    t_plain = legs.leg_time(plain, pose, False)
+    leg, t_leg = legs.faster(obstacles, pose, plain, False, "pick", t_plain)
+    assert [tuple(p) for p in agent.path.points] == [tuple(p) for p in leg.path.points]
+    if not via_grid:
+        assert leg is plain
 
+
+def test_the_part_picked_soonest_is_reached_through_a_grid_point_where_that_is_faster(field, robot):
+    """From across the field (0.6, 0, facing +y) the part chosen by time is reached through a grid point
+    (``legs.via_grid``, the default): the leg the robot drives is the faster one, by more than half a second."""
+    pose = (0.6, 0.0, math.pi / 2)
+    agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": True}}))
+    assert agent.settings.legs.via_grid > 0
+    agent.on_state(FactoryState.from_letters("BBBB"), 0.0)
+    agent._decide(pose)
+    assert agent.mode == "to_pick"
+    times = {m.source: _pick_and_carry_time(agent, pose, m) for m in agent.policy.tied(agent.state)}
+    assert agent.target == min(times, key=times.get)
+    legs, obstacles = agent.legs, agent._obstacles()
+    plain = legs.plan(obstacles, pose, agent.target, False, "pick", via=False)
+    t_plain = legs.leg_time(plain, pose, False)
+    leg, t_leg = legs.faster(obstacles, pose, plain, False, "pick", t_plain)
+    assert t_leg < t_plain - 0.5
+    driven = [tuple(p) for p in agent.path.points]
+    assert driven == [tuple(p) for p in leg.path.points] != [tuple(p) for p in plain.path.points]
+    assert legs.leg_time(leg, pose, False) == pytest.approx(t_leg)
 
 
 def test_a_picked_parts_destination_is_chosen_while_it_backs_out(monkeypatch):
