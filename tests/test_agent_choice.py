@@ -152,9 +152,32 @@ def test_a_picked_parts_destination_is_chosen_while_it_backs_out(monkeypatch):
         assert r["points"] == r["max_points"] and r["collision_checks_hit"] == 0
         if ahead:
             assert r["choices_ahead"] >= 3 and set(where) == {"raf-ahead"} and len(where) == r["choices_ahead"]
+            # the back-out ends where the leg was planned from (the pose is the truth): that leg is driven
+            assert r["legs_ahead"] == r["choices_ahead"]
         else:
-            assert r["choices_ahead"] == 0 and where and "raf-ahead" not in where
+            assert r["choices_ahead"] == r["legs_ahead"] == 0 and where and "raf-ahead" not in where
         runs[ahead] = ([text for _t, text, *_ in r["events"] if text.startswith(("placed", "picked"))],
                        r["last_score_s"])
     assert runs[True][0] == runs[False][0]  # the same parts to the same slots, in the same order
     assert abs(runs[True][1] - runs[False][1]) < 0.5, runs
+
+
+def test_a_leg_chosen_ahead_is_planned_again_where_the_back_out_ends_away_from_its_start(monkeypatch):
+    """A destination chosen while backing out holds within ``AHEAD_POSE`` (3 cm) of where the back-out was to
+    end, but its leg, planned from there, is driven only within ``AHEAD_LEG_POSE`` (1 cm): the choice made from
+    2 cm beside the back-out's end is taken, and the leg to it planned again from where the robot stands."""
+    from robotatfactory.agent import behaviour
+    from robotatfactory.agent.docking import Docker
+    from robotatfactory.experiments.competition import play_round
+
+    assert behaviour.AHEAD_LEG_POSE[0] < 0.02 <= behaviour.AHEAD_POSE[0]
+    retreat = Docker.retreat_pose
+
+    def beside(self):
+        x, y, th = retreat(self)
+        return x - 0.02 * math.sin(th), y + 0.02 * math.cos(th), th
+
+    monkeypatch.setattr(Docker, "retreat_pose", beside)
+    r = play_round(1, 100)
+    assert r["points"] == r["max_points"] and r["collision_checks_hit"] == 0
+    assert r["choices_ahead"] >= 3 and r["legs_ahead"] == 0

@@ -46,6 +46,9 @@ from .tasks import Done, Move, TaskPolicy, Wait
 #: (m, rad): a destination chosen ahead from where the back-out was to end is taken where it ends this near that
 #: pose (the choice compares the legs from there; the chosen leg is planned from where the robot is)
 AHEAD_POSE = (0.03, 0.1)
+#: (m, rad): and where it ends this near that pose, the leg planned there on the thread is driven as it is (no
+#: leg planned again while the robot stands with its part: 0.25-1.2 s in round 1's cycles, ``raf bench planning``)
+AHEAD_LEG_POSE = (0.01, 0.05)
 #: x dock.timeout: a floor pick still under way this long after it started is given up outright (a failed try),
 #: on top of the back-out at dock.timeout that every docking shares: the back-out itself may get nowhere (on the
 #: stand-in a floor pick backed into a wall for 280 s before this limit; a pick or a place backs out along its
@@ -82,6 +85,7 @@ class AgentCounters:
     parts_refound: int = 0  # searches for a lost part in which the LIDAR found it on the floor
     floor_picks: int = 0  # lost parts picked up from the floor again
     choices_ahead: int = 0  # picked parts' destinations chosen while backing out (tasks.choose_ahead)
+    legs_ahead: int = 0  # of those, the leg planned on the thread driven as it was (AHEAD_LEG_POSE)
     floor_pick_failures: int = 0  # floor picks that failed (no contact, not held, blocked, no path, timeout)
     parts_left: int = 0  # lost parts left on the floor after recovery.refind_tries failed floor picks
 
@@ -667,17 +671,15 @@ class RoundAgent:
         obstacles = self._obstacles(state=state, carrying=True)
         pose = self.docker.retreat_pose()
         key = (pose, tuple(dest), state, *self._place_inputs(True))
-        self.ahead.start(key, lambda: (self._fastest("to_place", pose, dest, state, part, task, obstacles)[0],
-                                       obstacles))
+        self.ahead.start(key, lambda: (*self._fastest("to_place", pose, dest, state, part, task, obstacles),
+                                       obstacles, pose))
 
     def _ahead_still(self, key, pose, dest: list) -> bool:
         """The choice started ahead (``key``: the pose it was made from, the destinations, the state, the blocked
         spots and the parts on the floor) holds for ``pose`` and ``dest`` now: within ``AHEAD_POSE`` of that pose
         and the same inputs."""
         at, was_dest, state, blocked, floor = key
-        return (math.hypot(pose[0] - at[0], pose[1] - at[1]) <= AHEAD_POSE[0]
-                and abs(math.remainder(pose[2] - at[2], 2 * math.pi)) <= AHEAD_POSE[1]
-                and was_dest == tuple(dest) and state.same_slots(self.state)
+        return (_near(pose, at, AHEAD_POSE) and was_dest == tuple(dest) and state.same_slots(self.state)
                 and (blocked, floor) == self._place_inputs(True))
 
     def _fastest(self, mode: str, pose, dest: list, state: FactoryState, carrying: PartType | None, task,
@@ -798,10 +800,14 @@ class RoundAgent:
                 return
             self._leg_replans = 0
             chosen = self.ahead.take(lambda key: self._ahead_still(key, pose, dest))
-            if chosen is not None:  # chosen while backing out, for this pose and these inputs: the leg from here
+            if chosen is not None:  # chosen while backing out, for these inputs and about this pose
                 self.counters.choices_ahead += 1
-                self.target, obstacles = chosen
-                self._go("to_place", pose, obstacles)
+                self.target, leg, obstacles, planned_at = chosen
+                if leg is not None and _near(pose, planned_at, AHEAD_LEG_POSE):  # where it was planned from
+                    self.counters.legs_ahead += 1
+                    self._start_planned("to_place", leg)
+                else:  # the leg to the chosen destination from here
+                    self._go("to_place", pose, obstacles)
                 return
             self._go_fastest("to_place", pose, dest)
             return
@@ -877,6 +883,12 @@ class RoundAgent:
 
     def _event(self, t: float, text: str) -> None:
         self.events.append((t, text))
+
+
+def _near(pose, at, within: tuple[float, float]) -> bool:
+    """``pose`` is within ``within`` (m, rad) of ``at`` (x, y, heading)."""
+    return (math.hypot(pose[0] - at[0], pose[1] - at[1]) <= within[0]
+            and abs(math.remainder(pose[2] - at[2], 2 * math.pi)) <= within[1])
 
 
 def _dock_of(mode: str) -> str:

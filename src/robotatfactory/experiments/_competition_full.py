@@ -383,6 +383,8 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     try:  # what the agent counted (its last /diagnostics): choices made ahead on the thread, ...
         counters = read_agent_counters(bag_path)
         out["choices_ahead"] = counters["choices_ahead"]
+        if "legs_ahead" in counters:  # (an agent before it had none)
+            out["legs_ahead"] = counters["legs_ahead"]
         out["picks"] = counters["picks"]
     except Exception as e:  # noqa: BLE001 - as for the poses
         out["counters_note"] = f"no agent counters: {type(e).__name__}: {e}"

@@ -32,7 +32,8 @@ separately: every key carries the set, ``{mode}_{set}_r{round}_...`` (``other`` 
 
 Per run (keys ``{mode}_{set}_r{round}_s{seed}_...``): score and maximum score, the referee's delivery time
 (when the final score was reached and held), points the referee took back (``points_lost``), referee rule notes, picks attempted / failed, places, timeouts, the picks and those whose destination was
-chosen on a thread while the robot backed out (``choices_ahead``, ``tasks.choose_ahead``; on the whole stack
+chosen on a thread while the robot backed out (``choices_ahead``, ``tasks.choose_ahead``; ``legs_ahead`` of those
+whose leg planned there was driven as it was; on the whole stack
 from the agent's last ``/diagnostics`` in the run's bag), collisions of the robot's outline
 with walls or ribs, or beyond the floor's 2 cm overhang allowance (``floor``), checked every 5 cycles, parts pushed (a part not on the magnet moving 2 mm - 5 cm
 within 5 cycles: a push, not a machine's teleport), where each part was let go (``release_offset_max_m``:
@@ -367,7 +368,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "parts_lost": cnt.parts_lost,
             "parts_refound": cnt.parts_refound, "floor_picks": cnt.floor_picks,
             "floor_pick_failures": cnt.floor_pick_failures, "parts_left": cnt.parts_left,
-            "choices_ahead": cnt.choices_ahead, "picks": cnt.picks,
+            "choices_ahead": cnt.choices_ahead, "legs_ahead": cnt.legs_ahead, "picks": cnt.picks,
             "agent_done": agent.mode == "done", "sim_s": sim.time, "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
@@ -584,6 +585,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_timeouts"] = r["timeouts"]
         if "choices_ahead" in r:  # a picked part's destination chosen on the thread (tasks.choose_ahead)
             out[f"{p}_choices_ahead"] = r["choices_ahead"]
+            if "legs_ahead" in r:  # of those, the leg planned on the thread driven as it was
+                out[f"{p}_legs_ahead"] = r["legs_ahead"]
             out[f"{p}_picks"] = r["picks"]
         elif r.get("counters_note"):
             out[f"{p}_counters_note"] = r["counters_note"]
@@ -642,6 +645,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
         out[f"{p}_pick_failures"] = sum(int(r.get("pick_failures", 0)) for r in rs)
         if any("choices_ahead" in r for r in rs):  # of the picks, those whose destination was chosen ahead
             out[f"{p}_choices_ahead"] = sum(int(r.get("choices_ahead", 0)) for r in rs)
+            out[f"{p}_legs_ahead"] = sum(int(r.get("legs_ahead", 0)) for r in rs)
             out[f"{p}_picks"] = sum(int(r.get("picks", 0)) for r in rs)
         out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
         offsets = sorted(o for r in rs for o in r.get("release_offsets_m", ()))
