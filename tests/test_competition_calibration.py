@@ -253,3 +253,13 @@ def test_a_round_tried_again_after_a_port_race_starts_on_a_clean_directory(tmp_p
     r = competition._full_job(1, 100, tmp_path, False, None)
     assert "error" not in r and r["max_score"] is True, r
     assert attempts == [[], ["sim.log"], ["sim.log"]]  # the logs stay (overwritten), the outputs go
+
+
+def test_the_whole_stack_refuses_the_bare_stand_ins_sim_settings_and_simtwo_the_stand_ins():
+    """``--sim``: the whole stack passes only perturb.NAME and camera_every on to raf sim; another SimConfig
+    setting is the bare stand-in's, and the real SimTwo takes none of the stand-in's (checked before any run)."""
+    with pytest.raises(ConfigError, match="bare_truth's"):
+        competition.run(args(mode="full_stack", rounds="1", seeds=1, sim=["magnet=weld"]), None)
+    with pytest.raises(ConfigError, match="real SimTwo's scene and camera"):
+        competition.run(args(mode="full_stack", rounds="1", seeds=1, simulator="simtwo", sim=["camera_every=12"]),
+                        None)

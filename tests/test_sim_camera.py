@@ -183,6 +183,30 @@ def test_simtwo_frames_show_chunk_ends_on_a_cadence_that_is_no_grid(field, robot
     assert all(b.wall > a.wall for a, b in zip(frames, frames[1:]))
 
 
+def test_camera_every_publishes_one_frame_in_n_of_the_same_cadence(field, robot):
+    """``camera_every`` (a slower host's SimTwo): of the frames the cadence gives, the first and every n-th
+    after it are published, numbered 0, 1, 2, ... as published frames are, showing the same states and
+    images; the physics is untouched."""
+    from robotatfactory.sim import Simulator
+
+    def run(every):
+        s = Simulator(field, robot, SimConfig(camera=True, competition=False, lidar=False, seed=3,
+                                              camera_every=every))
+        frames, poses = [], []
+        for _ in range(50):  # 2 s
+            s.step_cycle(Command(0.1, 0.5, False))
+            frames += [(fr.index, fr.tick, fr.time, fr.wire().tobytes()) for fr in s.take_frames()]
+            poses.append(tuple(s.pose))
+        s.close()
+        return frames, poses
+
+    (all_frames, p1), (thinned, p3) = run(1), run(3)
+    assert p1 == p3
+    assert len(all_frames) >= 24 and len(thinned) == len(all_frames[::3])
+    assert [f[0] for f in thinned] == list(range(len(thinned)))
+    assert [f[1:] for f in thinned] == [f[1:] for f in all_frames[::3]]
+
+
 def test_render_cadence_is_seeded_and_catches_up_like_the_cadencer():
     """Pure schedule checks (no rendering): same seed same schedule, another seed another one; the
     simulation advances 17 ms per 1/60 s wall tick (1.02x real time, SimTwo's fixed chunk); the grid mode is

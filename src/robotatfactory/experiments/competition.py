@@ -105,6 +105,9 @@ for _m in (*MODES, SIMTWO_MODE):
                 TARGETS[f"{_p}_pose_error_docking_max_m"] = "<= 0.02 m while picking or placing"
 
 
+#: the raf sim settings (``--sim``) the whole stack passes on to raf sim (the others are the bare stand-in's)
+FULL_STACK_SIM = frozenset({"perturb", "camera_every"})
+
 def seed_set_of(seed: int) -> str:
     """``tuned`` (the seeds the agent was tuned on), ``heldout`` (never seen while tuning) or ``other``."""
     return "tuned" if seed in TUNED_SEEDS else "heldout" if seed in HELDOUT_SEEDS else "other"
@@ -188,7 +191,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--limit", type=float, default=300.0, help="simulated seconds per run (default 300)")
     parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
                         help="a SimConfig setting of the bare stand-in (repeatable), e.g. magnet=weld where the "
-                             "simulator has that option; the default is the simulator's own default")
+                             "simulator has that option; the default is the simulator's own default; the whole "
+                             "stack takes perturb.NAME and camera_every (e.g. camera_every=12: SimTwo's camera "
+                             "rate on this project's 2-core host)")
     parser.add_argument("--perturb", action="store_true",
                         help="a world that is not the map (raf sim's perturb settings, sim/perturb.py), the issue's "
                              "'a few' of each: " + _perturb_help() + "; --sim perturb.NAME=VALUE changes one; every "
@@ -877,13 +882,13 @@ def run(args, out_dir: Path | None) -> dict:
                                   ray_cpus=getattr(args, "ray_cpus", None) or (2 if simulator == "simtwo" else 1),
                                   ray_retries=int(getattr(args, "ray_retries", RAY_RETRIES)), inputs=inputs)
     if mode.endswith("full_stack"):  # realtime: each run is its own private graph; --jobs of them at once (threads)
-        if set(sim_options) - {"perturb"} or any(noise) or delay or cmd_delay:
-            raise ConfigError("--sim (but for perturb.NAME), --pose-noise, --pose-delay and --cmd-delay are "
-                              "bare_truth's: the whole stack (full_stack) runs raf sim's defaults and the agent on "
-                              "the EKF's pose")
-        if perturb.any and simulator == "simtwo":
-            raise ConfigError("--perturb / --sim perturb.NAME: the stand-in's world (raf sim); the real SimTwo's "
-                              "scene is its own")
+        if set(sim_options) - FULL_STACK_SIM or any(noise) or delay or cmd_delay:
+            raise ConfigError("--sim (but for perturb.NAME and camera_every), --pose-noise, --pose-delay and "
+                              "--cmd-delay are bare_truth's: the whole stack (full_stack) runs raf sim's defaults "
+                              "and the agent on the EKF's pose")
+        if (perturb.any or "camera_every" in sim_options) and simulator == "simtwo":
+            raise ConfigError("--perturb / --sim perturb.NAME / --sim camera_every: the stand-in's (raf sim); the "
+                              "real SimTwo's scene and camera are its own")
         if getattr(args, "analyse", None) and getattr(args, "calibration", None) not in (None, "none"):
             raise ConfigError("--analyse measures kept runs again: --calibration does not apply")
         if getattr(args, "analyse", None):  # the runs kept in a directory, measured again with this code

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -193,6 +193,16 @@ class RenderCadence:
                 frame = ScheduledFrame(published, renders, sent, steps, sent)
                 published += 1
             yield GuiIteration(start, first, k, sent, frame)
+
+
+def one_in(frames, n: int):
+    """Every ``n``-th of the scheduled ``frames`` (the first, the ``n+1``-th, ...), numbered on from 0 as
+    published frames are (``SimConfig.camera_every``: a slower host's SimTwo; ``n`` 1: all of them)."""
+    import itertools
+
+    if n == 1:
+        return frames
+    return (replace(f, index=j) for j, f in enumerate(itertools.islice(frames, 0, None, n)))
 
 
 class Renderer:

@@ -108,6 +108,10 @@ class SimConfig:
                                            "ends of 17 ms physics chunks on a seeded wall clock, every 4th "
                                            "render published) or grid (the idealisation k/15 s)",
                                  choices=CAMERA_TIMINGS)
+    camera_every: int = setting(1, "publish one of every this many of the camera frames camera_timing gives, "
+                                   "the others dropped unrendered (1: all, SimTwo on a PC that keeps up; 12: "
+                                   "about SimTwo's 1.0-1.4 frames a second on this project's 2-core host beside "
+                                   "the whole stack, docs/simtwo.md)", lo=1, hi=10 ** 4)
     reply_timing: str = setting("simtwo", "free-running: simtwo (SimTwo's script reads UDP only when its GUI loop "
                                           "handled messages since its previous call, and of several replies "
                                           "applies the first) or every_cycle (the newest reply before every "

@@ -30,7 +30,7 @@ from ..robot import RobotSpec  # noqa: E402
 from ..simtwo import Command, SensorFrame  # noqa: E402
 from ..simtwo.teleport import part_heading, spare_part_xy  # noqa: E402
 from . import scene as sc  # noqa: E402
-from .camera import CameraFrame, RenderCadence, Renderer, ScheduledFrame  # noqa: E402
+from .camera import CameraFrame, RenderCadence, Renderer, ScheduledFrame, one_in  # noqa: E402
 from .config import SimConfig  # noqa: E402
 from .motor import DCMotor, MotorParams, SimTwoPID, SimTwoPIDParams, SpeedControllerParams, SpeedPI  # noqa: E402
 from .magnet import MagnetForce, MagnetParams  # noqa: E402
@@ -208,7 +208,7 @@ class Simulator:
         cam = robot.camera
         self._camera_name = names.robot_camera
         self._cadence = RenderCadence(config.camera_timing, self.dt, cam.render_fps, cam.decimation, config.seed)
-        self._schedule = self._cadence.frames()
+        self._schedule = one_in(self._cadence.frames(), config.camera_every)
         # replies: the same GUI loop's turns (the same seed: the same turns as the camera's), see replies_readable
         self._turns = (RenderCadence("simtwo", self.dt, cam.render_fps, cam.decimation, config.seed).iterations()
                        if config.reply_timing == "simtwo" else None)
