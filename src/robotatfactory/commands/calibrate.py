@@ -19,7 +19,7 @@ examples:
   raf --field simtwo2022 calibrate --bag drive.bag --image-topic /camera/image_raw --odom-topic /odom --out calib.yaml --json fit.json
   raf calibrate --live --duration 60 --out calib.yaml          # while the robot drives round the field
   raf --middleware ros2 calibrate --live --duration 60 --out calib.yaml   # the same on ROS 2
-  raf --field simtwo2022 calibrate --bag drive.bag --hold cx,cy --out calib.yaml   # SimTwo: centred principal point
+  raf --field simtwo2022 calibrate --bag drive.bag --hold cx,cy --aspect-sigma 0.0001 --out calib.yaml   # SimTwo
 """
 
 
@@ -53,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--aspect-sigma", type=float, default=CalibrationConfig.aspect_sigma, metavar="F",
                         help="prior on the pixels' aspect ratio fy/fx towards the initial camera's, relative 1 sigma "
                              f"(default {CalibrationConfig.aspect_sigma:g}: square pixels unless the data say "
-                             "otherwise; 0: no prior)")
+                             "otherwise; 0: no prior; on SimTwo 0.0001: GLScene has one focal length)")
     parser.add_argument("--corner-refinement", default="apriltag", choices=("apriltag", "subpix", "contour", "none"),
                         help="ArUco corner refinement (default apriltag: 3-4x less corner scatter than subpix and no "
                              "shrinking of the markers on rendered frames; docs/calibration.md)")

@@ -19,8 +19,9 @@ against the perturbed true camera, the targets) with ``simulator`` = simtwo. The
 
 SimTwo's scene shows the calibration drive few or no wall markers; floor markers alone leave focal length,
 pitch and the principal point's cy on a line (docs/calibration.md, "Wall markers"). The held principal point
-and the square-pixel prior (``aspect_sigma``) take that line away; ``wall_detections`` says how many wall
-markers the fit had.
+and square pixels (``raf calibrate --aspect-sigma``, :data:`~robotatfactory.simtwo_linux.scene.CALIBRATION_ASPECT_SIGMA`:
+GLScene has one focal length, so fy = fx is held, not merely preferred) take that line away; ``wall_detections``
+says how many wall markers the fit had.
 """
 from __future__ import annotations
 
@@ -113,7 +114,7 @@ def result_keys(calib: Path, truth) -> dict:
 def run(args, out_dir: Path | None) -> dict:
     from ..localization.calibration import write_robot_json
     from ..robot import load_robot
-    from ..simtwo_linux.scene import CALIBRATION_HOLD, field_for_simtwo, focal_length_mm
+    from ..simtwo_linux.scene import CALIBRATION_ASPECT_SIGMA, CALIBRATION_HOLD, field_for_simtwo, focal_length_mm
     from ._localization_record import calibration_drive, experiment_graph
     from .localization import REAL, Plan
 
@@ -135,7 +136,8 @@ def run(args, out_dir: Path | None) -> dict:
     # the work folder (the ~100 MB bag) goes when the drive finished; logs live in out_dir/logs with --out
     with experiment_graph("raf_experiment_calibration", work, log_dir) as graph:
         calib, keys = calibration_drive(largs, plan, graph, log_dir, work, robot_file, nominal,
-                                        Path(out_dir) if out_dir else None, notes, hold=CALIBRATION_HOLD)
+                                        Path(out_dir) if out_dir else None, notes, hold=CALIBRATION_HOLD,
+                                        aspect_sigma=CALIBRATION_ASPECT_SIGMA)
         out.update(result_keys(calib, truth.camera))
         out.update({
             "simulator": "simtwo", "field": field, "middleware": graph.middleware,
@@ -147,6 +149,8 @@ def run(args, out_dir: Path | None) -> dict:
             "focal_length_mm": round(focal_length_mm(truth.camera.fx), 4),
             "bag_images": keys.get("calibration_bag_images"), "bag_odom": keys.get("calibration_bag_odom"),
             "calibrate_wall_s": round(keys.get("calibration_wall_s", 0.0), 1),
+            "calibration_held": keys.get("calibration_held"),
+            "calibration_aspect_sigma": keys.get("calibration_aspect_sigma"),
             "wall_s": round(time.monotonic() - t0, 1),
         })
     if not out.get("wall_detections"):

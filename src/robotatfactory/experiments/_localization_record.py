@@ -444,13 +444,14 @@ def experiment_graph(node_name: str, work: Path, log_dir: Path):
 
 def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, robot_file: Path | None, robot,
                       out_dir: Path | None, notes: list, sim_extra: tuple[str, ...] = (),
-                      hold: tuple[str, ...] = ()) -> tuple[Path | None, dict]:
+                      hold: tuple[str, ...] = (), aspect_sigma: float | None = None) -> tuple[Path | None, dict]:
     """``--calibration auto``: drive the calibration route recording a bag of camera/image_raw (a frame per
     IMAGE_PERIOD_S), camera_info and odom (``--save-bag FILE`` keeps it), then ``raf calibrate --bag`` on it; with
     ``--bag FILE``, no drive: ``raf calibrate`` on that recording. Returns the calibration file and result keys.
     ``sim_extra``: more ``raf sim`` options for the drive (the competition experiment's world: ``--round R
     --set perturb.NAME=VALUE``, so that the stand-in renders with the round's drawn camera). ``hold``: camera
-    parameters raf calibrate holds (``--hold``; on SimTwo its centred principal point)."""
+    parameters raf calibrate holds (``--hold``; on SimTwo its centred principal point); ``aspect_sigma``: its
+    square-pixel prior (``--aspect-sigma``; None: raf calibrate's default)."""
     from ..localization.route import make_route
     from ..ros.mw import bag_format
 
@@ -473,7 +474,8 @@ def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path,
         out.update({"calibration_bag_images": counts["images"], "calibration_bag_odom": counts["odom"]})
     calib = (out_dir or work) / "calibration.yaml"
     cmd = _raf("--field", args.field, "calibrate", "--bag", str(bag), "--out", str(calib),
-               *(("--hold", ",".join(hold)) if hold else ()))
+               *(("--hold", ",".join(hold)) if hold else ()),
+               *(("--aspect-sigma", f"{aspect_sigma:g}") if aspect_sigma is not None else ()))
     t0 = time.monotonic()
     with open(log_dir / "calibrate.log", "wb") as log:
         r = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=graph.env(), timeout=1800)
@@ -484,4 +486,6 @@ def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path,
     out["calibration_source"] = (f"raf calibrate on the recorded drive {bag} (--bag: replayed, not driven)"
                                  if plan.bag else "raf calibrate on the calibration drive")
     out["calibration_held"] = ",".join(hold) or "none"
+    if aspect_sigma is not None:
+        out["calibration_aspect_sigma"] = aspect_sigma
     return calib, out

@@ -243,7 +243,7 @@ def run(args, out_dir: Path | None) -> dict:
     from ..field import load_field
     from ..localization.calibration import write_calibration
     from ..robot import load_robot
-    from ..simtwo_linux.scene import CALIBRATION_HOLD
+    from ..simtwo_linux.scene import CALIBRATION_ASPECT_SIGMA, CALIBRATION_HOLD
 
     plan = plan_from_args(args)
     if plan.mode == REAL:  # SimTwo's scene is not the rules' field
@@ -270,7 +270,8 @@ def run(args, out_dir: Path | None) -> dict:
         calib: Path | None = None
         if plan.calibration == "auto":
             calib, keys = calibration_drive(args, plan, graph, log_dir, work, robot_file, nominal, out_dir, notes,
-                                            hold=CALIBRATION_HOLD if plan.real_simtwo else ())
+                                            hold=CALIBRATION_HOLD if plan.real_simtwo else (),
+                                            aspect_sigma=CALIBRATION_ASPECT_SIGMA if plan.real_simtwo else None)
             out.update({f"{m}_{k}": v for k, v in keys.items()})
         elif plan.calibration == "true":
             calib = write_calibration((out_dir or work) / "calibration_true.yaml", robot.camera,

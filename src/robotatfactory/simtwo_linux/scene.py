@@ -217,6 +217,13 @@ def scene_camera(agv_xml: Path) -> dict:
 #: that SimTwo's calibration drive sees leave no degenerate direction (docs/calibration.md)
 CALIBRATION_HOLD = ("cx", "cy")
 
+#: the square-pixel prior (``raf calibrate --aspect-sigma``, relative 1 sigma of fy/fx) on SimTwo: GLScene renders
+#: one focal length, so fy = fx is a fact of the renderer, not a guess (held like OpenCV's CALIB_FIX_ASPECT_RATIO).
+#: The drive pitches the camera about its x axis only, which leaves fy on a line with the pitch (correlation -0.997);
+#: the default prior (0.005) let that line carry fy 0.6-1.1 % off where fx was 0.1-0.3 % (3 of 9 runs; tied: 5 of 5
+#: within 0.12 % and 0.07 deg, docs/calibration.md "Square pixels held on SimTwo")
+CALIBRATION_ASPECT_SIGMA = 1e-4
+
 
 def camera_refusals(camera) -> list[str]:
     """Why SimTwo's GLScene camera cannot be ``camera`` (a robot file's CameraSpec): an ideal pinhole with a
