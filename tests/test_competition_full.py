@@ -74,6 +74,27 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
     # on the thread while backing out (tasks.choose_ahead; round 1 has a choice after every pick)
     assert res["full_stack_tuned_r1_s0_picks"] == runs[0]["picks"] == 4, runs[0].get("counters_note")
     assert 1 <= res["full_stack_tuned_r1_s0_choices_ahead"] <= 4
+    # the camera fixes the filter took, counted in the bag: the stand-in renders 14 frames a second (12.8 fixes a
+    # second in issue 20's batch); the test below makes it 12 times fewer
+    assert res["full_stack_tuned_r1_s0_camera_fixes_accepted_per_s"] > 5, runs[0]["logs"]
+    assert res["full_stack_tuned_r1_s0_camera_fixes_rejected"] >= 0
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_whole_stack_passes_camera_every_on_to_raf_sim(tmp_path):
+    """``--sim camera_every=12`` (SimTwo's camera rate on this host) reaches the whole stack's raf sim: one frame
+    in 12, so the filter takes about one camera fix a second instead of the 5 and more of the run above. Paced."""
+    r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "competition", "--rounds", "1",
+                        "--seeds", "1", "--first-seed", "100", "--sim", "camera_every=12", "--pace", "paced",
+                        "--out", str(tmp_path)], capture_output=True, text=True, timeout=400)
+    res = json.loads((tmp_path / "results.json").read_text())
+    runs = json.loads((tmp_path / "runs.json").read_text())
+    assert "error" not in runs[0], (runs[0].get("error"), r.stderr[-2000:])
+    assert json.loads(res["sim_settings"]) == {"camera_every": 12}
+    rate = res["full_stack_heldout_r1_s100_camera_fixes_accepted_per_s"]
+    assert 0.2 < rate < 2.0, (rate, runs[0]["logs"])
+    assert res["full_stack_heldout_r1_camera_fixes_accepted_per_s_median"] == rate
 
 
 def test_localize_settings_are_checked_before_any_run():

@@ -106,6 +106,15 @@ def read_agent_counters(bag_path: Path, topic: str = "diagnostics", name: str = 
     return {k: int(v) for k, v in diagnostic_values(last).items() if v.lstrip("-").isdigit()}
 
 
+def count_messages(bag_path: Path, topic: str) -> int:
+    """How many messages on ``topic`` the bag holds (0 when it recorded none)."""
+    from ..ros.bags import find_topic, open_bag
+
+    with open_bag(bag_path) as bag:
+        names = find_topic(bag.topics, topic)
+        return sum(1 for _ in bag.messages(names)) if names else 0
+
+
 def command_delays(commands: list[tuple[float, float, float]], trace) -> list[float]:
     """Seconds from each command's publication (its bag time) to the start of the first control cycle that
     ran it (the trace's ``cmd``): the loop's command latency. Commands never run (replaced before the next
@@ -388,6 +397,11 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
         out["picks"] = counters["picks"]
     except Exception as e:  # noqa: BLE001 - as for the poses
         out["counters_note"] = f"no agent counters: {type(e).__name__}: {e}"
+    try:  # the camera fixes the filter took and gated: how much the camera gave the localization
+        out["camera_fixes_accepted"] = count_messages(bag_path, "aruco/fixes/filter_accepted")
+        out["camera_fixes_rejected"] = count_messages(bag_path, "aruco/fixes/filter_rejected")
+    except Exception:  # noqa: BLE001 - as for the poses
+        pass
     out["command_delay_median_s"] = statistics.median(delays) if delays else math.nan
     out["command_delay_p95_s"] = _percentile(delays, 95)
     errs = pose_errors(poses, trace)

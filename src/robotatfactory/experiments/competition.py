@@ -40,7 +40,9 @@ within 5 cycles: a push, not a machine's teleport), where each part was let go (
 its offset from the nearest slot's normal, the line through the slot's centre along its facing; parts let go
 more than 0.1 m from every slot are left out), and the wheel odometry's error against the truth over
 each second (``odometry_error_per_m``: the sum of those errors over the distance driven; slip that ground
-truth hides from the agent but the EKF would not). Per round: success rate at maximum score, median and
+truth hides from the agent but the EKF would not); on the whole stack the camera fixes the filter took and gated
+(``camera_fixes_accepted``, ``camera_fixes_rejected``, counted in the run's bag; ``camera_fixes_accepted_per_s`` of
+simulated time, per round the median run's). Per round: success rate at maximum score, median and
 worst time of the last scoring delivery, the release offsets' median, p90 and maximum over every part let go
 in a slot (``..._release_offset_median_m``, the table's ``release mm p50/max``), how far the robot's turns on
 the spot with a part went beyond the odometry's, 0.5 s after each (``..._carry_turn_slip_mean_deg``, ``_sd_deg``,
@@ -606,6 +608,11 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                                                           f"{r['pose_error_docking_worst_at_s']} s")
             if r.get("pose_error_note"):
                 out[f"{p}_pose_error_note"] = r["pose_error_note"]
+            if "camera_fixes_accepted" in r:  # what the camera gave the localization
+                out[f"{p}_camera_fixes_accepted"] = r["camera_fixes_accepted"]
+                out[f"{p}_camera_fixes_rejected"] = r["camera_fixes_rejected"]
+                if r.get("sim_s"):
+                    out[f"{p}_camera_fixes_accepted_per_s"] = round(r["camera_fixes_accepted"] / r["sim_s"], 2)
         out[f"{p}_collisions"] = r["collision_checks_hit"]
         if r["collision_checks_hit"]:
             out[f"{p}_collision_where"] = "; ".join(f"{k} at t {t} s ({x}, {y})" for t, x, y, k in r["collision_hits"])
@@ -664,6 +671,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_pose_error_docking_max_target_met"] = bool(dock) and len(dock) == n and max(dock) <= POSE_TARGET
             med = [r["pose_error_median_m"] for r in rs if math.isfinite(r.get("pose_error_median_m", math.nan))]
             out[f"{p}_pose_error_median_m"] = round(statistics.median(med), 4) if med else None
+            rate = [r["camera_fixes_accepted"] / r["sim_s"] for r in rs if "camera_fixes_accepted" in r and r.get("sim_s")]
+            if rate:  # camera fixes the filter took per simulated second, the median run's
+                out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rate), 2)
         for k in CALIBRATION_ERROR_KEYS:  # the largest error of the used camera against the rendered one
             vals = [r[k] for r in rs if k in r]
             if vals:
