@@ -181,3 +181,23 @@ def test_a_leg_chosen_ahead_is_planned_again_where_the_back_out_ends_away_from_i
     r = play_round(1, 100)
     assert r["points"] == r["max_points"] and r["collision_checks_hit"] == 0
     assert r["choices_ahead"] >= 3 and r["legs_ahead"] == 0
+
+
+def test_once_every_destination_failed_the_least_failed_are_tried(field, robot):
+    """A carried part whose every destination has failed ``give_up_after`` - 1 times is still placed somewhere,
+    but the tries go round the slots that failed least instead of repeating the nearest one."""
+    src = SlotRef("machine_B", 2)
+    state = FactoryState.from_letters("XXXX", machine_B="XXXX")
+    agent, pose = carrying_agent(field, robot, state, src)
+    dest = agent.policy.destinations(state, B, src)
+    n = agent.settings.tasks.give_up_after
+    assert len(dest) >= 3 and n >= 2
+    agent.place_failed = {dest[0]: n - 1}
+    assert agent._usable(dest) == dest[1:]  # below the limit: the others
+    agent.place_failed = {d: n - 1 for d in dest}
+    assert agent._usable(dest) == dest  # all failed alike: all
+    agent.place_failed[dest[0]] = n + 5
+    agent.place_failed[dest[1]] = n
+    assert agent._usable(dest) == dest[2:]  # the least failed
+    agent._go_fastest("to_place", pose, agent._usable(dest))
+    assert agent.mode == "to_place" and agent.target in dest[2:]

@@ -396,9 +396,13 @@ class RoundAgent:
         return self.legs.leg_time(self.legs.plan(obstacles, start, m.target, True, "place", via=False), start, True)
 
     def _usable(self, dest: list) -> list:
-        """Destinations without ``give_up_after`` - 1 failed places (else all: a slot is better than none)."""
-        ok = [d for d in dest if self.place_failed.get(d, 0) < self.settings.tasks.give_up_after - 1]
-        return ok or dest
+        """Destinations without ``give_up_after`` - 1 failed places; once every one has failed so often, those
+        that failed least (a slot is better than none, and the tries go round the slots instead of repeating the
+        one nearest: a place failing the same way at once from where it stands was tried 869 times in a row at one
+        slot, stop 47)."""
+        fails = {d: self.place_failed.get(d, 0) for d in dest}
+        ok = [d for d in dest if fails[d] < self.settings.tasks.give_up_after - 1]
+        return ok or [d for d in dest if fails[d] == min(fails.values(), default=0)]
 
     def _obstacles(self, exclude: SlotRef | None = None, state: FactoryState | None = None,
                    carrying: bool | None = None) -> FieldObstacles:

@@ -372,7 +372,7 @@ def _held_offset(samples: list[tuple[float, float, float]]) -> float:
     110: 77-90 deg in the last 0.24 s), and every place after was stopped by the place gate."""
     th = samples[-1][2]
     run = []
-    for b, c, h in reversed(samples):
+    for _b, c, h in reversed(samples):
         if abs(math.remainder(h - th, 2 * math.pi)) > HELD_HEADING:
             break
         run.append(c)
