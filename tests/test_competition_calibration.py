@@ -255,6 +255,36 @@ def test_a_round_tried_again_after_a_port_race_starts_on_a_clean_directory(tmp_p
     assert attempts == [[], ["sim.log"], ["sim.log"]]  # the logs stay (overwritten), the outputs go
 
 
+def test_a_round_whose_stack_lost_a_port_to_another_run_is_tried_again(tmp_path, monkeypatch):
+    """A node of the stack (the bridge in raf compose) that finds its port taken exits at once: the round is tried
+    again on fresh ports, as when raf sim does (lost as a failed run in a camera_every=12 batch, round 1 seed 102);
+    any other crash is a failed run at once."""
+    from robotatfactory.experiments import _competition_full as full
+
+    attempts = []
+
+    def play(round_no, seed, *a, log_dir=None, **k):
+        attempts.append(1)
+        if len(attempts) < 2:
+            raise RuntimeError("stack exited early with code 2:\nraf compose: error: the bridge cannot bind udp "
+                               "127.0.0.1:50971: Address already in use (~udp/bind_host, ~udp/port)")
+        return {"round": round_no, "seed": seed, "points": 4, "max_points": 4, "max_score": True,
+                "last_score_s": 60.0, "notes": [], "false_start": False}
+
+    monkeypatch.setattr(full, "play_full_stack", play)
+    r = competition._full_job(1, 100, tmp_path, False, None)
+    assert "error" not in r and r["max_score"] is True and len(attempts) == 2, r
+
+    def crash(*a, **k):
+        attempts.append(1)
+        raise RuntimeError("stack exited early with code 1: raf localize: Traceback ...")
+
+    attempts.clear()
+    monkeypatch.setattr(full, "play_full_stack", crash)
+    r = competition._full_job(1, 100, tmp_path, False, None)
+    assert len(attempts) == 1 and "raf localize" in r["error"] and r["max_score"] is False
+
+
 def test_the_whole_stack_refuses_the_bare_stand_ins_sim_settings_and_simtwo_the_stand_ins():
     """``--sim``: the whole stack passes only perturb.NAME and camera_every on to raf sim; another SimConfig
     setting is the bare stand-in's, and the real SimTwo takes none of the stand-in's (checked before any run)."""

@@ -461,12 +461,13 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
             out = play_full_stack(round_no, seed, out_dir, record, field_name, simulator, localize, agent, sim_set,
                                   loss, calibration=calib, log_dir=log_dir, paced=paced, compose=compose)
             break
-        except SimStartError as e:  # a port race with a parallel run: again, on fresh ports
-            if not tries:
+        except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
+            # but a port race with a parallel run (raf sim, or a node of the stack, found the port it was given
+            # taken between choosing and binding it: issue 20's conditions, camera_every=12, round 1 seed 102,
+            # the bridge) is tried again on fresh ports
+            if not tries or not (isinstance(e, SimStartError) or "Address already in use" in str(e)):
                 return _failed(round_no, seed, e)
             discard_attempt(log_dir)
-        except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
-            return _failed(round_no, seed, e)
     drive_cam = cal_keys.pop("calibration_drive_camera", None)
     if drive_cam is not None:  # the drive's raf sim must have rendered the round's camera (same draw)
         round_cam = {k: v for k, v in (out.get("world") or {}).items() if k.startswith("camera_")}
