@@ -267,7 +267,8 @@ class Docker:
                     return self._out(out.v, out.w)
             if self.mode == "pick" and (contact or self.phase == "press"):
                 # the magnet holds the part where it met it: where the robot's centre line crosses the slot's
-                # centre now is the part's offset from that line, to be repeated at the place (mean of 6 cycles)
+                # centre now is the part's offset from that line, to be repeated at the place (the mean of the last
+                # cycles at the grip's heading: _held_offset)
                 self.held_offset = _held_offset(self._lateral)
                 if self.settings.compensate_offset:
                     # backing out along the normal through base_link as it stands: steering onto another line

@@ -194,8 +194,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sim", metavar="NAME=VALUE", action="append", default=[],
                         help="a SimConfig setting of the bare stand-in (repeatable), e.g. magnet=weld where the "
                              "simulator has that option; the default is the simulator's own default; the whole "
-                             "stack takes perturb.NAME and camera_every (e.g. camera_every=12: SimTwo's camera "
-                             "rate on this project's 2-core host)")
+                             "stack takes perturb.NAME and camera_every (e.g. camera_every=6 or 12: SimTwo's "
+                             "software camera on this project's 2-core host, docs/simulator.md)")
     parser.add_argument("--perturb", action="store_true",
                         help="a world that is not the map (raf sim's perturb settings, sim/perturb.py), the issue's "
                              "'a few' of each: " + _perturb_help() + "; --sim perturb.NAME=VALUE changes one; every "

@@ -21,6 +21,7 @@ ms apart after a slow iteration, with no fixed phase to the 40 ms control cycle.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from dataclasses import dataclass, replace
@@ -198,8 +199,6 @@ class RenderCadence:
 def one_in(frames, n: int):
     """Every ``n``-th of the scheduled ``frames`` (the first, the ``n+1``-th, ...), numbered on from 0 as
     published frames are (``SimConfig.camera_every``: a slower host's SimTwo; ``n`` 1: all of them)."""
-    import itertools
-
     if n == 1:
         return frames
     return (replace(f, index=j) for j, f in enumerate(itertools.islice(frames, 0, None, n)))

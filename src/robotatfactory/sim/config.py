@@ -109,9 +109,10 @@ class SimConfig:
                                            "render published) or grid (the idealisation k/15 s)",
                                  choices=CAMERA_TIMINGS)
     camera_every: int = setting(1, "publish one of every this many of the camera frames camera_timing gives, "
-                                   "the others dropped unrendered (1: all, SimTwo on a PC that keeps up; 12: "
-                                   "about SimTwo's 1.0-1.4 frames a second on this project's 2-core host beside "
-                                   "the whole stack, docs/simtwo.md)", lo=1, hi=10 ** 4)
+                                   "the others dropped unrendered (1: all, SimTwo on a PC that keeps up; SimTwo's "
+                                   "software camera on this project's 2-core host beside the whole stack varies by "
+                                   "session: 12 about its 1.0-1.4 frames a second of stop 46, 6 the 2.1-2.5 fixes "
+                                   "a second of stop 47, docs/simtwo.md)", lo=1, hi=10 ** 4)
     reply_timing: str = setting("simtwo", "free-running: simtwo (SimTwo's script reads UDP only when its GUI loop "
                                           "handled messages since its previous call, and of several replies "
                                           "applies the first) or every_cycle (the newest reply before every "
