@@ -448,7 +448,7 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
             calib, cal_keys = prepare(calibration, round_no, seed, sim_set, field_name, log_dir, simulator)
             break
         except Exception as e:  # noqa: BLE001 - no calibration, no run: reported as a failed run
-            # a port another run (or a node's connection) took between choosing it and binding it: the drive
+            # a port found taken (by a process outside the project: proc.free_port leases them): the drive
             # picks fresh ports when it runs again (the drive runs in a child: the error comes as its text)
             if tries and "Address already in use" in str(e):
                 continue
@@ -462,9 +462,9 @@ def _full_job(round_no: int, seed: int, out_dir: Path | None, record: bool, fiel
                                   loss, calibration=calib, log_dir=log_dir, paced=paced, compose=compose)
             break
         except Exception as e:  # a crashed run is a failed run, reported, not the end of the experiment
-            # but a port race with a parallel run (raf sim, or a node of the stack, found the port it was given
-            # taken between choosing and binding it: issue 20's conditions, camera_every=12, round 1 seed 102,
-            # the bridge) is tried again on fresh ports
+            # but a port found taken (raf sim, or a node of the stack: issue 20's conditions, camera_every=12,
+            # round 1 seed 102, the bridge, when ports came from the kernel's bind(0); since proc.free_port
+            # leases them, only a process outside the project can) is tried again on fresh ports
             if not tries or not (isinstance(e, SimStartError) or "Address already in use" in str(e)):
                 return _failed(round_no, seed, e)
             discard_attempt(log_dir)

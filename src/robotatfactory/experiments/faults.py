@@ -201,7 +201,8 @@ class Rig:
             return self.procs.start("sim", simtwo_side.command(self.args.field, self.sport, self.proxy.port,
                                                                cam_port, self.simtwo_keep))
         cmd = ["--field", self.args.field, "sim", "--port", str(self.sport), "--bridge", f"{LOCAL}:{self.proxy.port}",
-               "--no-server", "--status-every", "5", "--seed", str(self.args.seed), f"--start-pose={self.start_pose}"]
+               "--no-server", "--no-control", "--status-every", "5", "--seed", str(self.args.seed),
+               f"--start-pose={self.start_pose}"]
         cmd += ["--camera-bind", self.cam] if self.camera else ["--no-camera"]
         cmd += ["--fast"] if self.fast else ["--realtime"]
         if self.lockstep:

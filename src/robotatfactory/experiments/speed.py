@@ -211,7 +211,7 @@ def run(args, out_dir: Path | None) -> dict:
             _run_on_simtwo(procs, exp.node, env, field, port, sim_port, start, last_t, args.settle, rise + hold)
         else:
             procs.raf("sim", "--field", field, "sim", "--port", str(sim_port), "--bridge", f"127.0.0.1:{port}",
-                      "--no-camera", "--no-server",
+                      "--no-camera", "--no-server", "--no-control",
                       *(["--lockstep", "--lockstep-timeout", "2.0"] if lockstep else []),
                       "--realtime", f"--start-pose={START_POSE[0]},{START_POSE[1]},{START_POSE[2]}", "--speed-control",
                       args.speed_control, "--pid-timing", args.pid_timing, "--seed", str(args.seed), "--duration",
