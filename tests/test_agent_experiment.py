@@ -69,6 +69,12 @@ def test_the_full_stack_mode_names_itself_and_reports_the_pose_error_against_its
     assert res["full_stack_tuned_r1_pose_error_docking_max_target_met"] is False  # 2.5 cm > 2 cm in one run
     res = competition.summarize("full_stack", [r, dict(r, seed=1, pose_error_docking_max_m=float("nan"))])
     assert res["full_stack_tuned_r1_pose_error_docking_max_target_met"] is False  # a run without the measure fails it
+    fixes = dict(camera_fixes_accepted=120, camera_fixes_rejected=3, sim_s=60.0)
+    res = competition.summarize("full_stack", [dict(r, **fixes), dict(r, seed=1, **dict(fixes, sim_s=30.0)),
+                                               dict(r, seed=2)])  # a run without the count: not in the median
+    assert [res[f"full_stack_tuned_r1_s{s}_camera_fixes_accepted_per_s"] for s in (0, 1)] == [2.0, 4.0]
+    assert "full_stack_tuned_r1_s2_camera_fixes_accepted_per_s" not in res
+    assert res["full_stack_tuned_r1_camera_fixes_accepted_per_s_median"] == 3.0
     with pytest.raises(ConfigError, match="bare_truth's"):  # raf sim runs its defaults: refused before any run
         competition.run(args(stack="full", rounds="1", seeds=1, pose_delay=2), None)
     with pytest.raises(ConfigError, match="--agent: .*drive.a_max must be"):  # raf agent takes --agent, checked now

@@ -559,6 +559,11 @@ def _nan_last(x: float) -> float:
     return math.inf if not math.isfinite(x) else x
 
 
+def _fix_rate(run: dict) -> float | None:
+    """Camera fixes the filter took per simulated second in ``run`` (None: not counted, or no time)."""
+    return run["camera_fixes_accepted"] / run["sim_s"] if "camera_fixes_accepted" in run and run.get("sim_s") else None
+
+
 def summarize(mode: str, runs: list[dict]) -> dict:
     """Flat keys per run (``{mode}_{set}_r{round}_s{seed}_...``) and per set and round
     (``{mode}_{set}_r{round}_...``), the set being :func:`seed_set_of` the seed (see the module docstring)."""
@@ -612,8 +617,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             if "camera_fixes_accepted" in r:  # what the camera gave the localization
                 out[f"{p}_camera_fixes_accepted"] = r["camera_fixes_accepted"]
                 out[f"{p}_camera_fixes_rejected"] = r["camera_fixes_rejected"]
-                if r.get("sim_s"):
-                    out[f"{p}_camera_fixes_accepted_per_s"] = round(r["camera_fixes_accepted"] / r["sim_s"], 2)
+                if _fix_rate(r) is not None:
+                    out[f"{p}_camera_fixes_accepted_per_s"] = round(_fix_rate(r), 2)
         out[f"{p}_collisions"] = r["collision_checks_hit"]
         if r["collision_checks_hit"]:
             out[f"{p}_collision_where"] = "; ".join(f"{k} at t {t} s ({x}, {y})" for t, x, y, k in r["collision_hits"])
@@ -672,7 +677,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_pose_error_docking_max_target_met"] = bool(dock) and len(dock) == n and max(dock) <= POSE_TARGET
             med = [r["pose_error_median_m"] for r in rs if math.isfinite(r.get("pose_error_median_m", math.nan))]
             out[f"{p}_pose_error_median_m"] = round(statistics.median(med), 4) if med else None
-            rate = [r["camera_fixes_accepted"] / r["sim_s"] for r in rs if "camera_fixes_accepted" in r and r.get("sim_s")]
+            rate = [_fix_rate(r) for r in rs if _fix_rate(r) is not None]
             if rate:  # camera fixes the filter took per simulated second, the median run's
                 out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rate), 2)
         for k in CALIBRATION_ERROR_KEYS:  # the largest error of the used camera against the rendered one
