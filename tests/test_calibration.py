@@ -523,3 +523,19 @@ def test_a_calibration_file_is_parsed_once_into_the_camera_the_bridge_and_the_lo
     p.write_text(p.read_text().replace("-0.02", "-0.035"))  # a changed file is read again
     assert load_config({"camera": {"calibration": str(p)}}).robot.camera.distortion[0] == -0.035
     assert len(parsed) == 2
+
+
+def test_simtwos_calibration_constraints_are_options_raf_calibrate_takes_and_the_keys_that_report_them():
+    import argparse
+
+    from robotatfactory.commands import calibrate as cmd
+    from robotatfactory.simtwo_linux.scene import SIMTWO_CALIBRATION, CalibrationConstraints
+
+    parser = argparse.ArgumentParser()
+    cmd.add_arguments(parser)
+    args = parser.parse_args(["--bag", "x.bag", "--out", "c.yaml", *SIMTWO_CALIBRATION.calibrate_args()])
+    assert args.hold.split(",") == ["cx", "cy"] and args.aspect_sigma == pytest.approx(1e-4)
+    assert args.aspect_sigma < cal.CalibrationConfig.aspect_sigma  # tighter than the default prior
+    assert SIMTWO_CALIBRATION.keys() == {"calibration_held": "cx,cy", "calibration_aspect_sigma": 1e-4}
+    free = CalibrationConstraints(hold=(), aspect_sigma=0.005)
+    assert free.calibrate_args() == ("--aspect-sigma", "0.005") and free.keys()["calibration_held"] == "none"

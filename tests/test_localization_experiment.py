@@ -98,6 +98,23 @@ def test_options_resolve_to_a_plan(tmp_path):
         _parse("--route", "third")
 
 
+
+def test_what_raf_calibrate_holds_follows_the_simulator_unless_told():
+    """SimTwo's renderer fixes the principal point and square pixels; raf experiment compare asks the same of the
+    stand-in (--calibrate-as simtwo), so that its calibration rows compare like with like."""
+    import argparse
+
+    from robotatfactory.experiments import localization as exp
+    from robotatfactory.simtwo_linux.scene import SIMTWO_CALIBRATION
+
+    p = argparse.ArgumentParser()
+    exp.add_arguments(p)
+    held = {(a, real): exp._constraints(p.parse_args(["--calibrate-as", a]).calibrate_as, real)
+            for a in ("auto", "simtwo", "free") for real in (False, True)}
+    assert held == {("auto", False): None, ("auto", True): SIMTWO_CALIBRATION, ("simtwo", False): SIMTWO_CALIBRATION,
+                    ("simtwo", True): SIMTWO_CALIBRATION, ("free", False): None, ("free", True): None}
+    assert p.parse_args([]).calibrate_as == "auto"
+
 def test_mode_and_route_appear_in_every_target_key():
     from robotatfactory.experiments.localization import MODES, REAL, TARGETS
 

@@ -133,7 +133,7 @@ def test_calibration_experiment_on_simtwo_reports_the_stand_ins_keys(tmp_path):
     leave fx, fy, cy and the pitch on a line) a CI run ended 6.4 % off in fx; with it and the robot file's camera
     as SimTwo renders it (29.64 deg), 2026-11-30 (2 runs, docs/calibration.md): fx, fy within 0.08 %, pitch
     -0.06..-0.02 deg (sigma 0.05-0.12), nothing degenerate, 132-186 markers, 0-2 on walls. About 90 s with
-    SimTwo's start. With square pixels held too (``CALIBRATION_ASPECT_SIGMA``: GLScene has one focal length; the
+    SimTwo's start. With square pixels held too (``SIMTWO_CALIBRATION.aspect_sigma``: GLScene has one focal length; the
     default prior let fy run 0.6-1.1 % off in 3 of 7 runs, two of them in CI), 2026-11-30 (5 runs, one beside a
     busy core): fx = fy within 0.12 %, pitch -0.07..+0.01 deg (sigma 0.01)."""
     out = tmp_path / "cal"

@@ -13,14 +13,14 @@ experiment's calibration drive on SimTwo (:func:`._localization_record.calibrati
 ``calibration`` at ``--calibration-speed``, pure pursuit on SimTwo's ground truth, raf bridge on a private
 ROS graph, a camera frame per 0.2 s and odom recorded to a bag), then ``raf calibrate --bag --hold cx,cy``
 from the NOMINAL camera (the principal point held at the image centre, where GLScene renders it:
-:data:`~robotatfactory.simtwo_linux.scene.CALIBRATION_HOLD`); the result has the stand-in's keys (errors
+:data:`~robotatfactory.simtwo_linux.scene.SIMTWO_CALIBRATION`); the result has the stand-in's keys (errors
 against the perturbed true camera, the targets) with ``simulator`` = simtwo. The stand-in's ``--route``,
 ``--laps``, ``--speed``, ``--every``, ``--wheel-error`` and fit options do not apply (refused when given).
 
 SimTwo's scene shows the calibration drive few or no wall markers; floor markers alone leave focal length,
 pitch and the principal point's cy on a line (docs/calibration.md, "Wall markers"). The held principal point
-and square pixels (``raf calibrate --aspect-sigma``, :data:`~robotatfactory.simtwo_linux.scene.CALIBRATION_ASPECT_SIGMA`:
-GLScene has one focal length, so fy = fx is held, not merely preferred) take that line away; ``wall_detections``
+and square pixels (``raf calibrate --aspect-sigma``, the same
+:data:`~robotatfactory.simtwo_linux.scene.SIMTWO_CALIBRATION`: GLScene has one focal length, so fy = fx is held, not merely preferred) take that line away; ``wall_detections``
 says how many wall markers the fit had.
 """
 from __future__ import annotations
@@ -114,7 +114,7 @@ def result_keys(calib: Path, truth) -> dict:
 def run(args, out_dir: Path | None) -> dict:
     from ..localization.calibration import write_robot_json
     from ..robot import load_robot
-    from ..simtwo_linux.scene import CALIBRATION_ASPECT_SIGMA, CALIBRATION_HOLD, field_for_simtwo, focal_length_mm
+    from ..simtwo_linux.scene import SIMTWO_CALIBRATION, field_for_simtwo, focal_length_mm
     from ._localization_record import calibration_drive, experiment_graph
     from .localization import REAL, Plan
 
@@ -136,8 +136,8 @@ def run(args, out_dir: Path | None) -> dict:
     # the work folder (the ~100 MB bag) goes when the drive finished; logs live in out_dir/logs with --out
     with experiment_graph("raf_experiment_calibration", work, log_dir) as graph:
         calib, keys = calibration_drive(largs, plan, graph, log_dir, work, robot_file, nominal,
-                                        Path(out_dir) if out_dir else None, notes, hold=CALIBRATION_HOLD,
-                                        aspect_sigma=CALIBRATION_ASPECT_SIGMA)
+                                        Path(out_dir) if out_dir else None, notes,
+                                        constraints=SIMTWO_CALIBRATION)
         out.update(result_keys(calib, truth.camera))
         out.update({
             "simulator": "simtwo", "field": field, "middleware": graph.middleware,

@@ -28,6 +28,7 @@ import numpy as np
 from ._localization_analysis import METHODS
 
 if TYPE_CHECKING:
+    from ..simtwo_linux.scene import CalibrationConstraints
     from .localization import Plan
 
 #: idealisations of the stand-in for --ideal: (option of raf sim, its value or None, what it does); the results
@@ -444,14 +445,14 @@ def experiment_graph(node_name: str, work: Path, log_dir: Path):
 
 def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, robot_file: Path | None, robot,
                       out_dir: Path | None, notes: list, sim_extra: tuple[str, ...] = (),
-                      hold: tuple[str, ...] = (), aspect_sigma: float | None = None) -> tuple[Path | None, dict]:
+                      constraints: CalibrationConstraints | None = None) -> tuple[Path | None, dict]:
     """``--calibration auto``: drive the calibration route recording a bag of camera/image_raw (a frame per
     IMAGE_PERIOD_S), camera_info and odom (``--save-bag FILE`` keeps it), then ``raf calibrate --bag`` on it; with
     ``--bag FILE``, no drive: ``raf calibrate`` on that recording. Returns the calibration file and result keys.
     ``sim_extra``: more ``raf sim`` options for the drive (the competition experiment's world: ``--round R
-    --set perturb.NAME=VALUE``, so that the stand-in renders with the round's drawn camera). ``hold``: camera
-    parameters raf calibrate holds (``--hold``; on SimTwo its centred principal point); ``aspect_sigma``: its
-    square-pixel prior (``--aspect-sigma``; None: raf calibrate's default)."""
+    --set perturb.NAME=VALUE``, so that the stand-in renders with the round's drawn camera). ``constraints``: what
+    raf calibrate holds and its square-pixel prior (on SimTwo :data:`~..simtwo_linux.scene.SIMTWO_CALIBRATION`;
+    None: raf calibrate's defaults, nothing held)."""
     from ..localization.route import make_route
     from ..ros.mw import bag_format
 
@@ -474,8 +475,7 @@ def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path,
         out.update({"calibration_bag_images": counts["images"], "calibration_bag_odom": counts["odom"]})
     calib = (out_dir or work) / "calibration.yaml"
     cmd = _raf("--field", args.field, "calibrate", "--bag", str(bag), "--out", str(calib),
-               *(("--hold", ",".join(hold)) if hold else ()),
-               *(("--aspect-sigma", f"{aspect_sigma:g}") if aspect_sigma is not None else ()))
+               *(constraints.calibrate_args() if constraints else ()))
     t0 = time.monotonic()
     with open(log_dir / "calibrate.log", "wb") as log:
         r = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=graph.env(), timeout=1800)
@@ -485,7 +485,5 @@ def calibration_drive(args, plan: Plan, graph: Graph, log_dir: Path, work: Path,
         raise RuntimeError(f"raf calibrate failed (exit {r.returncode}):\n" + "\n".join(tail))
     out["calibration_source"] = (f"raf calibrate on the recorded drive {bag} (--bag: replayed, not driven)"
                                  if plan.bag else "raf calibrate on the calibration drive")
-    out["calibration_held"] = ",".join(hold) or "none"
-    if aspect_sigma is not None:
-        out["calibration_aspect_sigma"] = aspect_sigma
+    out.update(constraints.keys() if constraints else {"calibration_held": "none"})
     return calib, out

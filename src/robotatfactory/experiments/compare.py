@@ -8,8 +8,10 @@ over the repeats in adjacent columns:
   turns on the spot at two rates) and over the whole drive;
 - ``speed``: ``raf experiment speed`` through ROS (the paper's figure 5): RMS error, lag, steady speed;
 - ``localization``: ``raf experiment localization`` (its calibration drive, then ``--route``, default the
-  reference route, one lap): the calibration ``raf calibrate`` recovers, and the position and heading RMSE of
-  odometry, the paper's closest marker, the planar fit and the EKF;
+  reference route, one lap): the calibration ``raf calibrate`` recovers, on both simulators with what SimTwo's
+  renderer fixes held (``--calibrate-as simtwo``: the principal point and square pixels; the stand-in's MuJoCo
+  camera renders them alike), and the position and heading RMSE of odometry, the paper's closest marker, the
+  planar fit and the EKF;
 - ``competition``: ``raf experiment competition``'s whole stack, round 1 (``--rounds``) over ``--seeds``:
   points, the last delivery, pick failures, pose error while docking.
 
@@ -166,6 +168,7 @@ def measure_localization(simulator: str, field: str, out_dir: Path, k: int, rout
     # the stand-in's wheels as SimTwo's scene builds them (no extra calibration error: SimTwo has none either)
     res = run_experiment("localization", field, out_dir / f"localization_{simulator}_{k}", "--simulator", simulator,
                          "--route", route, "--laps", "1", "--no-rviz", "--no-tf-tree", "--calibration", calibration,
+                         "--calibrate-as", "simtwo",  # both calibrated alike: held where GLScene and MuJoCo render alike
                          *(["--wheel-error", "0,0"] if simulator == "standin" else []))
     prefix = f"{loc.REAL if simulator == 'simtwo' else 'simtwo'}_"
     out = {}

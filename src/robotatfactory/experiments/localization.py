@@ -112,6 +112,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--save-bag", metavar="FILE", default=None,
                         help="keep the calibration drive's recording there (ROS 1: a .bag file; ROS 2: a rosbag2 "
                              "directory), to replay with --bag")
+    parser.add_argument("--calibrate-as", choices=("auto", "simtwo", "free"), default="auto",
+                        help="with --calibration auto, what raf calibrate holds: simtwo = the principal point and "
+                             "square pixels, as GLScene renders them (simtwo_linux.scene.SIMTWO_CALIBRATION); free = "
+                             "nothing held, raf calibrate's defaults; auto (default) = simtwo on the real SimTwo, "
+                             "free on the stand-in (raf experiment compare: simtwo on both, like for like)")
     parser.add_argument("--calibration-speed", type=float, default=0.15,
                         help="cruise speed of the calibration drive, m/s (default 0.15)")
     parser.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
@@ -239,11 +244,17 @@ def run_route(args, plan: Plan, graph: Graph, log_dir: Path, work: Path, name: s
     return out
 
 
+def _constraints(calibrate_as: str, real_simtwo: bool):
+    """What raf calibrate holds on the calibration drive (``--calibrate-as``): SimTwo's constraints or None."""
+    from ..simtwo_linux.scene import SIMTWO_CALIBRATION
+
+    return SIMTWO_CALIBRATION if calibrate_as == "simtwo" or (calibrate_as == "auto" and real_simtwo) else None
+
+
 def run(args, out_dir: Path | None) -> dict:
     from ..field import load_field
     from ..localization.calibration import write_calibration
     from ..robot import load_robot
-    from ..simtwo_linux.scene import CALIBRATION_ASPECT_SIGMA, CALIBRATION_HOLD
 
     plan = plan_from_args(args)
     if plan.mode == REAL:  # SimTwo's scene is not the rules' field
@@ -270,8 +281,8 @@ def run(args, out_dir: Path | None) -> dict:
         calib: Path | None = None
         if plan.calibration == "auto":
             calib, keys = calibration_drive(args, plan, graph, log_dir, work, robot_file, nominal, out_dir, notes,
-                                            hold=CALIBRATION_HOLD if plan.real_simtwo else (),
-                                            aspect_sigma=CALIBRATION_ASPECT_SIGMA if plan.real_simtwo else None)
+                                            constraints=_constraints(getattr(args, "calibrate_as", "auto"),
+                                                                     plan.real_simtwo))
             out.update({f"{m}_{k}": v for k, v in keys.items()})
         elif plan.calibration == "true":
             calib = write_calibration((out_dir or work) / "calibration_true.yaml", robot.camera,

@@ -19,6 +19,7 @@ import re
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 from ..simtwo.ports import BRIDGE_UDP_PORT, LOCALHOST, SIMTWO_UDP_PORT
 from ..simtwo.teleport import SIMTWO_PART_PREFIX, SIMTWO_PART_Z, part_heading, spare_part_xy
@@ -212,17 +213,30 @@ def scene_camera(agv_xml: Path) -> dict:
             "focal": float(m.group(1)) if m else 50.0}  # Viewer.pas 3326: 50 when the element is missing
 
 
-#: the camera parameters ``raf calibrate --hold`` keeps at the robot file's values on SimTwo: GLScene's frustum
-#: is symmetric, so the principal point is the image centre (:func:`camera_refusals`); held, the floor markers
-#: that SimTwo's calibration drive sees leave no degenerate direction (docs/calibration.md)
-CALIBRATION_HOLD = ("cx", "cy")
+class CalibrationConstraints(NamedTuple):
+    """What ``raf calibrate`` is told of a renderer's camera: the parameters it holds at the robot file's values
+    (``--hold``) and its square-pixel prior (``--aspect-sigma``, relative 1 sigma of fy/fx)."""
 
-#: the square-pixel prior (``raf calibrate --aspect-sigma``, relative 1 sigma of fy/fx) on SimTwo: GLScene renders
-#: one focal length, so fy = fx is a fact of the renderer, not a guess (held like OpenCV's CALIB_FIX_ASPECT_RATIO).
-#: The drive pitches the camera about its x axis only, which leaves fy on a line with the pitch (correlation -0.997);
-#: the default prior (0.005) let that line carry fy 0.6-1.1 % off where fx was 0.1-0.3 % (3 of 9 runs; tied: 5 of 5
-#: within 0.12 % and 0.07 deg, docs/calibration.md "Square pixels held on SimTwo")
-CALIBRATION_ASPECT_SIGMA = 1e-4
+    hold: tuple[str, ...]
+    aspect_sigma: float
+
+    def calibrate_args(self) -> tuple[str, ...]:
+        """The ``raf calibrate`` options that say it."""
+        return (*(("--hold", ",".join(self.hold)) if self.hold else ()), "--aspect-sigma", f"{self.aspect_sigma:g}")
+
+    def keys(self) -> dict:
+        """The result keys that report it."""
+        return {"calibration_held": ",".join(self.hold) or "none", "calibration_aspect_sigma": self.aspect_sigma}
+
+
+#: ``raf calibrate`` on SimTwo. Held: the principal point (``cx, cy``): GLScene's frustum is symmetric, so it is
+#: the image centre (:func:`camera_refusals`); held, the floor markers that SimTwo's calibration drive sees leave
+#: no degenerate direction (docs/calibration.md). Square pixels (aspect sigma 1e-4): GLScene renders one focal
+#: length, so fy = fx is a fact of the renderer, not a guess (held like OpenCV's CALIB_FIX_ASPECT_RATIO). The
+#: drive pitches the camera about its x axis only, which leaves fy on a line with the pitch (correlation -0.997);
+#: the default prior (0.005) let that line carry fy 0.6-1.1 % off where fx was 0.1-0.3 % (3 of 9 runs; tied: 5 of
+#: 5 within 0.12 % and 0.07 deg, docs/calibration.md "Square pixels held on SimTwo")
+SIMTWO_CALIBRATION = CalibrationConstraints(hold=("cx", "cy"), aspect_sigma=1e-4)
 
 
 def camera_refusals(camera) -> list[str]:
