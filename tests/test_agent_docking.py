@@ -348,4 +348,17 @@ def test_the_place_gate_lets_a_part_held_off_centre_start_from_the_normal(field,
             dst.facing + math.pi)
     docker.start_place(dst, pose, 0.2)
     assert docker.settings.place_gate == pytest.approx(0.015)
-    assert docker._off_line(pose) is gated
+    o = docker.step(pose, True)  # the part on the magnet: the contact switch pressed
+    assert (docker.phase == "back") is gated  # gated: it backs out at once
+    if not gated:
+        assert docker.phase == "approach" and not o.failed
+        return
+    x, y, th = pose
+    for _ in range(500):  # the robot doing what it is told: back along the normal, then the report
+        x, y = x + o.v * math.cos(th) * docker.dt, y + o.v * math.sin(th) * docker.dt
+        th += o.w * docker.dt
+        o = docker.step((x, y, th), True)
+        if o.done or o.failed:
+            break
+    assert o.failed == "off_line" and o.magnet  # the part still held: the place is planned again
+    assert (x - dst.xy[0]) * u[0] + (y - dst.xy[1]) * u[1] >= d - 0.005  # back to where the leg ended

@@ -143,6 +143,7 @@ class RoundAgent:
         self._last_poll = -math.inf
         self.failures: dict[SlotRef, int] = {}  # failed tasks per source slot
         self.place_failed: dict[SlotRef, int] = {}  # failed places per destination slot
+        self.gated_in_a_row = 0  # places of the carried part the place gate stopped in a row (dock.place_gate_tries)
         self._mode_t0 = 0.0
         self._budget = math.inf  # s the current leg may take before it is abandoned
         self._released_t: float | None = None  # when the magnet let go of the part being placed
@@ -558,6 +559,7 @@ class RoundAgent:
         """Picked up from the floor: on as after any pick, to a destination."""
         lost = self.floor.picked(self.t)
         self.carrying = lost.part
+        self.gated_in_a_row = 0
         self.docker.held_offset = self.floor.docker.held_offset  # the place repeats the offset it was held with
         self._held_pose, self._held_state = tuple(pose[:3]), self.state
         dest = self._usable(self.policy.destinations(self.state, self.carrying))
@@ -778,8 +780,11 @@ class RoundAgent:
             self._mode_t0 = self.t
         else:
             retreat = self.legs.retreat(self._obstacles(exclude=self.target), self.target, carrying=False)
-            self.docker.start_place(slot, pose, retreat, v0=v0)
-            self._event(self.t, f"docking to place the {self.carrying.label} part in {self.target}")
+            tries = self.settings.dock.place_gate_tries
+            gate = not (tries and self.gated_in_a_row >= tries)
+            self.docker.start_place(slot, pose, retreat, v0=v0, gate=gate)
+            self._event(self.t, f"docking to place the {self.carrying.label} part in {self.target}"
+                        + ("" if gate else f" (ungated: the gate stopped the last {self.gated_in_a_row})"))
             self._released_t = self._release_pose = None
             self.mode = "place"
             self._mode_t0 = self.t
@@ -790,6 +795,7 @@ class RoundAgent:
             return
         if self.mode == "pick":
             self.counters.picks += 1
+            self.gated_in_a_row = 0
             self.carrying = self.task.part
             self._held_pose = tuple(pose[:3])
             self._event(self.t, f"picked the {self.carrying.label} part from {self.target}")
@@ -860,6 +866,7 @@ class RoundAgent:
         else:
             self.counters.place_failures += 1
             self.place_failed[self.target] = self.place_failed.get(self.target, 0) + 1
+            self.gated_in_a_row = self.gated_in_a_row + 1 if reason == "off_line" else 0
             if reason == "still_held":
                 self.magnet = False
         self.carrying = None if self.mode == "pick" else self.carrying

@@ -23,7 +23,8 @@ distance with the magnet's hold gap), stop, electromagnet off, wait ``settle`` s
 The contact switch must be released once backed out (the part stayed); pressed = failure ``still_held``.
 While the part is still outside the slot, a robot holding it more than ``place_gate`` m to the side of the
 slot's centre line does not go in: it backs out along the normal to where the approach started, the part still
-held, and reports ``off_line`` (the caller plans the place again).
+held, and reports ``off_line`` (the caller plans the place again; after ``place_gate_tries`` such stops in a
+row it starts the place with ``gate=False``).
 """
 from __future__ import annotations
 
@@ -127,6 +128,7 @@ class Docker:
         self._shift = 0.0
         self._lateral: list[tuple[float, float, float]] = []  # picking: (base_link's, the centre line's) offsets, heading
         self._pick_gated = False  # picking: the pick gate has looked (it looks once)
+        self._place_gated = True  # placing: the place gate looks (start_place's gate)
 
     # ------------------------------------------------------------------------------------------ geometry
     def dock_distance(self) -> float:
@@ -148,9 +150,11 @@ class Docker:
         self._begin("pick", slot, pose, retreat, self.dock_distance() - self.settings.overshoot, v0)
         self.magnet = self.settings.magnet_early
 
-    def start_place(self, slot, pose, retreat: float, v0: float = 0.0) -> None:
-        """Leave the carried part on ``slot``; the magnet stays on until the place pose is reached."""
+    def start_place(self, slot, pose, retreat: float, v0: float = 0.0, gate: bool = True) -> None:
+        """Leave the carried part on ``slot``; the magnet stays on until the place pose is reached. ``gate``
+        False: no place gate this time (``place_gate_tries`` gated places in a row)."""
         self._begin("place", slot, pose, retreat, self.place_distance(), v0)
+        self._place_gated = bool(gate)
         self.magnet = True
 
     def _begin(self, mode: str, slot, pose, retreat: float, distance: float, v0: float = 0.0) -> None:
@@ -204,7 +208,7 @@ class Docker:
         away (the part 27 mm off) did not turn back before the part met the rib 0.2 s later, where a kinematic
         run of the approach has it 11 mm off at the ribs."""
         gate = self.settings.place_gate
-        if gate <= 0 or self.phase != "approach":
+        if gate <= 0 or self.phase != "approach" or not self._place_gated:
             return False
         lp = self.place_distance() - self.settings.place_short  # base_link to the held part's centre
         if self._along(pose) - lp <= PLACE_ENTRY:  # the part is at the ribs already: going back is no better

@@ -40,6 +40,9 @@ class Docking:
                                        "entered: the robot backs out along the normal and plans the place again "
                                        "(on SimTwo a part 27 mm off met a rib and fell beside the slot; 0: off)",
                                  lo=0.0, hi=0.1)
+    place_gate_tries: int = setting(3, "places of one carried part the place gate may stop in a row; the next is "
+                                       "entered ungated (a place that may graze a rib beats one never made: a part "
+                                       "that falls is looked for and picked up again; 0: no bound)", lo=0, hi=100)
     pick_gate: float = setting(0.015, "m: a pick approach that has not met its part 6 mm before the dock pose, "
                                       "base_link more than this to the side of the slot's centre line (the pose "
                                       "estimate), is not driven on: past the dock pose the contact switch's bumper "
