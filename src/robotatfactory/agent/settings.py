@@ -100,9 +100,9 @@ class Carrying:
     v_max: float = setting(0.4, "m/s while a part is on the magnet (0: the normal limit)", lo=0.0, hi=2.0)
     back_speed: float = setting(0.25, "m/s backing out of a slot with the part (0: the docker's own)", lo=0.0,
                                 hi=1.0)
-    back_accel: float = setting(0.4, "m/s^2: backing out with the part, the speed ramps up and down at most at this "
+    back_accel: float = setting(0.8, "m/s^2: backing out with the part, the speed ramps up and down at most at this "
                                      "rate (and at most drive.a_max): SimTwo's magnet let the part go setting off "
-                                     "at 2; 0.8 was 1-4 s a round faster but not adopted (docs/agent.md)", lo=0.0,
+                                     "at 2; 0.8 was 1-3 s a round faster than 0.4 (stop 49, docs/agent.md)", lo=0.0,
                                 hi=5.0, lo_open=True)
     long_spin: float = setting(2.4, "rad: a turn on the spot with a part longer than this runs at "
                                     "carry.w_long_spin (0: off)", lo=0.0, hi=2 * math.pi)
