@@ -34,7 +34,7 @@ def _few(n: int) -> tuple[int, ...]:
     out = []
     for p in proc.leasable_ports()[::-97]:
         if p not in proc._leases and proc._bindable(p):
-            fh = proc._lease(p)
+            fh = proc.lease(f"raf-port-{p}")
             if fh is not None:
                 fh.close()
                 out.append(p)
@@ -84,6 +84,6 @@ def test_one_process_keeps_at_most_max_leases_the_oldest_go_first(monkeypatch):
     for _ in range(3):
         proc.free_port()
     assert first not in proc._leases and len(proc._leases) == 3
-    fh = proc._lease(first)  # released: another process could lease it now
+    fh = proc.lease(f"raf-port-{first}")  # released: another process could lease it now
     assert fh is not None
     fh.close()

@@ -62,10 +62,11 @@ def _bindable(port: int) -> bool:
     return True
 
 
-def _lease(port: int):
-    """The lease of ``port`` for this process (an open file with an exclusive ``flock``: the kernel drops it when
-    the process ends, however it ends), or None while another process holds it."""
-    fh = open(Path(tempfile.gettempdir()) / f"raf-port-{port}.lock", "a")
+def lease(name: str):
+    """A lease of ``name`` for this process: the open file ``$TMPDIR/{name}.lock`` with an exclusive ``flock`` (the
+    kernel drops it when the process ends, however it ends; closing the file gives it back), or None while another
+    process holds it. Free ports (:func:`free_port`) and ROS 2 domain ids (ros.master.PrivateDomain) are leased so."""
+    fh = open(Path(tempfile.gettempdir()) / f"{name}.lock", "a")
     try:
         fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
@@ -91,7 +92,7 @@ def free_port(kind=socket.SOCK_STREAM) -> int:
         for port in ports[start:] + ports[:start]:
             if port in _leases:
                 continue
-            fh = _lease(port)
+            fh = lease(f"raf-port-{port}")
             if fh is None:
                 continue
             if not _bindable(port):

@@ -20,8 +20,8 @@ against the perturbed true camera, the targets) with ``simulator`` = simtwo. The
 SimTwo's scene shows the calibration drive few or no wall markers; floor markers alone leave focal length,
 pitch and the principal point's cy on a line (docs/calibration.md, "Wall markers"). The held principal point
 and square pixels (``raf calibrate --aspect-sigma``, the same
-:data:`~robotatfactory.simtwo_linux.scene.SIMTWO_CALIBRATION`: GLScene has one focal length, so fy = fx is held, not merely preferred) take that line away; ``wall_detections``
-says how many wall markers the fit had.
+:data:`~robotatfactory.simtwo_linux.scene.SIMTWO_CALIBRATION`: GLScene has one focal length, so fy = fx is held,
+not merely preferred) take that line away; ``wall_detections`` says how many wall markers the fit had.
 """
 from __future__ import annotations
 

@@ -183,7 +183,8 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
     log_dir = Path(log_dir) if log_dir is not None else run_dir(out_dir, round_no, seed, simulator)
     trace_path = log_dir / TRACE_FILE
     bag_path = log_dir / (POSE_BAG_FILE if fmt == "bag" else POSE_BAG_DIR)
-    # (each run's own, leased by proc.free_port; a port a stranger took makes raf sim exit at once: SimStartError, retried)
+    # (each run's own, leased by proc.free_port; a port a stranger took makes raf sim exit at once:
+    # SimStartError, retried)
     sim_port, bridge_port, server_port, cam_port = _udp_port(), _udp_port(), _udp_port(), free_port()  # (TCP)
     field_args = ["--field", field_name] if field_name else []
     calib_args = ["--calibration", str(calibration)] if calibration else []

@@ -617,8 +617,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             if "camera_fixes_accepted" in r:  # what the camera gave the localization
                 out[f"{p}_camera_fixes_accepted"] = r["camera_fixes_accepted"]
                 out[f"{p}_camera_fixes_rejected"] = r["camera_fixes_rejected"]
-                if _fix_rate(r) is not None:
-                    out[f"{p}_camera_fixes_accepted_per_s"] = round(_fix_rate(r), 2)
+                if (rate := _fix_rate(r)) is not None:
+                    out[f"{p}_camera_fixes_accepted_per_s"] = round(rate, 2)
         out[f"{p}_collisions"] = r["collision_checks_hit"]
         if r["collision_checks_hit"]:
             out[f"{p}_collision_where"] = "; ".join(f"{k} at t {t} s ({x}, {y})" for t, x, y, k in r["collision_hits"])
@@ -677,9 +677,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_pose_error_docking_max_target_met"] = bool(dock) and len(dock) == n and max(dock) <= POSE_TARGET
             med = [r["pose_error_median_m"] for r in rs if math.isfinite(r.get("pose_error_median_m", math.nan))]
             out[f"{p}_pose_error_median_m"] = round(statistics.median(med), 4) if med else None
-            rate = [_fix_rate(r) for r in rs if _fix_rate(r) is not None]
-            if rate:  # camera fixes the filter took per simulated second, the median run's
-                out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rate), 2)
+            rates = [x for x in map(_fix_rate, rs) if x is not None]
+            if rates:  # camera fixes the filter took per simulated second, the median run's
+                out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rates), 2)
         for k in CALIBRATION_ERROR_KEYS:  # the largest error of the used camera against the rendered one
             vals = [r[k] for r in rs if k in r]
             if vals:

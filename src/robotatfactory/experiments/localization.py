@@ -281,8 +281,7 @@ def run(args, out_dir: Path | None) -> dict:
         calib: Path | None = None
         if plan.calibration == "auto":
             calib, keys = calibration_drive(args, plan, graph, log_dir, work, robot_file, nominal, out_dir, notes,
-                                            constraints=_constraints(getattr(args, "calibrate_as", "auto"),
-                                                                     plan.real_simtwo))
+                                            constraints=_constraints(args.calibrate_as, plan.real_simtwo))
             out.update({f"{m}_{k}": v for k, v in keys.items()})
         elif plan.calibration == "true":
             calib = write_calibration((out_dir or work) / "calibration_true.yaml", robot.camera,

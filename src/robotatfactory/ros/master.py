@@ -134,19 +134,16 @@ class PrivateDomain(_PrivateGraph):
         self.home = Path(tempfile.mkdtemp(prefix="raf-ros2-"))
 
     def start(self) -> "PrivateDomain":
-        import fcntl
         import random
+
+        from ..proc import lease
 
         ids = [self.domain_id] if self.domain_id is not None else random.sample(list(self.IDS), len(self.IDS))
         for i in ids:
-            fh = open(Path(tempfile.gettempdir()) / f"raf-ros2-domain-{i}.lock", "w")
-            try:
-                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                fh.close()
-                continue
-            self.domain_id, self._lock = i, fh
-            return self
+            fh = lease(f"raf-ros2-domain-{i}")
+            if fh is not None:
+                self.domain_id, self._lock = i, fh
+                return self
         raise RuntimeError("no free ROS 2 domain id (every one in 1-100 is held by another run)")
 
     @property
