@@ -77,12 +77,14 @@ def _pick_and_carry_time(agent, pose, m):
 
 @pytest.mark.parametrize("via_grid", [0.0, 0.05])
 def test_the_next_part_is_the_one_picked_and_carried_soonest(field, robot, via_grid):
+    """``tasks.pick_by_time`` (which applies with ``tasks.plan_order`` off) takes the part picked and carried
+    soonest."""
     state = FactoryState.from_letters("BBBB")
     sp = field.start_pose
     pose = (sp.x, sp.y, sp.theta)
     chosen = {}
     for by_time in (True, False):
-        agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": by_time},
+        agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": by_time, "plan_order": False},
                                                          "legs": {"via_grid": via_grid}}))
         agent.on_state(state, 0.0)
         agent._decide(pose)
@@ -111,7 +113,7 @@ def test_the_part_picked_soonest_is_reached_through_a_grid_point_where_that_is_f
     """From across the field (0.6, 0, facing +y) the part chosen by time is reached through a grid point
     (``legs.via_grid``, the default): the leg the robot drives is the faster one, by more than half a second."""
     pose = (0.6, 0.0, math.pi / 2)
-    agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": True}}))
+    agent = RoundAgent(field, robot, agent_settings({"tasks": {"pick_by_time": True, "plan_order": False}}))
     assert agent.settings.legs.via_grid > 0
     agent.on_state(FactoryState.from_letters("BBBB"), 0.0)
     agent._decide(pose)

@@ -24,6 +24,7 @@ Events (``events``: list of (t, text)) say what it did: the task chosen, picked,
 from __future__ import annotations
 
 import math
+import time as _time
 from dataclasses import dataclass, field, replace
 
 from ..competition.parts import PartType
@@ -35,6 +36,7 @@ from .follower import DriveLimits, PathFollower, ramp
 from .hybrid import NoCarryPath
 from .legs import VIA_RANKED, LegPlan, LegPlanner
 from .obstacles import FieldObstacles, PartObstacle
+from .order import LegTimes, Plan, leg_times, plan_order, table_key
 from .planner import NoPath
 from .recovery import Relocalizer, StuckDetector, uncertainty_of
 from .refind import Scan
@@ -56,6 +58,9 @@ AHEAD_LEG_POSE = (0.01, 0.05)
 #: limit (adding it would change them), and :meth:`RoundAgent._timeout` would count it in ``timeouts`` and log
 #: it, which it never did. So it stays the floor pick's own.
 FLOOR_PICK_GIVE_UP = 2
+#: (m, rad): deciding this near where the robot backed out to after its last place, the first legs of an order
+#: (tasks.plan_order) are the table's from that slot (else each is planned from the pose: a leg each)
+PLACED_POSE = (0.05, 0.3)
 
 
 @dataclass(frozen=True)
@@ -165,6 +170,18 @@ class RoundAgent:
         self.scan: Scan | None = None  # the latest LIDAR sweep (on_scan), None: never given one
         self._held_pose = None  # the pose at the last cycle the contact switch showed the carried part
         self._held_state = None  # ... and the factory's state as the agent knew it then
+        self.order: Plan | None = None  # the order of the moves last chosen (tasks.plan_order), its first the task
+        self._placed: tuple | None = None  # (slot, pose): where the robot stood after its last place
+
+    def prepare(self) -> float:
+        """Get what deciding needs before the round starts: with ``tasks.plan_order``, the table of leg times
+        (:class:`~.order.LegTimes`; measured once per map, robot and leg settings, 15 s of CPU, then read from the
+        cache file: :func:`~.order.leg_times`). Returns the seconds it took (0: nothing to do)."""
+        if not self.settings.tasks.plan_order:
+            return 0.0
+        t0 = _time.perf_counter()
+        self._leg_times()
+        return _time.perf_counter() - t0
 
     @property
     def d_dock(self) -> float:
@@ -347,7 +364,10 @@ class RoundAgent:
         task = self.policy.next_task(st, robot_xy=tuple(pose[:2]), ready_at={k: v for k, v in ready.items() if v},
                                      avoid=avoid)
         leg = None
-        if isinstance(task, Move) and self.settings.tasks.pick_by_time:
+        self.order = None
+        if isinstance(task, Move) and self.settings.tasks.plan_order:
+            task = self._ordered(pose, st, avoid, task)
+        elif isinstance(task, Move) and self.settings.tasks.pick_by_time:
             task, leg = self._soonest(pose, self.policy.tied(st, avoid), task)
         if task != self.task:
             self._event(self.t, f"task: {task}")
@@ -376,8 +396,7 @@ class RoundAgent:
         best = None
         for m in tied:  # timed by the planner's legs; the chosen pick leg through a grid point if that is faster
             try:
-                leg = self.legs.plan(obstacles, pose, m.source, False, "pick", via=False)
-                t_leg = self.legs.leg_time(leg, pose, False)
+                leg, t_leg = self.legs.timed(obstacles, pose, m.source, False, "pick")
                 cost = t_leg + self._carry_time(m)
             except NoPath:
                 continue
@@ -386,6 +405,84 @@ class RoundAgent:
         if best is None:
             return default, None
         return best[1], self.legs.faster(obstacles, pose, best[2], False, "pick", best[3])[0]
+
+    def _ordered(self, pose, st: FactoryState, avoid: set, rules: Move) -> Move:
+        """``tasks.plan_order``: the first move of the order of the moves left that places the last part soonest
+        (:func:`~.order.plan_order`), unless the best order starting with the rules' part ``rules`` ends less than
+        ``tasks.plan_margin`` s later: then that one's (the rules' part, to the slot that order gives it). The order
+        is kept in :attr:`order`; ``rules`` when there is none."""
+        times = self._leg_times()
+        near = ()
+        if self.settings.tasks.reserve_outgoing:  # every outgoing slot, nearest the outputs first
+            near = tuple(self.policy.outgoing_near_outputs(replace(st, outgoing=(None,) * 4)))
+        placed_at = {ln.input: self.delays.placed_at(ln.input) for ln in self.policy.lanes}
+        kw = dict(first_leg=self._first_legs(pose, st, avoid), delay=self.delays.estimate,
+                  placed_at={k: v for k, v in placed_at.items() if v is not None}, avoid=avoid, near_outputs=near)
+        free = plan_order(self.policy, st, self.t, times, **kw)
+        kept = plan_order(self.policy, st, self.t, times, first=rules.source, **kw)
+        if free is not None and (kept is None or free.finish < kept.finish - self.settings.tasks.plan_margin):
+            self.order = free
+        else:
+            self.order = kept
+        if self.order is None:
+            return rules
+        first = self.order.moves[0]
+        if first != rules:
+            why = "" if first.source == rules.source else f" (the rules' part: {kept.finish - self.t:.1f} s)" \
+                if kept is not None else ""
+            self._event(self.t, f"ordered: {len(self.order.moves)} moves, the last placed in "
+                                f"{self.order.finish - self.t:.1f} s{why}")
+        return first
+
+    def _first_legs(self, pose, st: FactoryState, avoid: set) -> dict[SlotRef, float]:
+        """Seconds of the pick leg from ``pose`` to each part that may move now: the table's row of the slot the
+        robot last placed in when it stands where it backed out to from there (``PLACED_POSE``), else each leg
+        planned from ``pose`` (:meth:`.LegPlanner.timed`; no path: left out)."""
+        times = self._leg_times()
+        placed = self._placed
+        row = placed is not None and _near(pose, placed[1], PLACED_POSE)
+        out, obstacles = {}, None
+        for m in self.policy.candidates(st, avoid):
+            if row and (placed[0], m.source) in times.empty:
+                out[m.source] = times.empty[(placed[0], m.source)]
+                continue
+            obstacles = obstacles if obstacles is not None else self._obstacles(state=st)
+            try:
+                out[m.source] = self.legs.timed(obstacles, pose, m.source, False, "pick")[1]
+            except NoPath:
+                continue
+        return out
+
+    def _leg_times(self) -> LegTimes:
+        """The table of leg times between the slots parts are picked from (incoming, machine outputs) and placed
+        in (outgoing, machine inputs), on the map with no part in it (:meth:`.LegPlanner.between`): from this
+        process's memory or the cache file, keyed by everything a leg depends on (:func:`~.order.table_key`)."""
+        return leg_times(self._table_key(), self.measure_leg_times)
+
+    def measure_leg_times(self) -> LegTimes:
+        """Measure the table of :meth:`_leg_times` (no cache): 128 legs planned and timed, about 4 s of CPU
+        (``raf bench planning``)."""
+        outputs = [ln.output for ln in self.policy.lanes]
+        inputs = [ln.input for ln in self.policy.lanes]
+        picks = [SlotRef("incoming", n) for n in range(1, 5)] + outputs
+        places = [SlotRef("outgoing", n) for n in range(1, 5)] + inputs
+        obstacles = FieldObstacles(self.field, [])
+        return LegTimes.measure(picks, places, lambda a, b, c: self.legs.between(obstacles, a, b, c))
+
+    def _table_key(self) -> str:
+        """The leg-time table's key: the map, the robot and the settings a leg depends on (not, say, the server's
+        port: a test or a run with other such settings reads the same table)."""
+        s = self.settings
+        return table_key(self.field, self.robot, s.legs, s.carry, s.drive, s.dock, self.limits, self.carry_limits,
+                         self.dt)
+
+    def _planned(self, dest: list) -> list:
+        """``dest`` cut to the slot the order gave the part being moved (:meth:`_ordered`), when it is one of
+        them."""
+        o = self.order
+        if o is not None and o.moves and o.moves[0] == self.task and self.task.target in dest:
+            return [self.task.target]
+        return dest
 
     def _carry_time(self, m: Move) -> float:
         """Seconds of the carrying leg of ``m``: from the carrying approach pose at its source (where the robot
@@ -422,7 +519,8 @@ class RoundAgent:
     def _by_time(self, dest: list, carrying: bool) -> bool:
         """The destination of ``dest`` is chosen by time (:meth:`_fastest`): ``tasks.choose_by_time`` on, a
         choice to make, and not carrying on arcs (``carry.arcs`` plans its own leg)."""
-        return (self.settings.tasks.choose_by_time and len(dest) >= 2
+        least = 1 if self.settings.tasks.plan_order else 2  # one: the order's, its leg planned while backing out
+        return (self.settings.tasks.choose_by_time and len(dest) >= least
                 and not (carrying and self.settings.carry.arcs))
 
     def _mapped(self, floor: list[PartObstacle]) -> FieldObstacles:
@@ -671,7 +769,7 @@ class RoundAgent:
             return
         task, part = self.task, self.task.part
         state = self.state.with_slot(task.source, None)
-        dest = self._usable(self.policy.destinations(state, part))
+        dest = self._planned(self._usable(self.policy.destinations(state, part)))
         if not self._by_time(dest, True):
             return
         obstacles = self._obstacles(state=state, carrying=True)
@@ -709,10 +807,10 @@ class RoundAgent:
             if self.policy.destination_class(state, d) != best_class:
                 continue
             try:
-                leg = self.legs.plan(obstacles, pose, d, carrying is not None, _dock_of(mode), via=False)
+                leg, seconds = self.legs.timed(obstacles, pose, d, carrying is not None, _dock_of(mode))
             except NoPath:
                 continue
-            timed.append((self.legs.leg_time(leg, pose, carrying is not None), d, leg))
+            timed.append((seconds, d, leg))
         if not timed:
             return dest[0], None
         best = timed[0]
@@ -802,7 +900,8 @@ class RoundAgent:
             self.state = self.state.with_slot(self.task.source, None)  # expected until the server says
             self._held_state = self.state
             self.target = self.task.target
-            dest = self._usable(self.policy.destinations(self.state.with_slot(self.task.source, None), self.carrying))
+            dest = self._planned(self._usable(self.policy.destinations(self.state.with_slot(self.task.source, None),
+                                                                       self.carrying)))
             if not self.settings.tasks.choose_by_time and self.target not in dest:  # the planned place was taken
                 self.target = dest[0] if dest else None
             if not dest:
@@ -823,6 +922,7 @@ class RoundAgent:
             return
         self.counters.places += 1
         self._event(self.t, f"placed the {self.carrying.label} part in {self.target}")
+        self._placed = (self.target, tuple(pose[:3]))
         if self.settings.recovery.check_place and self.settings.recovery.refind:
             self.floor.placed(self.t, self.carrying, self._release_pose or tuple(pose[:3]), self.target,
                               self._held_state or self.state)

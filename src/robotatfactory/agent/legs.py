@@ -188,6 +188,25 @@ class LegPlanner:
             return leg, seconds if seconds is not None else self.leg_time(leg, pose, carrying)
         return self._via_leg(self._context(obstacles, leg.slot, carrying), pose, leg, carrying, dock, seconds)
 
+    def timed(self, obstacles: FieldObstacles, pose, target, carrying: bool, dock: str) -> tuple[LegPlan, float]:
+        """The usual leg (:meth:`plan` without the grid point) and its seconds (:meth:`leg_time`): what a choice
+        between several targets compares (:meth:`faster` then improves the chosen one). Raises NoPath."""
+        leg = self.plan(obstacles, pose, target, carrying, dock, via=False)
+        return leg, self.leg_time(leg, pose, carrying)
+
+    def between(self, obstacles: FieldObstacles, source, target, carrying: bool) -> float:
+        """Seconds of the leg from the approach pose in front of ``source`` (where the robot backs out to after
+        docking there: after a pick carrying, after a place not) to ``target``, through a grid point where that is
+        faster (:meth:`faster`); inf when there is no path. The table of :class:`~.order.LegTimes`."""
+        dock = "place" if carrying else "pick"
+        try:
+            start = self.path_planner(obstacles, carrying).approach_pose(self.slot(source), self.d_dock,
+                                                                         self.footprint(carrying))
+            leg, seconds = self.timed(obstacles, start, target, carrying, dock)
+            return self.faster(obstacles, start, leg, carrying, dock, seconds)[1]
+        except NoPath:
+            return math.inf
+
     def _context(self, obstacles: FieldObstacles, target, carrying: bool) -> "_LegContext":
         """What planning a leg to ``target`` needs besides the pose (:class:`_LegContext`)."""
         fp = self.footprint(carrying)

@@ -131,7 +131,17 @@ class Tasks:
                                        "after the back-out, standing still: 0.85 s in round 1's longest cycle)")
     pick_by_time: bool = setting(False, "of the parts of the best rank the next is the one whose pick leg and "
                                         "carrying leg take the least time (false: the nearest to the robot; on, "
-                                        "round 1 was 1.2 s slower: docs/agent.md)")
+                                        "round 1 was 1.2 s slower: docs/agent.md); only with tasks.plan_order "
+                                        "off")
+    plan_order: bool = setting(True, "the moves left are ordered by a search over every order (agent/order.py: the "
+                                     "last place soonest, on a table of leg times measured once per map, robot and "
+                                     "settings); the rules' next part is kept unless that order ends "
+                                     "tasks.plan_margin s sooner, and each part goes to the slot the order chose "
+                                     "(false: the rules alone)")
+    plan_margin: float = setting(1.0, "s: the order starting with another part than the rules' is taken only when it "
+                                      "ends at least this much sooner than the best order starting with the rules' "
+                                      "(the table's legs are a second either way: 0 was slower in round 3)", lo=0.0,
+                                 hi=60.0)
     reserve_outgoing: bool = setting(True, "a blue part from elsewhere than a machine output leaves the outgoing "
                                            "slots nearest machine B's outputs to the parts still to come from there")
 

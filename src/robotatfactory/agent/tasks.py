@@ -123,6 +123,10 @@ class TaskPolicy:
         lane = self._lane_of.get(ref)
         return int(lane is not None and state.at(lane.output) is not None)
 
+    def lane_of(self, ref: SlotRef | None) -> LaneRef | None:
+        """The machine lane whose input or output ``ref`` is (None: a warehouse slot)."""
+        return self._lane_of.get(ref)
+
     def is_output(self, ref: SlotRef | None) -> bool:
         return ref in self._outputs
 

@@ -99,6 +99,7 @@ def run(args) -> dict:
         "drive_s_per_leg_carrying_mean": float(np.mean(drive[True])) if drive[True] else math.nan,
         "repeats": max(1, args.repeats),
     }
+    out.update(order_cpu(field, robot, agent_settings(tree), max(1, args.repeats)))
     for round_no in (1, 3):
         cycles = round_cycles(round_no, 100, tree)
         print(f"[bench planning] round {round_no} seed 100 (bare): longest cycle {1000 * max(cycles):.0f} ms",
@@ -108,6 +109,42 @@ def run(args) -> dict:
         out[f"round{round_no}_cycles_over_period"] = sum(c > robot.control_period for c in cycles)
         out[f"round{round_no}_cycle_s_over_period_total"] = sum(c for c in cycles if c > robot.control_period)
     return out
+
+
+def order_cpu(field, robot, settings, repeats: int) -> dict:
+    """``tasks.plan_order``'s costs: the leg-time table measured (CPU s, ``repeats`` times, no cache), and the
+    first decision of rounds 1-3, seeds 100-109 from the start pose (CPU ms: the pick legs planned from the pose
+    and the two searches, :meth:`~robotatfactory.agent.behaviour.RoundAgent._ordered`), with the moves the
+    searches tried."""
+    from ..agent.behaviour import RoundAgent
+    from ..agent.state import FactoryState
+    from ..competition.rounds import RoundSetup
+
+    agent = RoundAgent(field, robot, settings)
+    table = []
+    for rep in range(repeats):
+        t0 = time.process_time()
+        agent.measure_leg_times()
+        table.append(time.process_time() - t0)
+        print(f"[bench planning] leg-time table {rep + 1}: {table[-1]:.1f} s CPU", flush=True)
+    agent._leg_times()
+    pose = (field.start_pose.x, field.start_pose.y, field.start_pose.theta)
+    cpu, nodes = [], []
+    for round_no in (1, 2, 3):
+        for seed in range(100, 110):
+            st = FactoryState.from_letters(RoundSetup.make(round_no, seed).letters)
+            rules = agent.policy.next_task(st, robot_xy=pose[:2])
+            agent._placed = None
+            t0 = time.process_time()
+            agent._ordered(pose, st, set(), rules)
+            cpu.append(time.process_time() - t0)
+            nodes.append(agent.order.nodes if agent.order is not None else 0)
+    print(f"[bench planning] first decisions with the order: {1000 * float(np.median(cpu)):.0f} ms median, "
+          f"{1000 * max(cpu):.0f} max", flush=True)
+    return {"order_table_cpu_s_min": min(table), "order_table_cpu_s_max": max(table),
+            "order_first_decision_cpu_ms_median": 1000 * float(np.median(cpu)),
+            "order_first_decision_cpu_ms_max": 1000 * max(cpu), "order_search_moves_tried_max": max(nodes),
+            "order_decisions": len(cpu)}
 
 
 def round_cycles(round_no: int, seed: int, agent: dict) -> list[float]:

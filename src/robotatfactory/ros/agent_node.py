@@ -59,6 +59,9 @@ class AgentNode:
         self.field = load_field(cfg.field)
         self.robot = load_robot(cfg.robot)
         self.agent = RoundAgent(self.field, self.robot, cfg)
+        took = self.agent.prepare()  # the leg-time table (tasks.plan_order) before the node says it runs
+        if took > 1.0:
+            node.info(f"raf agent: leg-time table measured in {took:.0f} s (cached for the next start)")
         self.lock = threading.RLock()
         self.pose: tuple[float, float, float] | None = None
         self.pose_cov: np.ndarray | None = None  # 3x3 (x, y, theta) of the latest pose
@@ -248,21 +251,25 @@ class AgentNode:
         return a.task
 
     def _planned_moves(self, current: Move | None) -> list:
-        """The round as planned (:func:`..agent.tasks.plan_round`): the current Move first, then the Moves
-        planned from the server state as it will be once the current one is done. Re-planned only when the
+        """The round as planned: the current Move first, then the agent's own order of the moves after it
+        (``tasks.plan_order``), else the Moves :func:`..agent.tasks.plan_round` plans from the server state as it
+        will be once the current one is done. Re-planned only when the
         server state or the current Move changes."""
         a = self.agent
         st = a.state
         if st is None:
             return [current] if current is not None else []
-        key = (id(st), current)
+        key = (id(st), current, id(a.order))
         if key != self._plan_state:
             self._plan_state = key
             if current is not None:  # the part leaves its slot (it may be gone already) and lands at the target
                 st = st.with_slot(current.source, None).with_slot(current.target, current.part)
             try:
-                steps, _ = plan_round(a.policy, st, a.delays.estimate or 10.0)
-                self._plan = [s.task for s in steps if isinstance(s.task, Move)]
+                if a.order is not None and a.order.moves and a.order.moves[0] == current:  # the agent's own order
+                    self._plan = list(a.order.moves[1:])
+                else:
+                    steps, _ = plan_round(a.policy, st, a.delays.estimate or 10.0)
+                    self._plan = [s.task for s in steps if isinstance(s.task, Move)]
             except Exception as e:  # noqa: BLE001 - display only: a plan that cannot be made shows nothing
                 self._plan = []
                 self.node.warn(f"raf agent: no plan to show: {e}", throttle=10.0)
