@@ -6,6 +6,13 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 os.environ.setdefault("MUJOCO_GL", "egl")
+if "RAF_CACHE_DIR" not in os.environ:  # the agent's leg-time table: one per test session, not the user's cache
+    import atexit
+    import shutil
+    import tempfile
+
+    os.environ["RAF_CACHE_DIR"] = tempfile.mkdtemp(prefix="raf-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["RAF_CACHE_DIR"], True)
 
 
 @pytest.fixture(scope="session")

@@ -123,10 +123,6 @@ def brute_force(state, t, times, first_leg, delay, near=()):
     return best
 
 
-def random_table(draw_float) -> LegTimes:
-    return LegTimes.measure(PICKS, PLACES, lambda a, b, c: draw_float())
-
-
 LEG = st.sampled_from([1.0, 1.5, 2.0, 3.0, 4.5, 6.0])
 
 

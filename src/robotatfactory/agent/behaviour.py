@@ -175,7 +175,7 @@ class RoundAgent:
 
     def prepare(self) -> float:
         """Get what deciding needs before the round starts: with ``tasks.plan_order``, the table of leg times
-        (:class:`~.order.LegTimes`; measured once per map, robot and leg settings, 15 s of CPU, then read from the
+        (:class:`~.order.LegTimes`; measured once per map, robot and leg settings, about 4 s of CPU, then read from the
         cache file: :func:`~.order.leg_times`). Returns the seconds it took (0: nothing to do)."""
         if not self.settings.tasks.plan_order:
             return 0.0
@@ -414,7 +414,7 @@ class RoundAgent:
         times = self._leg_times()
         near = ()
         if self.settings.tasks.reserve_outgoing:  # every outgoing slot, nearest the outputs first
-            near = tuple(self.policy.outgoing_near_outputs(replace(st, outgoing=(None,) * 4)))
+            near = tuple(self.policy.outgoing_by_nearness())
         placed_at = {ln.input: self.delays.placed_at(ln.input) for ln in self.policy.lanes}
         kw = dict(first_leg=self._first_legs(pose, st, avoid), delay=self.delays.estimate,
                   placed_at={k: v for k, v in placed_at.items() if v is not None}, avoid=avoid, near_outputs=near)
@@ -428,8 +428,9 @@ class RoundAgent:
             return rules
         first = self.order.moves[0]
         if first != rules:
-            why = "" if first.source == rules.source else f" (the rules' part: {kept.finish - self.t:.1f} s)" \
-                if kept is not None else ""
+            why = ""
+            if first.source != rules.source and kept is not None:
+                why = f" (the rules' part: {kept.finish - self.t:.1f} s)"
             self._event(self.t, f"ordered: {len(self.order.moves)} moves, the last placed in "
                                 f"{self.order.finish - self.t:.1f} s{why}")
         return first

@@ -32,7 +32,7 @@ from typing import Callable
 
 from ..competition.parts import PartType
 from .state import ZONES, FactoryState, SlotRef
-from .tasks import MACHINE_OF, Move, TaskPolicy
+from .tasks import Move, TaskPolicy
 
 #: s to grip a part and back out of its slot (the docking's press and grip; the back-out's ramps)
 PICK_S = 1.0
@@ -243,14 +243,12 @@ class _Search:
         return state, jobs
 
     def _destinations(self, state: FactoryState, part: PartType, source: SlotRef) -> list[SlotRef]:
-        if part is PartType.BLUE:
-            free = [SlotRef("outgoing", k) for k in range(1, 5) if state.outgoing[k - 1] is None]
-            if self.policy.is_output(source):
-                near = [d for d in self.near_outputs if d in free][:2]
-                return near or free
-            return free
-        return [ln.input for ln in self.policy.lanes
-                if ln.machine == MACHINE_OF[part] and state.at(ln.input) is None]
+        """The free slots where ``part`` scores (:meth:`.TaskPolicy.destinations`); a blue part from a machine
+        output: the first two free of ``near_outputs``, if any is."""
+        free = self.policy.destinations(state, part)
+        if part is PartType.BLUE and self.policy.is_output(source):
+            return [d for d in self.near_outputs if d in free][:2] or free
+        return free
 
     def _empty(self, at: SlotRef | None, source: SlotRef) -> float:
         if at is None:
@@ -264,7 +262,7 @@ _TABLES: dict[str, LegTimes] = {}
 
 def leg_times(key: str, measure: Callable[[], LegTimes], cache_dir: Path | None = None) -> LegTimes:
     """The table for ``key`` (a digest of everything the legs depend on: :func:`table_key`): from this process's
-    memory, else from ``cache_dir`` (default :func:`cache_dir`; None there: no file), else ``measure()`` (written
+    memory, else from ``cache_dir`` (default :func:`default_cache_dir`; None there: no file), else ``measure()`` (written
     there atomically for the next process)."""
     if key in _TABLES:
         return _TABLES[key]

@@ -132,19 +132,24 @@ class TaskPolicy:
 
     def outgoing_near_outputs(self, state: FactoryState, ahead: float = 0.26) -> list[SlotRef]:
         """The free outgoing slots, nearest first to where the robot stands after taking a part from one of the
+        machine outputs that give blue parts (:meth:`outgoing_by_nearness`)."""
+        return [r for r in self.outgoing_by_nearness(ahead) if state.outgoing[r.number - 1] is None]
+
+    def outgoing_by_nearness(self, ahead: float = 0.26) -> list[SlotRef]:
+        """Every outgoing slot, nearest first to where the robot stands after taking a part from one of the
         machine outputs that give blue parts (``ahead`` m out along their facing, averaged): from there it
         reaches the first ones with turns one way only, while to the far ones it turns back the other way after
         its first turn on the spot, when the carried part has slid along the magnet's face (SimTwo's force
         magnet), and the part may pivot off it (lost in 5 of 10 runs on a late, noisy pose, docs/agent.md)."""
+        every = [SlotRef("outgoing", k) for k in range(1, 5)]
         final_outputs = [ln.output for ln in self.lanes if ln.machine == MACHINE_OF[PartType.GREEN]]
-        free = [SlotRef("outgoing", k) for k in range(1, 5) if state.outgoing[k - 1] is None]
         if not final_outputs:
-            return free
+            return every
         pts = [(self.slot_xy[o][0] + ahead * math.cos(self.slot_facing.get(o, 0.0)),
                 self.slot_xy[o][1] + ahead * math.sin(self.slot_facing.get(o, 0.0))) for o in final_outputs]
         mx = sum(p[0] for p in pts) / len(pts)
         my = sum(p[1] for p in pts) / len(pts)
-        return sorted(free, key=lambda r: (self._dist(r, (mx, my)), r.number))
+        return sorted(every, key=lambda r: (self._dist(r, (mx, my)), r.number))
 
     def reserved_outgoing(self, state: FactoryState, source: SlotRef | None = None) -> list[SlotRef]:
         """Free outgoing slots to keep for the blue parts that will still come out of machine outputs, when a
