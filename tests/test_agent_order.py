@@ -8,7 +8,7 @@ import json
 import math
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import assume, given, settings, strategies as st
 
 from robotatfactory.agent import order as order_mod
 from robotatfactory.agent.order import PICK_S, PLACE_S, LegTimes, leg_times, plan_order
@@ -163,6 +163,21 @@ def test_the_search_finds_the_soonest_order_of_a_brute_force(case, near_rule):
     assert plan is not None and plan.complete
     assert plan.finish == pytest.approx(best)
     assert simulate(list(plan.moves), state, 0.0, table, first, delay, near) == pytest.approx(plan.finish)
+
+
+@settings(max_examples=40, deadline=None)
+@given(small_rounds())
+def test_the_search_from_the_free_orders_first_part_is_as_soon_as_the_free_order(case):
+    """The agent skips the second search (``first`` the rules' part) when the exact free search already starts
+    with that part: fixing the first part to the free order's own ends exactly as soon."""
+    state, table, first, delay = case
+    free = plan_order(POLICY, state, 0.0, table, first_leg=first, delay=delay, budget=10 ** 6)
+    assume(free is not None)  # nothing to move now (a part in its machine)
+    kept = plan_order(POLICY, state, 0.0, table, first_leg=first, delay=delay, budget=10 ** 6,
+                      first=free.moves[0].source)
+    assert free.complete and kept.complete
+    assert kept.moves[0].source == free.moves[0].source
+    assert kept.finish == pytest.approx(free.finish)
 
 
 def test_a_red_part_through_both_machines_waits_for_each():

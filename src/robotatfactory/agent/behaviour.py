@@ -419,7 +419,10 @@ class RoundAgent:
         kw = dict(first_leg=self._first_legs(pose, st, avoid), delay=self.delays.estimate,
                   placed_at={k: v for k, v in placed_at.items() if v is not None}, avoid=avoid, near_outputs=near)
         free = plan_order(self.policy, st, self.t, times, **kw)
-        kept = plan_order(self.policy, st, self.t, times, first=rules.source, **kw)
+        if free is not None and free.complete and free.moves[0].source == rules.source:
+            kept = free  # an exact search that starts with the rules' part: the second search would end as soon
+        else:
+            kept = plan_order(self.policy, st, self.t, times, first=rules.source, **kw)
         if free is not None and (kept is None or free.finish < kept.finish - self.settings.tasks.plan_margin):
             self.order = free
         else:
