@@ -66,6 +66,8 @@ def test_two_robots_drive_and_are_localized(middleware, ros_graph, tmp_path):
                                  env, tmp_path / "sim.log"))
         for c in pose:
             c.wait(1, timeout=40)  # each node localized its robot from its own camera
+        for c in gt:  # a pose arriving first does not mean this subscription has met its publisher (ROS 2)
+            c.wait(1, timeout=10)
         starts = [c.msgs[-1].pose.pose.position for c in gt]
         # both drive: robot 1 straight ahead, robot 2 forward and turning right (away from robot 1)
         cmds = [(0.1, 0.0), (0.08, -0.25)]
