@@ -206,3 +206,41 @@ def test_at_rest_is_judged_from_the_ground_truth_above_a_resting_robots_jitter()
     still_turning = tr.copy()
     still_turning[30:, 7] += 0.01 * np.arange(30)  # 0.25 rad/s to the end
     assert math.isnan(at_rest(still_turning, replies, 100.0, 200.0)["restart_bridge_at_rest_s"])
+
+
+def test_the_proxy_records_a_frame_before_the_bridge_can_have_it(monkeypatch):
+    """The observer matches each published message to a frame on the proxy's record, so a frame must be on it
+    before it goes out: here the proxy's thread stalls 0.2 s after each send (as a preempted thread may), and
+    the bridge's side finds every frame it receives already recorded."""
+    import socket
+    import time
+
+    from robotatfactory.experiments._faults_net import LOCAL, Proxy
+    from robotatfactory.simtwo import SensorFrame
+
+    bridge = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    bridge.bind((LOCAL, 0))
+    bridge.settimeout(2.0)
+    proxy = Proxy((LOCAL, bridge.getsockname()[1]))
+    out = proxy._out
+
+    def stalled(direction, data, addr):
+        fate = out(direction, data, addr)
+        time.sleep(0.2)
+        return fate
+
+    monkeypatch.setattr(proxy, "_out", stalled)
+    sim = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for seq in range(3):
+            frame = SensorFrame(seq=seq, time_ms=40 * (seq + 1), enc_delta=(0, 0), enc_total=(seq, seq), x=0, y=0,
+                                theta=0, contact=False, magnet=False)
+            sim.sendto(frame.encode(), (LOCAL, proxy.port))
+            got = SensorFrame.decode(bridge.recv(65535))
+            recorded = [int(r[1]) for r in proxy.truth()]
+            assert seq in recorded, f"frame {seq} reached the bridge before the proxy recorded it: {recorded}"
+            assert got.seq == seq
+    finally:
+        proxy.close()
+        sim.close()
+        bridge.close()

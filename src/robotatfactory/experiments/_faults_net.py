@@ -29,7 +29,7 @@ import numpy as np
 
 from ..simtwo import Command, ProtocolError
 from ..simtwo.messages import encode_link_lost
-from ._faults_observe import DELAYED, DROPPED
+from ._faults_observe import DELAYED, DROPPED, FORWARDED
 
 LOCAL = "127.0.0.1"
 
@@ -149,15 +149,18 @@ class Proxy:
                 except Exception:  # noqa: BLE001 - the simulator never sends garbage, but do not die on it
                     continue
                 self.counts["frames"] += 1
-                fate = self._out(0, data, self.bridge)
-                if fate in (DROPPED, DELAYED):
-                    self._notify_lost(f.seq)
-                with self.lock:
+                with self.lock:  # recorded before it goes out: whatever the bridge publishes from it is on record
                     self.frames.append((now, f.seq, f.time_ms, f.enc_total[0], f.enc_total[1], f.x, f.y, f.theta))
-                    self.fates.append(fate)
+                    self.fates.append(FORWARDED)
+                    k = len(self.fates) - 1
                     if self.record_ranges:
                         self.ranges.append(np.asarray(f.ranges, dtype=np.float32))
                     self.template = data
+                fate = self._out(0, data, self.bridge)
+                with self.lock:
+                    self.fates[k] = fate
+                if fate in (DROPPED, DELAYED):
+                    self._notify_lost(f.seq)
                 if self.forge_ticks_every and self.counts["frames"] % self.forge_ticks_every == 0:
                     self._forge_ticks(f)
 

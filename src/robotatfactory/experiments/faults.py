@@ -187,9 +187,12 @@ class Rig:
         return self.procs.raf("bridge", *cmd)
 
     def observe(self, robot) -> Observer:
-        """The observer over everything so far: the proxy's record against what the watcher received."""
+        """The observer over everything so far: the proxy's record against what the watcher received. The
+        messages are taken first: a frame that goes out after the proxy's record is taken cannot then have a
+        message among them (a /clock published from it was once reported as poisoned)."""
+        published = self.watch.published()
         truth, _, ranges = self.proxy.snapshot()
-        return Observer(truth, self.watch.published(), Geometry.of(robot), self.bridge_starts, ranges)
+        return Observer(truth, published, Geometry.of(robot), self.bridge_starts, ranges)
 
     def start_localize(self):
         return self.procs.raf("localize", "--field", self.args.field, "localize")
