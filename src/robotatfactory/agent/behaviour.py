@@ -42,7 +42,7 @@ from .recovery import Relocalizer, StuckDetector, uncertainty_of
 from .refind import Scan
 from .settings import PLACE_LOOK, AgentSettings
 from .state import FactoryState, SlotRef
-from .tasks import Done, Move, TaskPolicy, Wait
+from .tasks import NEAR_OUTPUT_SLOTS, Done, Move, TaskPolicy, Wait
 
 
 #: (m, rad): a destination chosen ahead from where the back-out was to end is taken where it ends this near that
@@ -800,7 +800,7 @@ class RoundAgent:
         a thread while the robot backs out with the part (:meth:`_choose_ahead`)."""
         if self.settings.tasks.reserve_outgoing and carrying is PartType.BLUE and isinstance(task, Move):
             if self.policy.is_output(task.source):  # the slots it reaches turning one way only
-                near = self.policy.outgoing_near_outputs(state)[:2]
+                near = self.policy.outgoing_near_outputs(state)[:NEAR_OUTPUT_SLOTS]
                 dest = [d for d in dest if d in near] or dest
             else:  # leave those to the parts still to come out of the machines
                 keep = set(self.policy.reserved_outgoing(state, task.source))

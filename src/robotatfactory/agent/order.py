@@ -32,7 +32,7 @@ from typing import Callable
 
 from ..competition.parts import PartType
 from .state import ZONES, FactoryState, SlotRef
-from .tasks import Move, TaskPolicy
+from .tasks import NEAR_OUTPUT_SLOTS, Move, TaskPolicy
 
 #: s to grip a part and back out of its slot (the docking's press and grip; the back-out's ramps)
 PICK_S = 1.0
@@ -101,9 +101,9 @@ def plan_order(policy: TaskPolicy, state: FactoryState, t: float, times: LegTime
     ``first_leg``: seconds of the pick leg from the robot's pose to each part it may take first (a part not in it
     is not taken first); ``delay``: the machines' processing time (None: ``GUESS_DELAY``); ``placed_at``: when the
     part at each machine input was left there; ``avoid``: slots whose parts are not moved; ``near_outputs``: the
-    outgoing slots nearest the machine outputs, nearest first (a blue part from an output goes to the first two of
-    them that are free, if any is); ``first``: the slot of the first
-    move's part, if it is given. None when no move can be made now."""
+    outgoing slots nearest the machine outputs, nearest first (a blue part from an output goes to the first
+    ``NEAR_OUTPUT_SLOTS`` of them that are free, if any is); ``first``: the slot of the first move's part, if it
+    is given. None when no move can be made now."""
     search = _Search(policy, times, first_leg, GUESS_DELAY if delay is None else float(delay), frozenset(avoid),
                      tuple(near_outputs), budget)
     jobs = []
@@ -244,10 +244,10 @@ class _Search:
 
     def _destinations(self, state: FactoryState, part: PartType, source: SlotRef) -> list[SlotRef]:
         """The free slots where ``part`` scores (:meth:`.TaskPolicy.destinations`); a blue part from a machine
-        output: the first two free of ``near_outputs``, if any is."""
+        output: the first ``NEAR_OUTPUT_SLOTS`` free of ``near_outputs``, if any is."""
         free = self.policy.destinations(state, part)
         if part is PartType.BLUE and self.policy.is_output(source):
-            return [d for d in self.near_outputs if d in free][:2] or free
+            return [d for d in self.near_outputs if d in free][:NEAR_OUTPUT_SLOTS] or free
         return free
 
     def _empty(self, at: SlotRef | None, source: SlotRef) -> float:
@@ -262,8 +262,8 @@ _TABLES: dict[str, LegTimes] = {}
 
 def leg_times(key: str, measure: Callable[[], LegTimes], cache_dir: Path | None = None) -> LegTimes:
     """The table for ``key`` (a digest of everything the legs depend on: :func:`table_key`): from this process's
-    memory, else from ``cache_dir`` (default :func:`default_cache_dir`; None there: no file), else ``measure()`` (written
-    there atomically for the next process)."""
+    memory, else from ``cache_dir`` (default :func:`default_cache_dir`; None there: no file), else ``measure()``
+    (written there atomically for the next process)."""
     if key in _TABLES:
         return _TABLES[key]
     folder = cache_dir if cache_dir is not None else default_cache_dir()

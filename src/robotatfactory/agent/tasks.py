@@ -34,6 +34,9 @@ from .state import ZONES, FactoryState, SlotRef
 
 MACHINE_OF = {PartType.RED: "machine_A", PartType.GREEN: "machine_B"}
 _PRIORITY = {PartType.RED: 1, PartType.GREEN: 2, PartType.BLUE: 3}
+#: a blue part from a machine output goes to one of this many free outgoing slots nearest the outputs
+#: (:meth:`TaskPolicy.outgoing_near_outputs`), the ones it reaches turning one way only
+NEAR_OUTPUT_SLOTS = 2
 
 
 @dataclass(frozen=True)
