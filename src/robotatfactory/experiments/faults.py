@@ -175,6 +175,7 @@ class Rig:
         self.proxy = Proxy((LOCAL, self.bport), seed=args.seed, record_ranges=lidar)
         self.bridge_starts: list[float] = []  # wall (monotonic) of each start of the bridge, for the observer
         self.watch = None
+        self.fates = np.zeros(0, dtype=int)  # the frames' fates in the proxy's record observe() last took
         self.simtwo = getattr(args, "simulator", "standin") == "simtwo"
         self.simtwo_keep: Path | None = None  # SimTwo: the folder of the running one (its log)
         self.sim_start_s = 180.0 if self.simtwo else 90.0  # wall s to the first frame (SimTwo: 5-30 s)
@@ -189,9 +190,10 @@ class Rig:
     def observe(self, robot) -> Observer:
         """The observer over everything so far: the proxy's record against what the watcher received. The
         messages are taken first: a frame that goes out after the proxy's record is taken cannot then have a
-        message among them (a /clock published from it was once reported as poisoned)."""
+        message among them (a /clock published from it was once reported as poisoned). The fates of the frames
+        in that record (dropped, duplicated, ...) are kept as ``self.fates``, row for row with ``truth``."""
         published = self.watch.published()
-        truth, _, ranges = self.proxy.snapshot()
+        truth, self.fates, ranges = self.proxy.snapshot()
         return Observer(truth, published, Geometry.of(robot), self.bridge_starts, ranges)
 
     def start_localize(self):
@@ -442,9 +444,9 @@ def part_loss(args, log_dir: Path, robot) -> dict:
         t_loss1 = time.monotonic()
         time.sleep(1.0)
         rig.check()
-        truth, fates, _ = px.snapshot()
+        obs = rig.observe(robot)  # one record of the proxy's: the observer's truth and the frames' fates
+        truth, fates = obs.truth, rig.fates
         np.save(d / "truth.npy", truth)
-        obs = rig.observe(robot)
         _save_bridge_diag(w, d / "bridge_diagnostics.json")
     finally:
         rig.down()
