@@ -7,7 +7,8 @@ import sys
 
 import pytest
 
-from robotatfactory.experiments._competition_full import command_delays, dock_windows, pose_errors
+from robotatfactory.experiments._competition_full import (command_delays, dock_windows, place_heading_errors,
+                                                          pose_errors)
 from robotatfactory.sim.trace import Trace, TraceRecord
 
 
@@ -38,6 +39,28 @@ def test_pose_errors_against_the_truth_at_the_stamp():
     assert len(errs) == 2
     assert errs[0][1] == pytest.approx(0.003) and errs[0][2] == pytest.approx(0.02)
     assert errs[1][1] == pytest.approx(0.004)
+
+
+def test_the_heading_error_as_a_place_approach_begins():
+    """0.3 s into each place's docking, never a pick's; a place without a pose that late is left out."""
+    from robotatfactory.experiments import competition
+
+    windows = [(3.0, 4.0, "pick the blue part at incoming 1"), (9.0, 10.5, "place the blue part in outgoing 1"),
+               (12.0, math.inf, "place the blue part in outgoing 2"),
+               (20.0, 20.2, "place the green part in machine_A 1")]
+    errs = [(3.4, 0.001, 0.3), (9.2, 0.001, 0.5), (9.32, 0.002, math.radians(2.0)), (9.36, 0.002, 0.2),
+            (12.31, 0.001, math.radians(0.5)), (20.1, 0.0, 0.4)]
+    got = place_heading_errors(errs, windows)
+    assert got == pytest.approx([2.0, 0.5])
+    r = {"round": 1, "seed": 100, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 50.0,
+         "notes": [], "picks_attempted": 2, "pick_failures": 0, "timeouts": 0, "wall_s": 1.0, "false_start": False,
+         "collision_checks_hit": 0, "collision_hits": [], "parts_pushed": 0, "logs": "x",
+         "place_heading_error_deg": got}
+    res = competition.summarize("full_stack", [r, dict(r, seed=101, place_heading_error_deg=[1.0, 3.0])])
+    assert res["full_stack_heldout_r1_place_approaches"] == 4
+    assert res["full_stack_heldout_r1_place_heading_error_median_deg"] == 2.0  # nearest rank, the upper of two
+    assert res["full_stack_heldout_r1_place_heading_error_max_deg"] == 3.0
+    assert "2.0/3.0" in competition.table("full_stack", [r, dict(r, seed=101, place_heading_error_deg=[1.0, 3.0])])
 
 
 def test_command_delays_from_publication_to_the_cycle_that_ran_it():

@@ -75,6 +75,7 @@ def test_a_turn_on_the_spot_with_a_part_is_measured_against_the_odometry(field, 
     the same turn without a part, and a short one with it, are not measured."""
     import math
 
+    from robotatfactory.experiments import competition
     from robotatfactory.experiments._competition_observe import RunObserver as Obs
     from robotatfactory.localization.odometry import DiffDriveOdometry
 
@@ -97,9 +98,17 @@ def test_a_turn_on_the_spot_with_a_part_is_measured_against_the_odometry(field, 
     for angle in (math.pi / 2, -math.pi / 2):
         obs = Obs(field, robot)
         turn(obs, 3, angle)
-        (slip,) = obs.figures()["carry_turn_slip_deg"]
+        fig = obs.figures()
+        (slip,), (size,) = fig["carry_turn_slip_deg"], fig["carry_turn_deg"]
         # from the first cycle the odometry sees turning: 3 % of the turn less that cycle's (a tick: 0.1 deg)
         assert math.isclose(slip, 0.03 * math.degrees(abs(angle) - 1.5 * robot.control_period), abs_tol=0.2), slip
+        assert 85.0 < size < 90.0, size  # the truth's turn, unsigned, from the cycle the odometry sees turning
+        run = dict(round=2, seed=100, points=4, max_points=4, max_score=True, last_score_s=50.0, notes=[],
+                   picks_attempted=2, pick_failures=0, timeouts=0, wall_s=1.0, false_start=False, **fig)
+        res = competition.summarize("bare_truth", [run])
+        # the slip per degree the truth turned: 3 % of the odometry's turn is 2.9 % of the truth's
+        assert math.isclose(res["bare_truth_heldout_r2_carry_turn_slip_pct"], 100 * slip / size, abs_tol=0.01)
+        assert 2.6 < res["bare_truth_heldout_r2_carry_turn_slip_pct"] < 3.0
     obs = Obs(field, robot)
     t, seq = turn(obs, None, math.pi / 2)  # empty
     turn(obs, 3, math.radians(10), t, seq)  # too short

@@ -31,6 +31,7 @@ FULL_DURATION = {1: 130.0, 2: 190.0, 3: 230.0}  # simulated s of one run at most
 START_AFTER = 3.0  # simulated s before the run starts (the agent's nodes are up by then)
 END_AFTER_MAX = 1.0  # simulated s the maximum score must stand before raf sim ends the run
 DONE_GRACE = 3.0  # wall s after the agent logged "task: done" before raf sim is stopped
+PLACE_HEADING_AFTER = 0.3  # s into a place's docking: the heading error there (place_heading_error_deg)
 #: every process of a run: OpenCV's own thread pool off (one thread per process; the runs of a batch are the
 #: parallelism). Measured alone, paced, round 1 seed 100, ROS 1: 42-46 CPU s with the pool, 39-40 without, the
 #: same trace byte for byte (docs/benchmarks.md)
@@ -69,6 +70,20 @@ def pose_errors(poses: list[tuple[float, float, float, float]], trace) -> list[t
         g = trace.pose_at(t)
         if g is not None:
             out.append((t, math.hypot(x - g[0], y - g[1]), abs(wrap_angle(th - g[2]))))
+    return out
+
+
+def place_heading_errors(errs: list[tuple[float, float, float]], windows: list[tuple[float, float, str]],
+                         after: float = PLACE_HEADING_AFTER) -> list[float]:
+    """The heading error (deg, unsigned) of the first pose ``after`` s or more into each place's docking (a
+    ``docking to place`` window of :func:`dock_windows`; ``errs`` from :func:`pose_errors`): how far off the
+    agent's heading was as it entered the place approach, where a turn with the part has just ended."""
+    out = []
+    for t0, t1, what in windows:
+        if what.startswith("place"):
+            e = next((e for e in errs if t0 + after <= e[0] <= t1), None)
+            if e is not None:
+                out.append(round(math.degrees(e[2]), 3))
     return out
 
 
@@ -416,6 +431,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
         out[f"{key}_max_m"] = max(pos) if pos else math.nan
         out[f"{key}_heading_max_rad"] = max((e[2] for e in sel), default=math.nan)
     out["pose_error_p95_m"] = _percentile([e[1] for e in errs], 95)
+    out["place_heading_error_deg"] = place_heading_errors(errs, windows)
     worst = max(docking, key=lambda e: e[1], default=None)
     if worst is not None:
         out["pose_error_docking_worst_at_s"] = round(worst[0], 2)

@@ -46,8 +46,11 @@ simulated time, per round the median run's). Per round: success rate at maximum 
 worst time of the last scoring delivery, the release offsets' median, p90 and maximum over every part let go
 in a slot (``..._release_offset_median_m``, the table's ``release mm p50/max``), how far the robot's turns on
 the spot with a part went beyond the odometry's, 0.5 s after each (``..._carry_turn_slip_mean_deg``, ``_sd_deg``,
-``_p95_abs_deg``, over ``..._carry_turns``: the slip the EKF's carrying model is for, the stand-in's against
-SimTwo's), and the targets of the issue:
+``_p95_abs_deg``, over ``..._carry_turns``; ``..._carry_turn_slip_pct``: their sum per degree turned, the
+fraction the EKF's ``ekf.carry_turn_bias`` stands for): the slip the EKF's carrying model is for, the stand-in's
+against SimTwo's; on the whole stack the agent's heading error 0.3 s into each place's docking, where a turn with
+the part has just ended (``..._place_heading_error_{median,p90,max}_deg`` over ``..._place_approaches``), and the
+targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts knocked out of slots;
@@ -677,6 +680,11 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_pose_error_docking_max_target_met"] = bool(dock) and len(dock) == n and max(dock) <= POSE_TARGET
             med = [r["pose_error_median_m"] for r in rs if math.isfinite(r.get("pose_error_median_m", math.nan))]
             out[f"{p}_pose_error_median_m"] = round(statistics.median(med), 4) if med else None
+            heading = sorted(x for r in rs for x in r.get("place_heading_error_deg", ()))
+            if heading:  # the heading error 0.3 s into each place's docking (after a turn with the part)
+                out[f"{p}_place_approaches"] = len(heading)
+                for q, name in ((0.5, "median"), (0.9, "p90"), (1.0, "max")):
+                    out[f"{p}_place_heading_error_{name}_deg"] = round(_quantile(heading, q), 2)
             rates = [x for x in map(_fix_rate, rs) if x is not None]
             if rates:  # camera fixes the filter took per simulated second, the median run's
                 out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rates), 2)
@@ -694,6 +702,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_carry_turn_slip_mean_deg"] = round(statistics.mean(slips), 2)
             out[f"{p}_carry_turn_slip_sd_deg"] = round(statistics.stdev(slips), 2) if len(slips) > 1 else 0.0
             out[f"{p}_carry_turn_slip_p95_abs_deg"] = round(_quantile(sorted(abs(x) for x in slips), 0.95), 2)
+            turned = sum(x for r in rs for x in r.get("carry_turn_deg", ()))
+            if turned > 0:  # the slip per degree turned (the EKF's carry_turn_bias is its fraction)
+                out[f"{p}_carry_turn_slip_pct"] = round(100 * sum(slips) / turned, 2)
         odo = [r["odometry_error_per_m"] for r in rs if "odometry_error_per_m" in r]
         if odo:  # slip: the pose would suffer from it on the EKF, not here (ground truth)
             out[f"{p}_odometry_error_per_m_median"] = round(statistics.median(odo), 4)
@@ -717,7 +728,7 @@ def table(mode: str, runs: list[dict]) -> str:
              f"{'seeds':<14} {'round':>5} {'runs':>4} {'max score':>9} {'median s':>9} {'worst s':>8} {'target s':>8} "
              f"{'pick fail':>9} {'knocked':>7} {'pushed':>6} {'notes':>5} {'collide':>7} {'odo mm/m':>8} "
              f"{'release mm p50/max':>18}"
-             + ("" if bare else f" {'pose err docking max mm':>23}")]
+             + ("" if bare else f" {'pose err docking max mm':>23} {'place hdg deg p50/max':>21}")]
     groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
                     key=lambda g: (("tuned", "heldout", "other").index(g[0]), g[1]))
     for k, rn in groups:
@@ -735,7 +746,8 @@ def table(mode: str, runs: list[dict]) -> str:
                      f"{1000 * statistics.median([r.get('odometry_error_per_m', math.nan) for r in rs]):>8.2f} "
                      f"{_release_cell(rs):>18}"
                      + ("" if bare else
-                        f" {1000 * max((r.get('pose_error_docking_max_m', math.nan) for r in rs), key=_nan_last):>23.1f}"))
+                        f" {1000 * max((r.get('pose_error_docking_max_m', math.nan) for r in rs), key=_nan_last):>23.1f}"
+                        f" {_place_heading_cell(rs):>21}"))
     if bare:
         acts = ("wait_start", "decide", "drive", "turn", "final_turn", "dock_approach", "dock_wait", "dock_back")
         lines.append("time split, median s per run (RoundAgent.activity): " + " ".join(f"{a:>13}" for a in acts))
@@ -746,6 +758,12 @@ def table(mode: str, runs: list[dict]) -> str:
                 lines.append(f"  {k:<7} round {rn}{'':>36}" + " ".join(
                     f"{statistics.median(s.get(a, 0.0) for s in sp):>13.1f}" for a in acts))
     return "\n".join(lines)
+
+
+def _place_heading_cell(rs: list[dict]) -> str:
+    """The table's heading error 0.3 s into each place's docking: median / max over every place, deg."""
+    errs = sorted(e for r in rs for e in r.get("place_heading_error_deg", ()))
+    return f"{_quantile(errs, 0.5):.1f}/{errs[-1]:.1f}" if errs else "-"
 
 
 def _release_cell(rs: list[dict]) -> str:
