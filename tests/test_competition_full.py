@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from robotatfactory.experiments._competition_full import (command_delays, dock_windows, place_heading_errors,
-                                                          pose_errors)
+from robotatfactory.experiments._competition_full import (carry_turn_heading_errors, command_delays, dock_windows,
+                                                          place_heading_errors, pose_errors)
 from robotatfactory.sim.trace import Trace, TraceRecord
 
 
@@ -61,6 +61,27 @@ def test_the_heading_error_as_a_place_approach_begins():
     assert res["full_stack_heldout_r1_place_heading_error_median_deg"] == 2.0  # nearest rank, the upper of two
     assert res["full_stack_heldout_r1_place_heading_error_max_deg"] == 3.0
     assert "2.0/3.0" in competition.table("full_stack", [r, dict(r, seed=101, place_heading_error_deg=[1.0, 3.0])])
+
+
+def test_the_estimate_half_a_second_after_each_carrying_turn():
+    """The first pose 0.5 s or later after a turn with a part ended, no later than 1.0 s; a turn without such a
+    pose is left out; per round the rms and the largest, with how many turns they are over."""
+    from robotatfactory.experiments import competition
+
+    errs = [(5.4, 0.001, 0.3), (5.52, 0.001, math.radians(3.0)), (5.6, 0.001, 0.4), (8.6, 0.0, math.radians(1.0)),
+            (13.2, 0.0, 0.5)]
+    got = carry_turn_heading_errors(errs, [5.0, 8.0, 12.0])  # the third: its only pose is 1.2 s after
+    assert got == pytest.approx([3.0, 1.0])
+    r = {"round": 3, "seed": 100, "points": 8, "max_points": 8, "max_score": True, "last_score_s": 70.0,
+         "notes": [], "picks_attempted": 4, "pick_failures": 0, "timeouts": 0, "wall_s": 1.0, "false_start": False,
+         "collision_checks_hit": 0, "collision_hits": [], "parts_pushed": 0, "logs": "x",
+         "carry_turn_heading_error_deg": got}
+    res = competition.summarize("full_stack", [r, dict(r, seed=101, carry_turn_heading_error_deg=[0.0, 2.0])])
+    assert res["full_stack_heldout_r3_carry_turns_estimated"] == 4
+    assert res["full_stack_heldout_r3_carry_turn_heading_error_rms_deg"] == pytest.approx(math.sqrt(14 / 4), abs=0.01)
+    assert res["full_stack_heldout_r3_carry_turn_heading_error_max_deg"] == 3.0
+    assert "full_stack_heldout_r3_carry_turns_estimated" not in competition.summarize(
+        "full_stack", [dict(r, carry_turn_heading_error_deg=[])])
 
 
 def test_command_delays_from_publication_to_the_cycle_that_ran_it():

@@ -103,6 +103,9 @@ def test_a_turn_on_the_spot_with_a_part_is_measured_against_the_odometry(field, 
         # from the first cycle the odometry sees turning: 3 % of the turn less that cycle's (a tick: 0.1 deg)
         assert math.isclose(slip, 0.03 * math.degrees(abs(angle) - 1.5 * robot.control_period), abs_tol=0.2), slip
         assert 85.0 < size < 90.0, size  # the truth's turn, unsigned, from the cycle the odometry sees turning
+        (end,) = fig["carry_turn_end_s"]  # the first still cycle after the turn's 26
+        n = int(round(abs(angle) / 1.5 / robot.control_period))
+        assert abs(end - (n + 1) * robot.control_period) <= robot.control_period + 1e-9, end
         run = dict(round=2, seed=100, points=4, max_points=4, max_score=True, last_score_s=50.0, notes=[],
                    picks_attempted=2, pick_failures=0, timeouts=0, wall_s=1.0, false_start=False, **fig)
         res = competition.summarize("bare_truth", [run])

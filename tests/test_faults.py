@@ -60,6 +60,8 @@ def test_restarts_of_simulator_bridge_camera_and_roscore(tmp_path):
     assert r["restart_bridge_at_rest_after_death_s"] <= 0.6 + 0.04
     assert r["restart_bridge_resume_s"] <= 1.0
     assert r["restart_roscore_nodes_clear"], r["restart_roscore_exit_codes"]
+    # the private graph's ROS logs are kept beside the part's own (roscore's, this part's rospy subscribers')
+    assert list((tmp_path / "restarts" / "ros_log").rglob("master.log"))
 
 
 def test_a_parts_own_wall_time_is_not_overwritten_by_its_total(tmp_path, monkeypatch):

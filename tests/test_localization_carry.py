@@ -83,6 +83,10 @@ def test_a_turn_on_the_spot_with_a_part_is_taken_carry_turn_bias_larger_and_noth
     # carrying from 1.0 s on, told after the odometry: replayed, the last second's turn (25 cycles) scaled
     late = run(cfg=cfg, late=[(1.0, True)]).pose()[2]
     assert late == pytest.approx(math.remainder(turned + k * W * DT * 25, math.tau), abs=1e-9)
+    # a camera fix's stamp uncertainty is widened by the turn rate the prediction takes: the carried one
+    ekf = run(cfg=cfg, switches=[(0.0, True)])
+    rate, carried = ekf._velocity_at(49.5 * DT)[2], ekf._velocity_at(49.5 * DT, carrying=True)[2]
+    assert rate == pytest.approx(W) and carried == pytest.approx((1 + k) * W)
 
 
 def test_a_switch_counts_from_its_own_stamp_whether_it_comes_ahead_on_time_or_late():
@@ -186,7 +190,8 @@ def test_only_the_filter_with_the_carrying_model_stays_consistent_through_a_turn
     """The filter (started at the truth) fed the robot's odometry through the turn, with no fix (no marker in
     view), then a camera-like fix of the truth once the robot stops: with the model (the noise and the bias) its
     heading error is smaller and within its 99 % bound (NEES < 6.63) and the fix's squared Mahalanobis distance
-    within 3 dof's 99 % (11.34); without it, both far outside. The empty robot's filter is the same with and without the model."""
+    within 3 dof's 99 % (11.34); without it, both far outside. The empty robot's filter is the same with and
+    without the model."""
     tr, odo = agent_turns[True]
     stop = int(np.flatnonzero(np.any(tr.cmd != 0, axis=1))[-1]) + 1
     R = np.diag([0.0015 ** 2, 0.0015 ** 2, math.radians(0.3) ** 2])

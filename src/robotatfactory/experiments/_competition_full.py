@@ -26,12 +26,14 @@ import time
 from pathlib import Path
 
 from ..ros.master import free_port
+from ._competition_observe import SPIN_AFTER
 
 FULL_DURATION = {1: 130.0, 2: 190.0, 3: 230.0}  # simulated s of one run at most (raf sim --duration)
 START_AFTER = 3.0  # simulated s before the run starts (the agent's nodes are up by then)
 END_AFTER_MAX = 1.0  # simulated s the maximum score must stand before raf sim ends the run
 DONE_GRACE = 3.0  # wall s after the agent logged "task: done" before raf sim is stopped
 PLACE_HEADING_AFTER = 0.3  # s into a place's docking: the heading error there (place_heading_error_deg)
+TURN_HEADING_WITHIN = 0.5  # s: a carrying turn's estimate is the first pose within this of SPIN_AFTER after it
 #: every process of a run: OpenCV's own thread pool off (one thread per process; the runs of a batch are the
 #: parallelism). Measured alone, paced, round 1 seed 100, ROS 1: 42-46 CPU s with the pool, 39-40 without, the
 #: same trace byte for byte (docs/benchmarks.md)
@@ -73,18 +75,31 @@ def pose_errors(poses: list[tuple[float, float, float, float]], trace) -> list[t
     return out
 
 
+def heading_errors_in(errs: list[tuple[float, float, float]], spans) -> list[float]:
+    """The heading error (deg, unsigned) of the first pose in each span ``(t0, t1)`` (``errs`` from
+    :func:`pose_errors`); a span with no pose gives nothing."""
+    out = []
+    for t0, t1 in spans:
+        e = next((e for e in errs if t0 <= e[0] <= t1), None)
+        if e is not None:
+            out.append(round(math.degrees(e[2]), 3))
+    return out
+
+
 def place_heading_errors(errs: list[tuple[float, float, float]], windows: list[tuple[float, float, str]],
                          after: float = PLACE_HEADING_AFTER) -> list[float]:
     """The heading error (deg, unsigned) of the first pose ``after`` s or more into each place's docking (a
-    ``docking to place`` window of :func:`dock_windows`; ``errs`` from :func:`pose_errors`): how far off the
-    agent's heading was as it entered the place approach, where a turn with the part has just ended."""
-    out = []
-    for t0, t1, what in windows:
-        if what.startswith("place"):
-            e = next((e for e in errs if t0 + after <= e[0] <= t1), None)
-            if e is not None:
-                out.append(round(math.degrees(e[2]), 3))
-    return out
+    ``docking to place`` window of :func:`dock_windows`): how far off the agent's heading was as it entered the
+    place approach, where a turn with the part has just ended."""
+    return heading_errors_in(errs, [(t0 + after, t1) for t0, t1, what in windows if what.startswith("place")])
+
+
+def carry_turn_heading_errors(errs: list[tuple[float, float, float]], ends: list[float],
+                              after: float = SPIN_AFTER, within: float = TURN_HEADING_WITHIN) -> list[float]:
+    """The heading error (deg, unsigned) of the first pose ``after`` s after each turn on the spot with a part
+    ended (``ends``: the observer's ``carry_turn_end_s``; no later than ``within`` s after that): the estimate
+    when the turn's slip is measured, what ``ekf.carry_turn_bias`` is for."""
+    return heading_errors_in(errs, [(t + after, t + after + within) for t in ends])
 
 
 def read_poses(bag_path: Path, topic: str = "pose") -> list[tuple[float, float, float, float]]:
@@ -432,6 +447,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
         out[f"{key}_heading_max_rad"] = max((e[2] for e in sel), default=math.nan)
     out["pose_error_p95_m"] = _percentile([e[1] for e in errs], 95)
     out["place_heading_error_deg"] = place_heading_errors(errs, windows)
+    out["carry_turn_heading_error_deg"] = carry_turn_heading_errors(errs, out.get("carry_turn_end_s", []))
     worst = max(docking, key=lambda e: e[1], default=None)
     if worst is not None:
         out["pose_error_docking_worst_at_s"] = round(worst[0], 2)

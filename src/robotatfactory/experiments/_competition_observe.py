@@ -11,8 +11,9 @@ beside its slot the agent put it), the wheel odometry's error against the truth 
 second per metre driven, how far each turn on the spot with a part went beyond the odometry's (``carry_turn_slip_deg``:
 the truth's heading change less the odometry's from the turn's start to ``SPIN_AFTER`` s after its end, positive
 where the robot turned farther, turns of at least ``SPIN_MIN`` only; the turn told by the odometry's speeds; and
-``carry_turn_deg``, the size of each of those turns by the truth, so that the slip can be put per degree turned), the
-time split per agent activity (when the caller knows it), and for the figures the path and the animation frames.
+``carry_turn_deg``, the size of each of those turns by the truth, so that the slip can be put per degree turned, and
+``carry_turn_end_s``, when each ended, so that the whole stack's estimate can be read after it), the time split
+per agent activity (when the caller knows it), and for the figures the path and the animation frames.
 """
 from __future__ import annotations
 
@@ -72,6 +73,7 @@ class RunObserver:
         self._spin: _Spin | None = None  # a turn on the spot with a part being followed
         self.carry_turn_slip: list[float] = []  # deg per such turn (see the module docstring)
         self.carry_turn: list[float] = []  # deg: each such turn's size by the truth (unsigned)
+        self.carry_turn_end: list[float] = []  # s: when each such turn ended (its slip is measured SPIN_AFTER later)
 
     def cycle(self, t: float, seq: int, pose, held: int | None, enc, parts, activity: str | None = None) -> None:
         """One control cycle's truth: time, cycle number, robot pose, the held part's id, the encoder totals,
@@ -154,6 +156,7 @@ class RunObserver:
             slip = math.remainder(truth - (o.theta - spin.odometry0), 2 * math.pi)
             self.carry_turn_slip.append(round(math.degrees(math.copysign(1.0, truth) * slip), 3))
             self.carry_turn.append(round(math.degrees(abs(truth)), 3))
+            self.carry_turn_end.append(round(spin.ended, 3))
 
     def _release_offset(self, part_pose) -> tuple[str, float, float]:
         """The slot nearest to a part let go at ``part_pose``: its name, the part's signed offset from the slot's
@@ -177,7 +180,8 @@ class RunObserver:
                "odometry_error_per_m": sum(s[0] for s in self.slip) / moved if moved > 0 else 0.0,
                "odometry_error_max_per_s_m": max((s[0] for s in self.slip), default=0.0),
                "odometry_heading_error_max_per_s_rad": max((s[1] for s in self.slip), default=0.0),
-               "carry_turn_slip_deg": list(self.carry_turn_slip), "carry_turn_deg": list(self.carry_turn)}
+               "carry_turn_slip_deg": list(self.carry_turn_slip), "carry_turn_deg": list(self.carry_turn),
+               "carry_turn_end_s": list(self.carry_turn_end)}
         if self.split:
             out["time_split"] = {k: round(v, 2) for k, v in sorted(self.split.items())}
         if self.record_path:

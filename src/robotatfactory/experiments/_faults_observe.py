@@ -122,11 +122,13 @@ class Observer:
 
     ``truth``: (n, 8) rows wall, Seq, Tms, left total, right total, x, y, theta in the order the simulator sent
     them; ``ranges``: (n, rays) or None (no scan check); ``bridge_starts``: wall times the bridge was
-    (re)started, ascending."""
+    (re)started, ascending; ``fates``: what the proxy did with each of those frames (:data:`FORWARDED`, ...),
+    kept for the caller (empty: not given)."""
 
     def __init__(self, truth: np.ndarray, published: Published, geo: Geometry, bridge_starts=(0.0,),
-                 ranges: np.ndarray | None = None):
+                 ranges: np.ndarray | None = None, fates: np.ndarray | None = None):
         self.truth = np.asarray(truth, dtype=float).reshape(-1, 8)
+        self.fates = np.zeros(0, dtype=int) if fates is None else np.asarray(fates, dtype=int)
         self.pub, self.geo = published, geo
         self.starts = sorted(float(s) for s in bridge_starts) or [float("-inf")]
         self.ranges = None if ranges is None or len(ranges) != len(self.truth) else np.asarray(ranges, dtype=float)

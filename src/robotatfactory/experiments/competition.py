@@ -49,8 +49,9 @@ the spot with a part went beyond the odometry's, 0.5 s after each (``..._carry_t
 ``_p95_abs_deg``, over ``..._carry_turns``; ``..._carry_turn_slip_pct``: their sum per degree turned, the
 fraction the EKF's ``ekf.carry_turn_bias`` stands for): the slip the EKF's carrying model is for, the stand-in's
 against SimTwo's; on the whole stack the agent's heading error 0.3 s into each place's docking, where a turn with
-the part has just ended (``..._place_heading_error_{median,p90,max}_deg`` over ``..._place_approaches``), and the
-targets of the issue:
+the part has just ended (``..._place_heading_error_{median,p90,max}_deg`` over ``..._place_approaches``) and the
+estimate's heading error 0.5 s after each such turn, where its slip is measured
+(``..._carry_turn_heading_error_{rms,max}_deg`` over ``..._carry_turns_estimated``), and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts knocked out of slots;
@@ -685,6 +686,12 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                 out[f"{p}_place_approaches"] = len(heading)
                 for q, name in ((0.5, "median"), (0.9, "p90"), (1.0, "max")):
                     out[f"{p}_place_heading_error_{name}_deg"] = round(_quantile(heading, q), 2)
+            turns = [x for r in rs for x in r.get("carry_turn_heading_error_deg", ())]
+            if turns:  # the estimate's heading 0.5 s after each turn on the spot with a part (its slip measured)
+                out[f"{p}_carry_turns_estimated"] = len(turns)
+                out[f"{p}_carry_turn_heading_error_rms_deg"] = round(math.sqrt(statistics.fmean(
+                    x * x for x in turns)), 2)
+                out[f"{p}_carry_turn_heading_error_max_deg"] = round(max(turns), 2)
             rates = [x for x in map(_fix_rate, rs) if x is not None]
             if rates:  # camera fixes the filter took per simulated second, the median run's
                 out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rates), 2)
@@ -744,10 +751,10 @@ def table(mode: str, runs: list[dict]) -> str:
                      f"{sum(len(r.get('notes', [])) for r in rs):>5} "
                      f"{sum(int(r.get('collision_checks_hit', 0)) for r in rs):>7} "
                      f"{1000 * statistics.median([r.get('odometry_error_per_m', math.nan) for r in rs]):>8.2f} "
-                     f"{_release_cell(rs):>18}"
+                     f"{_median_max_cell(rs, 'release_offsets_m', 1000):>18}"
                      + ("" if bare else
                         f" {1000 * max((r.get('pose_error_docking_max_m', math.nan) for r in rs), key=_nan_last):>23.1f}"
-                        f" {_place_heading_cell(rs):>21}"))
+                        f" {_median_max_cell(rs, 'place_heading_error_deg'):>21}"))
     if bare:
         acts = ("wait_start", "decide", "drive", "turn", "final_turn", "dock_approach", "dock_wait", "dock_back")
         lines.append("time split, median s per run (RoundAgent.activity): " + " ".join(f"{a:>13}" for a in acts))
@@ -760,16 +767,10 @@ def table(mode: str, runs: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _place_heading_cell(rs: list[dict]) -> str:
-    """The table's heading error 0.3 s into each place's docking: median / max over every place, deg."""
-    errs = sorted(e for r in rs for e in r.get("place_heading_error_deg", ()))
-    return f"{_quantile(errs, 0.5):.1f}/{errs[-1]:.1f}" if errs else "-"
-
-
-def _release_cell(rs: list[dict]) -> str:
-    """The table's release offsets: median / max over every part let go in a slot, mm."""
-    offsets = sorted(o for r in rs for o in r.get("release_offsets_m", ()))
-    return f"{1000 * _quantile(offsets, 0.5):.1f}/{1000 * offsets[-1]:.1f}" if offsets else "-"
+def _median_max_cell(rs: list[dict], key: str, scale: float = 1.0) -> str:
+    """A table cell: median / max of the lists ``key`` of the runs ``rs`` pooled, times ``scale``; "-" if empty."""
+    v = sorted(x for r in rs for x in r.get(key, ()))
+    return f"{scale * _quantile(v, 0.5):.1f}/{scale * v[-1]:.1f}" if v else "-"
 
 
 def figure(run: dict, path: Path, mode: str, field_name: str | None = None) -> Path:

@@ -56,6 +56,7 @@ import math
 import os
 import random
 import re
+import shutil
 import signal
 import socket
 import sys
@@ -164,6 +165,7 @@ class Rig:
         from ..ros.processes import Procs
 
         self.args, self.camera, self.localize, self.fast, self.lockstep = args, camera, localize, fast, lockstep
+        self.log_dir = log_dir
         self.lidar = lidar  # the bridge publishes scan, the proxy records the ranges (the observer checks them)
         self.start_pose = start_pose  # the open middle of the field (rules2026); the loss part drives a corridor
         self.master = PrivateMaster().start()
@@ -175,7 +177,6 @@ class Rig:
         self.proxy = Proxy((LOCAL, self.bport), seed=args.seed, record_ranges=lidar)
         self.bridge_starts: list[float] = []  # wall (monotonic) of each start of the bridge, for the observer
         self.watch = None
-        self.fates = np.zeros(0, dtype=int)  # the frames' fates in the proxy's record observe() last took
         self.simtwo = getattr(args, "simulator", "standin") == "simtwo"
         self.simtwo_keep: Path | None = None  # SimTwo: the folder of the running one (its log)
         self.sim_start_s = 180.0 if self.simtwo else 90.0  # wall s to the first frame (SimTwo: 5-30 s)
@@ -191,10 +192,11 @@ class Rig:
         """The observer over everything so far: the proxy's record against what the watcher received. The
         messages are taken first: a frame that goes out after the proxy's record is taken cannot then have a
         message among them (a /clock published from it was once reported as poisoned). The fates of the frames
-        in that record (dropped, duplicated, ...) are kept as ``self.fates``, row for row with ``truth``."""
+        in that record (dropped, duplicated, ...) come with it as the observer's ``fates``, row for row with
+        ``truth``."""
         published = self.watch.published()
-        truth, self.fates, ranges = self.proxy.snapshot()
-        return Observer(truth, published, Geometry.of(robot), self.bridge_starts, ranges)
+        truth, fates, ranges = self.proxy.snapshot()
+        return Observer(truth, published, Geometry.of(robot), self.bridge_starts, ranges, fates)
 
     def start_localize(self):
         return self.procs.raf("localize", "--field", self.args.field, "localize")
@@ -251,7 +253,20 @@ class Rig:
         finally:
             self.procs.stop_all()
             self.proxy.close()
+            self.master.stop()
+            self._keep_ros_logs()
             self.master.cleanup()
+
+    def _keep_ros_logs(self) -> None:
+        """The private graph's ROS logs (roscore's master.log, rosout, this process's rospy log with the
+        subscribers' publisher updates) kept beside the part's own logs as ``ros_log/``: what a restart that
+        was never reconnected left (ROS 2 has none)."""
+        src = self.master.home / "log"
+        if src.is_dir():
+            try:
+                shutil.copytree(src, self.log_dir / "ros_log", symlinks=True, dirs_exist_ok=True)
+            except OSError as e:
+                print(f"faults: the ROS logs of {src} not kept: {e}", flush=True)
 
 
 def circles(v=0.06, w=0.5):
@@ -445,7 +460,7 @@ def part_loss(args, log_dir: Path, robot) -> dict:
         time.sleep(1.0)
         rig.check()
         obs = rig.observe(robot)  # one record of the proxy's: the observer's truth and the frames' fates
-        truth, fates = obs.truth, rig.fates
+        truth, fates = obs.truth, obs.fates
         np.save(d / "truth.npy", truth)
         _save_bridge_diag(w, d / "bridge_diagnostics.json")
     finally:
@@ -699,7 +714,7 @@ def run_part(name: str, args, log_dir: Path) -> dict:
             p.kill()
             p.join(5)
     if "error" in msg:
-        raise RuntimeError(f"{name}: {msg['error']}")
+        raise RuntimeError(f"{name}: {msg['error']} (the part's logs, its ROS logs in ros_log/: {log_dir})")
     return msg["ok"]
 
 

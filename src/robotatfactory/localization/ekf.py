@@ -484,11 +484,12 @@ class Ekf:
             return replace(s, t=rec.t1)
         return replace(s, x=self._wrap(x), P=self._bound(P), t=rec.t1)
 
-    def _velocity_at(self, t: float) -> np.ndarray:
-        """World-frame (vx, vy, w) from the odometry record spanning t (zero if none)."""
+    def _velocity_at(self, t: float, carrying: bool = False) -> np.ndarray:
+        """World-frame (vx, vy, w) from the odometry record spanning t (zero if none), as :meth:`_predict` takes
+        it: the carried increment while ``carrying``."""
         for rt, r in reversed(self._log):
             if isinstance(r, _Odom) and r.t0 <= t <= r.t1 + 1e-9 and r.t1 > r.t0:
-                vx, vy, w = se2_log(r.inc)
+                vx, vy, w = se2_log(self._carried(r.inc) if carrying else r.inc)
                 dt = r.t1 - r.t0
                 th = float(self.state.x[2]) if self.state.x is not None else 0.0
                 c, s = math.cos(th), math.sin(th)
@@ -513,7 +514,7 @@ class Ekf:
                 return s, UpdateResult(False, "waiting_for_confident_fix")
             return (FilterState(self._wrap(m.z), self._bound(m.R), s.t, s.t, 0, s.carrying),
                     UpdateResult(True, reasons.REINITIALISED))
-        v = self._velocity_at(m.t)
+        v = self._velocity_at(m.t, s.carrying)
         R = m.R + np.outer(v, v) * c.stamp_sigma_s ** 2
         nu = m.z - s.x
         nu[2] = wrap_angle(float(nu[2]))
