@@ -33,7 +33,7 @@ START_AFTER = 3.0  # simulated s before the run starts (the agent's nodes are up
 END_AFTER_MAX = 1.0  # simulated s the maximum score must stand before raf sim ends the run
 DONE_GRACE = 3.0  # wall s after the agent logged "task: done" before raf sim is stopped
 PLACE_HEADING_AFTER = 0.3  # s into a place's docking: the heading error there (place_heading_error_deg)
-TURN_HEADING_WITHIN = 0.5  # s: a carrying turn's estimate is the first pose within this of SPIN_AFTER after it
+TURN_HEADING_WINDOW = 0.2  # s: a carrying turn's estimate is the median heading error over this, SPIN_AFTER after it
 #: every process of a run: OpenCV's own thread pool off (one thread per process; the runs of a batch are the
 #: parallelism). Measured alone, paced, round 1 seed 100, ROS 1: 42-46 CPU s with the pool, 39-40 without, the
 #: same trace byte for byte (docs/benchmarks.md)
@@ -95,11 +95,18 @@ def place_heading_errors(errs: list[tuple[float, float, float]], windows: list[t
 
 
 def carry_turn_heading_errors(errs: list[tuple[float, float, float]], ends: list[float],
-                              after: float = SPIN_AFTER, within: float = TURN_HEADING_WITHIN) -> list[float]:
-    """The heading error (deg, unsigned) of the first pose ``after`` s after each turn on the spot with a part
-    ended (``ends``: the observer's ``carry_turn_end_s``; no later than ``within`` s after that): the estimate
-    when the turn's slip is measured, what ``ekf.carry_turn_bias`` is for."""
-    return heading_errors_in(errs, [(t + after, t + after + within) for t in ends])
+                              after: float = SPIN_AFTER, window: float = TURN_HEADING_WINDOW) -> list[float]:
+    """The heading error (deg, unsigned) from ``after`` s after each turn on the spot with a part ended (``ends``:
+    the observer's ``carry_turn_end_s``), the median over the poses of the next ``window`` s: the estimate when
+    the turn's slip is measured, what ``ekf.carry_turn_bias`` is for. A median, because the robot often turns
+    again by then, and one truth sample out of step with its stamp (SimTwo's frames) reads as degrees of error
+    at a turn rate; a turn with no pose in the window gives nothing."""
+    out = []
+    for t in ends:
+        sel = [e[2] for e in errs if t + after <= e[0] <= t + after + window]
+        if sel:
+            out.append(round(math.degrees(statistics.median(sel)), 3))
+    return out
 
 
 def read_poses(bag_path: Path, topic: str = "pose") -> list[tuple[float, float, float, float]]:
