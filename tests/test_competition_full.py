@@ -22,6 +22,13 @@ def _trace(n=50, period=0.04, v=0.1, cmds=None):
     return Trace({"trace": 1, "control_period": period}, recs)
 
 
+def _run(**keys) -> dict:
+    """A run's result as the experiment keeps it, at the maximum, with ``keys`` added or replaced."""
+    return {"round": 1, "seed": 100, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 50.0,
+            "notes": [], "picks_attempted": 2, "pick_failures": 0, "timeouts": 0, "wall_s": 1.0, "false_start": False,
+            "collision_checks_hit": 0, "collision_hits": [], "parts_pushed": 0, "logs": "x", **keys}
+
+
 def test_dock_windows_run_from_docking_to_its_outcome():
     ev = [(1.0, "task: move blue part from incoming 1 to outgoing 1"), (3.0, "docking to pick the blue part at incoming 1"),
           (4.0, "picked the blue part from incoming 1"), (9.0, "docking to place the blue part in outgoing 1"),
@@ -52,10 +59,7 @@ def test_the_heading_error_as_a_place_approach_begins():
             (12.31, 0.001, math.radians(0.5)), (20.1, 0.0, 0.4)]
     got = place_heading_errors(errs, windows)
     assert got == pytest.approx([2.0, 0.5])
-    r = {"round": 1, "seed": 100, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 50.0,
-         "notes": [], "picks_attempted": 2, "pick_failures": 0, "timeouts": 0, "wall_s": 1.0, "false_start": False,
-         "collision_checks_hit": 0, "collision_hits": [], "parts_pushed": 0, "logs": "x",
-         "place_heading_error_deg": got}
+    r = _run(round=1, place_heading_error_deg=got)
     res = competition.summarize("full_stack", [r, dict(r, seed=101, place_heading_error_deg=[1.0, 3.0])])
     assert res["full_stack_heldout_r1_place_approaches"] == 4
     assert res["full_stack_heldout_r1_place_heading_error_median_deg"] == 2.0  # nearest rank, the upper of two
@@ -74,10 +78,7 @@ def test_the_estimate_half_a_second_after_each_carrying_turn():
             (5.8, 0.001, 0.4), (8.6, 0.0, d(1.0)), (12.9, 0.0, 0.5)]
     got = carry_turn_heading_errors(errs, [5.0, 8.0, 12.0])  # the third: its only pose is 0.9 s after
     assert got == pytest.approx([3.0, 1.0])
-    r = {"round": 3, "seed": 100, "points": 8, "max_points": 8, "max_score": True, "last_score_s": 70.0,
-         "notes": [], "picks_attempted": 4, "pick_failures": 0, "timeouts": 0, "wall_s": 1.0, "false_start": False,
-         "collision_checks_hit": 0, "collision_hits": [], "parts_pushed": 0, "logs": "x",
-         "carry_turn_heading_error_deg": got}
+    r = _run(round=3, carry_turn_heading_error_deg=got)
     res = competition.summarize("full_stack", [r, dict(r, seed=101, carry_turn_heading_error_deg=[0.0, 2.0])])
     assert res["full_stack_heldout_r3_carry_turns_estimated"] == 4
     assert res["full_stack_heldout_r3_carry_turn_heading_error_rms_deg"] == pytest.approx(math.sqrt(14 / 4), abs=0.01)
