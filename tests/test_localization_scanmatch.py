@@ -192,3 +192,34 @@ def test_a_scan_waits_for_the_odometry_of_its_last_ray(world):
     assert math.hypot(f.pose[0] - pose[0], f.pose[1] - pose[1]) < 0.003
     assert sl.fix_pending(0.24, pose) is None  # matched once
     assert sl.add_scan(np.full(N, np.inf), ANGLES, 0.2, 0.2 / N).reason == "too_few_returns"
+
+
+def test_every_ray_where_the_strided_returns_are_too_few(world):
+    """Before machine A's input 3 on simtwo2022 with a part held, the LIDAR sees one wall past the robot: 17 returns
+    at stride 2 on the stand-in (its body hides the rest). Cast here with the part and a sector the body hides:
+    stride 2 gives too few, and with ``dense_when_few`` every ray gives the fix, its covariance twice the strided
+    fit's would be for the same returns (the same surfaces, twice the rays); off, nothing changes."""
+    fld, robot, _, boxes = world
+    pose = (-0.662, -0.155, math.radians(3))
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    d = float(robot.electromagnet["x"]) + fld.part.depth / 2
+    part = (pose[0] + d * c, pose[1] + d * s, fld.part.depth / 2, fld.part.width / 2, c, s)
+    r = _scan(boxes, pose, np.random.default_rng(5), extra=[part])
+    r[(ANGLES > math.radians(70)) & (ANGLES < math.radians(330))] = np.inf  # what the robot's body hides
+    prior = (pose[0] + 0.004, pose[1] - 0.003, pose[2] + math.radians(1.5))
+    out = {}
+    for dense in (False, True):
+        sl = ScanLocalizer(fld, robot, ScanMatchConfig(dense_when_few=dense))
+        sl.add_odom(0.0, (0.0, 0.0, 0.0))
+        sl.add_odom(0.24, (0.0, 0.0, 0.0))
+        out[dense] = sl.add_scan(r, ANGLES, 0.0, 0.2 / N) or sl.fix_pending(0.24, prior)
+    assert not out[False].ok and out[False].reason == "too_few_returns" and out[False].points < 30
+    f = out[True]
+    assert f.ok and f.points >= 30
+    assert abs(math.remainder(f.pose[2] - pose[2], 2 * math.pi)) < math.radians(0.5)  # 1.5 deg off before
+    # the covariance: the dense fit's with rays_per_independent doubled
+    sl = ScanLocalizer(fld, robot, ScanMatchConfig(stride=1, rays_per_independent=16.0))
+    _, pts = sl.returns(r, ANGLES)
+    ref = sl.map.match(pts, prior, sl.cfg, sigma=sl.sigma(pts))
+    np.testing.assert_allclose(f.cov, ref.cov, rtol=0.05)
+    assert from_dict({"scan_match": {"dense_when_few": True}}).scan_match.dense_when_few is True

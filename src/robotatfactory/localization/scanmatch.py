@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,6 +35,9 @@ class ScanMatchConfig:
     enabled: bool = setting(True, "scan fixes for the EKF, the field's boxes as the map (docs/localization.md, "
                                   "\"LIDAR scan matching\")")
     stride: int = setting(2, "use every n-th ray (360 rays: up to 180 returns)", lo=1)
+    dense_when_few: bool = setting(False, "when every stride-th ray gives fewer than min_points returns, every ray "
+                                          "(the fit's covariance then times stride more: the same surfaces); where "
+                                          "one wall is all the LIDAR sees past the robot and a held part")
     max_range_m: float = setting(1.5, "m: farther returns are not used (the range noise grows with distance)",
                                  lo=0.0, lo_open=True)
     body_margin_m: float = setting(0.02, "m: returns on the robot or a held part (their outline grown by this) "
@@ -325,12 +328,12 @@ class ScanLocalizer:
         return np.hypot(self.cfg.sigma_m, a * np.exp(b * r))
 
     def returns(self, ranges: np.ndarray, angles: np.ndarray, range_min: float = 0.0,
-                range_max: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
+                range_max: float = math.inf, stride: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(ray indices, points in the laser frame) of the usable returns: finite, in range, every
-        ``stride``-th, not on the robot or a held part."""
+        ``stride``-th (default ``cfg.stride``), not on the robot or a held part."""
         ranges = np.asarray(ranges, dtype=float)
         angles = np.asarray(angles, dtype=float)
-        idx = np.arange(0, len(ranges), max(1, self.cfg.stride))
+        idx = np.arange(0, len(ranges), max(1, self.cfg.stride if stride is None else stride))
         r = ranges[idx]
         ok = np.isfinite(r) & (r >= max(range_min, 1e-3)) & (r <= min(range_max, self.cfg.max_range_m))
         idx, r = idx[ok], r[ok]
@@ -349,10 +352,14 @@ class ScanLocalizer:
         once odometry covers its last ray (a scan can arrive before the odometry of the same cycle). A newer
         scan replaces one still waiting. Returns a ScanFix (not ok) when the scan cannot be used at all."""
         idx, pts = self.returns(ranges, angles, range_min, range_max)
+        stride = self.cfg.stride
+        if len(idx) < self.cfg.min_points and self.cfg.dense_when_few and stride > 1:
+            idx, pts = self.returns(ranges, angles, range_min, range_max, stride=1)
+            stride = 1
         if len(idx) < self.cfg.min_points:
             self._pending = None
             return ScanFix(False, reason="too_few_returns", points=len(idx))
-        self._pending = (t0 + idx * dt, pts)
+        self._pending = (t0 + idx * dt, pts, stride)
         return None
 
     def ready(self) -> bool:
@@ -365,7 +372,7 @@ class ScanLocalizer:
         clock); None while no scan is ready."""
         if not self.ready():
             return None
-        times, pts = self._pending
+        times, pts, stride = self._pending
         self._pending = None
         if filter_pose is None:
             return ScanFix(False, reason="no_prior")
@@ -377,6 +384,8 @@ class ScanLocalizer:
         body = deskew(pts, ray_odom, tuple(ref_odom), self.laser_pose)
         # the filter's pose carried back (or on) to t_ref by odometry: map<-base(t_ref) = map<-odom * odom<-base
         T = _se2(filter_pose) @ np.linalg.inv(_se2(filt_odom)) @ _se2(ref_odom)
-        f = self.map.match(body, _pose(T), self.cfg, self.laser_pose[:2], self.sigma(pts))
+        cfg = self.cfg if stride == self.cfg.stride else replace(  # every ray: neighbours share more errors
+            self.cfg, rays_per_independent=self.cfg.rays_per_independent * self.cfg.stride / stride)
+        f = self.map.match(body, _pose(T), cfg, self.laser_pose[:2], self.sigma(pts))
         f.t = t_ref
         return f
