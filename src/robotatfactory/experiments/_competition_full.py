@@ -75,14 +75,14 @@ def pose_errors(poses: list[tuple[float, float, float, float]], trace) -> list[t
     return out
 
 
-def heading_errors_in(errs: list[tuple[float, float, float]], spans) -> list[float]:
-    """The heading error (deg, unsigned) of the first pose in each span ``(t0, t1)`` (``errs`` from
-    :func:`pose_errors`); a span with no pose gives nothing."""
+def heading_errors_in(errs: list[tuple[float, float, float]], spans, pick=lambda sel: sel[0]) -> list[float]:
+    """The heading error (deg, unsigned) in each span ``(t0, t1)`` (``errs`` from :func:`pose_errors`), ``pick``
+    of the span's errors (the first pose's by default); a span with no pose gives nothing."""
     out = []
     for t0, t1 in spans:
-        e = next((e for e in errs if t0 <= e[0] <= t1), None)
-        if e is not None:
-            out.append(round(math.degrees(e[2]), 3))
+        sel = [e[2] for e in errs if t0 <= e[0] <= t1]
+        if sel:
+            out.append(round(math.degrees(pick(sel)), 3))
     return out
 
 
@@ -101,12 +101,7 @@ def carry_turn_heading_errors(errs: list[tuple[float, float, float]], ends: list
     the turn's slip is measured, what ``ekf.carry_turn_bias`` is for. A median, because the robot often turns
     again by then, and one truth sample out of step with its stamp (SimTwo's frames) reads as degrees of error
     at a turn rate; a turn with no pose in the window gives nothing."""
-    out = []
-    for t in ends:
-        sel = [e[2] for e in errs if t + after <= e[0] <= t + after + window]
-        if sel:
-            out.append(round(math.degrees(statistics.median(sel)), 3))
-    return out
+    return heading_errors_in(errs, [(t + after, t + after + window) for t in ends], pick=statistics.median)
 
 
 def read_poses(bag_path: Path, topic: str = "pose") -> list[tuple[float, float, float, float]]:
