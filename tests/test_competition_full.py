@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from robotatfactory.experiments._competition_full import (carry_turn_heading_errors, command_delays, dock_windows,
-                                                          place_heading_errors, pose_errors)
+                                                          place_heading_errors, pose_errors, scan_counts)
 from robotatfactory.sim.trace import Trace, TraceRecord
 
 
@@ -87,6 +87,27 @@ def test_the_estimate_half_a_second_after_each_carrying_turn():
         "full_stack", [dict(r, carry_turn_heading_error_deg=[])])
 
 
+def test_the_lidar_sweeps_and_what_became_of_them():
+    """The localizer's counts (its filter status) give the sweeps, the fixes the filter took and the sweeps too
+    sparse to match; per round their sums and the share of sweeps that gave a fix."""
+    from robotatfactory.experiments import competition
+
+    counters = {"scans": 300, "filter_scan_accepted": 210, "filter_scan_mahalanobis": 12,
+                "scan_unmatched_too_few_returns": 9, "scan_unmatched_too_few_on_map": 40, "scan_fixes": 230}
+    got = scan_counts(counters)
+    assert got == {"scans": 300, "scan_fixes_accepted": 210, "scans_too_few_returns": 9, "scans_too_few_on_map": 40}
+    assert scan_counts({"scans": 5})["scans_too_few_returns"] == 0  # a count never raised is not in the status
+    r = _run(round=2, **got)
+    res = competition.summarize("full_stack", [r, dict(r, seed=101, scans=100, scan_fixes_accepted=10,
+                                                       scans_too_few_returns=1, scans_too_few_on_map=0)])
+    assert res["full_stack_heldout_r2_s101_scan_fixes_accepted"] == 10
+    assert res["full_stack_heldout_r2_scans"] == 400
+    assert res["full_stack_heldout_r2_scan_fix_share"] == pytest.approx(220 / 400, abs=1e-3)
+    assert (res["full_stack_heldout_r2_scans_too_few_returns"], res["full_stack_heldout_r2_scans_too_few_on_map"]) \
+        == (10, 40)
+    assert "full_stack_heldout_r2_scans" not in competition.summarize("full_stack", [_run(round=2)])
+
+
 def test_command_delays_from_publication_to_the_cycle_that_ran_it():
     # commands published at 0.20 and 0.40 s first run in the cycles starting at 0.24 and 0.40 s
     cmds = [(0.0, 0.0, False)] * 6 + [(0.1, 0.0, False)] * 4 + [(0.2, 0.5, False)] * 40
@@ -125,6 +146,9 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
     # second in issue 20's batch); the test below makes it 12 times fewer
     assert res["full_stack_tuned_r1_s0_camera_fixes_accepted_per_s"] > 5, runs[0]["logs"]
     assert res["full_stack_tuned_r1_s0_camera_fixes_rejected"] >= 0
+    # the LIDAR sweeps, read from the localizer's last /diagnostics: five a second or so, most giving a fix
+    assert res["full_stack_tuned_r1_s0_scans"] > 100, runs[0].get("scan_counts_note")
+    assert 0.3 < res["full_stack_tuned_r1_scan_fix_share"] <= 1.0
 
 
 @pytest.mark.ros

@@ -123,19 +123,30 @@ def read_commands(bag_path: Path, topic: str = "cmd_vel") -> list[tuple[float, f
         return [(t * 1e-9, m.linear.x, m.angular.z) for _topic, t, m in bag.messages(names)]
 
 
-def read_agent_counters(bag_path: Path, topic: str = "diagnostics", name: str = "raf agent") -> dict[str, int]:
-    """The agent's counters (:class:`~robotatfactory.agent.behaviour.AgentCounters`: picks, choices made
-    ahead, ...) as its last ``name`` status on ``topic`` reported them: every integer value of that status."""
+def read_status_counters(bag_path: Path, name: str, topic: str = "diagnostics") -> dict[str, int]:
+    """Every integer value of the last status on ``topic`` whose name ends with ``name`` (``"raf agent"``: the
+    agent's :class:`~robotatfactory.agent.behaviour.AgentCounters`, picks, choices made ahead, ...;
+    ``": filter"``: the localizer's counts, LIDAR sweeps and what became of them)."""
     from ..ros.bags import find_topic, open_bag
     from ..ros.messages import diagnostic_values
 
     last = None
     with open_bag(bag_path) as bag:
         for _topic, _t, m in bag.messages(find_topic(bag.topics, topic)):
-            last = next((s for s in m.status if s.name == name), last)
+            last = next((s for s in m.status if s.name.endswith(name)), last)
     if last is None:
-        raise ValueError(f"no {name!r} status on {topic}")
+        raise ValueError(f"no status named ...{name!r} on {topic}")
     return {k: int(v) for k, v in diagnostic_values(last).items() if v.lstrip("-").isdigit()}
+
+
+def scan_counts(counters: dict[str, int]) -> dict[str, int]:
+    """What the localizer's LIDAR sweeps came to (``counters``: its filter status, :func:`read_status_counters`):
+    ``scans`` taken, ``scan_fixes_accepted`` by the filter, and the sweeps the matcher gave no fix for want of
+    returns (``scans_too_few_returns``: the robot's body and a held part hide the rest) or of returns on the map
+    (``scans_too_few_on_map``)."""
+    return {"scans": counters["scans"], "scan_fixes_accepted": counters.get("filter_scan_accepted", 0),
+            "scans_too_few_returns": counters.get("scan_unmatched_too_few_returns", 0),
+            "scans_too_few_on_map": counters.get("scan_unmatched_too_few_on_map", 0)}
 
 
 def count_messages(bag_path: Path, topic: str) -> int:
@@ -423,13 +434,17 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
     except Exception:  # noqa: BLE001 - as for the poses
         delays = []
     try:  # what the agent counted (its last /diagnostics): choices made ahead on the thread, ...
-        counters = read_agent_counters(bag_path)
+        counters = read_status_counters(bag_path, "raf agent")
         out["choices_ahead"] = counters["choices_ahead"]
         if "legs_ahead" in counters:  # (an agent before it had none)
             out["legs_ahead"] = counters["legs_ahead"]
         out["picks"] = counters["picks"]
     except Exception as e:  # noqa: BLE001 - as for the poses
         out["counters_note"] = f"no agent counters: {type(e).__name__}: {e}"
+    try:  # the LIDAR sweeps and what the scan matcher and the filter made of them
+        out.update(scan_counts(read_status_counters(bag_path, ": filter")))
+    except Exception as e:  # noqa: BLE001 - as for the poses
+        out["scan_counts_note"] = f"no localizer counts: {type(e).__name__}: {e}"
     try:  # the camera fixes the filter took and gated: how much the camera gave the localization
         out["camera_fixes_accepted"] = count_messages(bag_path, "aruco/fixes/filter_accepted")
         out["camera_fixes_rejected"] = count_messages(bag_path, "aruco/fixes/filter_rejected")

@@ -51,7 +51,10 @@ fraction the EKF's ``ekf.carry_turn_bias`` stands for): the slip the EKF's carry
 against SimTwo's; on the whole stack the agent's heading error 0.3 s into each place's docking, where a turn with
 the part has just ended (``..._place_heading_error_{median,p90,max}_deg`` over ``..._place_approaches``) and the
 estimate's heading error 0.5 s after each such turn, where its slip is measured
-(``..._carry_turn_heading_error_{rms,max}_deg`` over ``..._carry_turns_estimated``), and the targets of the issue:
+(``..._carry_turn_heading_error_{rms,max}_deg`` over ``..._carry_turns_estimated``), the LIDAR sweeps the
+localizer took (``..._scans``), the share the filter took a scan fix from (``..._scan_fix_share``) and the sweeps
+too sparse to match (``..._scans_too_few_returns``, ``..._scans_too_few_on_map``; from the localizer's last
+``/diagnostics``), and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts knocked out of slots;
@@ -623,6 +626,11 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                 out[f"{p}_camera_fixes_rejected"] = r["camera_fixes_rejected"]
                 if (rate := _fix_rate(r)) is not None:
                     out[f"{p}_camera_fixes_accepted_per_s"] = round(rate, 2)
+            if "scans" in r:  # the LIDAR sweeps and what became of them
+                for k in ("scans", "scan_fixes_accepted", "scans_too_few_returns", "scans_too_few_on_map"):
+                    out[f"{p}_{k}"] = r[k]
+            elif r.get("scan_counts_note"):
+                out[f"{p}_scan_counts_note"] = r["scan_counts_note"]
         out[f"{p}_collisions"] = r["collision_checks_hit"]
         if r["collision_checks_hit"]:
             out[f"{p}_collision_where"] = "; ".join(f"{k} at t {t} s ({x}, {y})" for t, x, y, k in r["collision_hits"])
@@ -692,6 +700,12 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                 out[f"{p}_carry_turn_heading_error_rms_deg"] = round(math.sqrt(statistics.fmean(
                     x * x for x in turns)), 2)
                 out[f"{p}_carry_turn_heading_error_max_deg"] = round(max(turns), 2)
+            scans = sum(int(r.get("scans", 0)) for r in rs)
+            if scans:  # the LIDAR sweeps: the share the filter took a fix from, and those too sparse to match
+                out[f"{p}_scans"] = scans
+                out[f"{p}_scan_fix_share"] = round(sum(int(r.get("scan_fixes_accepted", 0)) for r in rs) / scans, 3)
+                for k in ("scans_too_few_returns", "scans_too_few_on_map"):
+                    out[f"{p}_{k}"] = sum(int(r.get(k, 0)) for r in rs)
             rates = [x for x in map(_fix_rate, rs) if x is not None]
             if rates:  # camera fixes the filter took per simulated second, the median run's
                 out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rates), 2)
