@@ -106,6 +106,9 @@ def test_the_lidar_sweeps_and_what_became_of_them():
     assert (res["full_stack_heldout_r2_scans_too_few_returns"], res["full_stack_heldout_r2_scans_too_few_on_map"]) \
         == (10, 40)
     assert "full_stack_heldout_r2_scans" not in competition.summarize("full_stack", [_run(round=2)])
+    rows = competition.table("full_stack", [r, dict(r, seed=101, scans=100, scan_fixes_accepted=10)]).splitlines()
+    assert rows[1].split()[-3:] == ["scan", "fix", "%"] and rows[2].split()[-1] == "55"
+    assert competition.table("full_stack", [_run(round=2)]).splitlines()[2].split()[-1] == "-"
 
 
 def test_command_delays_from_publication_to_the_cycle_that_ran_it():

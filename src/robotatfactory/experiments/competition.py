@@ -749,7 +749,7 @@ def table(mode: str, runs: list[dict]) -> str:
              f"{'seeds':<14} {'round':>5} {'runs':>4} {'max score':>9} {'median s':>9} {'worst s':>8} {'target s':>8} "
              f"{'pick fail':>9} {'knocked':>7} {'pushed':>6} {'notes':>5} {'collide':>7} {'odo mm/m':>8} "
              f"{'release mm p50/max':>18}"
-             + ("" if bare else f" {'pose err docking max mm':>23} {'place hdg deg p50/max':>21}")]
+             + ("" if bare else f" {'pose err docking max mm':>23} {'place hdg deg p50/max':>21} {'scan fix %':>10}")]
     groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
                     key=lambda g: (("tuned", "heldout", "other").index(g[0]), g[1]))
     for k, rn in groups:
@@ -768,7 +768,7 @@ def table(mode: str, runs: list[dict]) -> str:
                      f"{_median_max_cell(rs, 'release_offsets_m', 1000):>18}"
                      + ("" if bare else
                         f" {1000 * max((r.get('pose_error_docking_max_m', math.nan) for r in rs), key=_nan_last):>23.1f}"
-                        f" {_median_max_cell(rs, 'place_heading_error_deg'):>21}"))
+                        f" {_median_max_cell(rs, 'place_heading_error_deg'):>21} {_scan_fix_cell(rs):>10}"))
     if bare:
         acts = ("wait_start", "decide", "drive", "turn", "final_turn", "dock_approach", "dock_wait", "dock_back")
         lines.append("time split, median s per run (RoundAgent.activity): " + " ".join(f"{a:>13}" for a in acts))
@@ -779,6 +779,12 @@ def table(mode: str, runs: list[dict]) -> str:
                 lines.append(f"  {k:<7} round {rn}{'':>36}" + " ".join(
                     f"{statistics.median(s.get(a, 0.0) for s in sp):>13.1f}" for a in acts))
     return "\n".join(lines)
+
+
+def _scan_fix_cell(rs: list[dict]) -> str:
+    """A table cell: the percentage of the runs' LIDAR sweeps the filter took a fix from; "-" if none counted."""
+    scans = sum(int(r.get("scans", 0)) for r in rs)
+    return f"{100 * sum(int(r.get('scan_fixes_accepted', 0)) for r in rs) / scans:.0f}" if scans else "-"
 
 
 def _median_max_cell(rs: list[dict], key: str, scale: float = 1.0) -> str:
