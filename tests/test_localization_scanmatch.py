@@ -222,4 +222,4 @@ def test_every_ray_where_the_strided_returns_are_too_few(world):
     _, pts = sl.returns(r, ANGLES)
     ref = sl.map.match(pts, prior, sl.cfg, sigma=sl.sigma(pts))
     np.testing.assert_allclose(f.cov, ref.cov, rtol=0.05)
-    assert from_dict({"scan_match": {"dense_when_few": True}}).scan_match.dense_when_few is True
+    assert from_dict({"scan_match": {"dense_when_few": False}}).scan_match.dense_when_few is False

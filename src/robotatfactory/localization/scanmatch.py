@@ -35,7 +35,7 @@ class ScanMatchConfig:
     enabled: bool = setting(True, "scan fixes for the EKF, the field's boxes as the map (docs/localization.md, "
                                   "\"LIDAR scan matching\")")
     stride: int = setting(2, "use every n-th ray (360 rays: up to 180 returns)", lo=1)
-    dense_when_few: bool = setting(False, "when every stride-th ray gives fewer than min_points returns, every ray "
+    dense_when_few: bool = setting(True, "when every stride-th ray gives fewer than min_points returns, every ray "
                                           "(the fit's covariance then times stride more: the same surfaces); where "
                                           "one wall is all the LIDAR sees past the robot and a held part")
     max_range_m: float = setting(1.5, "m: farther returns are not used (the range noise grows with distance)",
