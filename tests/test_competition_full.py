@@ -93,18 +93,22 @@ def test_the_lidar_sweeps_and_what_became_of_them():
     from robotatfactory.experiments import competition
 
     counters = {"scans": 300, "filter_scan_accepted": 210, "filter_scan_mahalanobis": 12,
-                "scan_unmatched_too_few_returns": 9, "scan_unmatched_too_few_on_map": 40, "scan_fixes": 230}
+                "scan_unmatched_too_few_returns": 9, "scan_unmatched_too_few_on_map": 40,
+                "scan_unmatched_mostly_off_map": 7, "scan_fixes": 230}
     got = scan_counts(counters)
-    assert got == {"scans": 300, "scan_fixes_accepted": 210, "scans_too_few_returns": 9, "scans_too_few_on_map": 40}
+    assert got == {"scans": 300, "scan_fixes_accepted": 210, "scans_too_few_returns": 9, "scans_too_few_on_map": 40,
+                   "scans_mostly_off_map": 7}
     assert scan_counts({"scans": 5})["scans_too_few_returns"] == 0  # a count never raised is not in the status
     r = _run(round=2, **got)
     res = competition.summarize("full_stack", [r, dict(r, seed=101, scans=100, scan_fixes_accepted=10,
-                                                       scans_too_few_returns=1, scans_too_few_on_map=0)])
+                                                       scans_too_few_returns=1, scans_too_few_on_map=0,
+                                                       scans_mostly_off_map=2)])
     assert res["full_stack_heldout_r2_s101_scan_fixes_accepted"] == 10
     assert res["full_stack_heldout_r2_scans"] == 400
     assert res["full_stack_heldout_r2_scan_fix_share"] == pytest.approx(220 / 400, abs=1e-3)
     assert (res["full_stack_heldout_r2_scans_too_few_returns"], res["full_stack_heldout_r2_scans_too_few_on_map"]) \
         == (10, 40)
+    assert res["full_stack_heldout_r2_scans_mostly_off_map"] == 9
     assert "full_stack_heldout_r2_scans" not in competition.summarize("full_stack", [_run(round=2)])
     rows = competition.table("full_stack", [r, dict(r, seed=101, scans=100, scan_fixes_accepted=10)]).splitlines()
     assert rows[1].split()[-3:] == ["scan", "fix", "%"] and rows[2].split()[-1] == "55"

@@ -89,6 +89,30 @@ def test_things_not_in_the_map_are_left_out(world):
     assert f.inliers < f.points  # the parts' returns were counted out
 
 
+def test_a_sweep_with_too_little_on_the_map_says_which_way():
+    """Fewer than min_points returns on mapped surfaces: ``too_few_on_map``; enough of them, but fewer than
+    min_inlier_share of the sweep (most on things the map does not have): ``mostly_off_map``."""
+    fld = load_field("simtwo2022")
+    m = FieldMap(fld, 0.05)
+    pose = (0.47, -0.2, -math.pi / 2)  # facing the outgoing warehouse's back wall (y = -0.57)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+
+    def body(xs, ys):
+        dx, dy = np.asarray(xs) - pose[0], np.asarray(ys) - pose[1]
+        return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=1)
+
+    wall = lambda k: body(np.linspace(0.25, 0.70, k), np.full(k, -0.57))  # noqa: E731
+    off_x, off_y = np.linspace(0.1, 0.4, 60), np.full(60, -0.3)  # in the open: a row of things the map lacks
+    assert np.all(np.abs(m.distance(np.stack([off_x, off_y], axis=1), pose[:2])[0]) > 0.1)
+    prior = (pose[0] + 0.005, pose[1] + 0.003, pose[2] + 0.005)
+    cases = {"mostly_off_map": np.vstack([wall(40), body(off_x, off_y)]),  # 40 on the wall of 100
+             "too_few_on_map": np.vstack([wall(20), body(off_x[:15], off_y[:15])])}  # 20 of 35
+    for reason, pts in cases.items():
+        f = m.match(pts, prior, ScanMatchConfig(), sigma=np.full(len(pts), 0.003))
+        assert not f.ok and f.reason == reason, (reason, f)
+    assert m.match(wall(40), prior, ScanMatchConfig(), sigma=np.full(40, 0.003)).ok  # the wall alone: a fix
+
+
 def test_returns_on_the_robot_and_a_held_part_are_ignored(world):
     fld, robot, sl, boxes = world
     r = np.full(N, 0.5)

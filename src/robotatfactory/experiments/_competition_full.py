@@ -123,6 +123,9 @@ def read_commands(bag_path: Path, topic: str = "cmd_vel") -> list[tuple[float, f
         return [(t * 1e-9, m.linear.x, m.angular.z) for _topic, t, m in bag.messages(names)]
 
 
+SCAN_SHORT = ("too_few_returns", "too_few_on_map", "mostly_off_map")  # why a sweep gave no fix, counted per run
+
+
 def read_status_counters(bag_path: Path, name: str, topic: str = "diagnostics") -> dict[str, int]:
     """Every integer value of the last status on ``topic`` whose name ends with ``name`` (``"raf agent"``: the
     agent's :class:`~robotatfactory.agent.behaviour.AgentCounters`, picks, choices made ahead, ...;
@@ -142,11 +145,10 @@ def read_status_counters(bag_path: Path, name: str, topic: str = "diagnostics") 
 def scan_counts(counters: dict[str, int]) -> dict[str, int]:
     """What the localizer's LIDAR sweeps came to (``counters``: its filter status, :func:`read_status_counters`):
     ``scans`` taken, ``scan_fixes_accepted`` by the filter, and the sweeps the matcher gave no fix for want of
-    returns (``scans_too_few_returns``: the robot's body and a held part hide the rest) or of returns on the map
-    (``scans_too_few_on_map``)."""
+    returns (``scans_too_few_returns``: the robot's body and a held part hide the rest), of returns on the map
+    (``scans_too_few_on_map``) or with most returns off it (``scans_mostly_off_map``: parts, another robot)."""
     return {"scans": counters["scans"], "scan_fixes_accepted": counters.get("filter_scan_accepted", 0),
-            "scans_too_few_returns": counters.get("scan_unmatched_too_few_returns", 0),
-            "scans_too_few_on_map": counters.get("scan_unmatched_too_few_on_map", 0)}
+            **{f"scans_{k}": counters.get(f"scan_unmatched_{k}", 0) for k in SCAN_SHORT}}
 
 
 def count_messages(bag_path: Path, topic: str) -> int:

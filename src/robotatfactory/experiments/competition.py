@@ -53,8 +53,8 @@ the part has just ended (``..._place_heading_error_{median,p90,max}_deg`` over `
 estimate's heading error 0.5 s after each such turn, where its slip is measured
 (``..._carry_turn_heading_error_{rms,max}_deg`` over ``..._carry_turns_estimated``), the LIDAR sweeps the
 localizer took (``..._scans``), the share the filter took a scan fix from (``..._scan_fix_share``) and the sweeps
-too sparse to match (``..._scans_too_few_returns``, ``..._scans_too_few_on_map``; from the localizer's last
-``/diagnostics``), and the targets of the issue:
+too sparse to match (``..._scans_too_few_returns``, ``..._scans_too_few_on_map``, ``..._scans_mostly_off_map``;
+from the localizer's last ``/diagnostics``), and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts knocked out of slots;
@@ -574,6 +574,8 @@ def _fix_rate(run: dict) -> float | None:
 def summarize(mode: str, runs: list[dict]) -> dict:
     """Flat keys per run (``{mode}_{set}_r{round}_s{seed}_...``) and per set and round
     (``{mode}_{set}_r{round}_...``), the set being :func:`seed_set_of` the seed (see the module docstring)."""
+    from ._competition_full import SCAN_SHORT
+
     out: dict = {"mode": mode, "pose_source": POSE_SOURCE[mode]}
     groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
                     key=lambda g: (("tuned", "heldout", "other").index(g[0]), g[1]))
@@ -627,8 +629,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                 if (rate := _fix_rate(r)) is not None:
                     out[f"{p}_camera_fixes_accepted_per_s"] = round(rate, 2)
             if "scans" in r:  # the LIDAR sweeps and what became of them
-                for k in ("scans", "scan_fixes_accepted", "scans_too_few_returns", "scans_too_few_on_map"):
-                    out[f"{p}_{k}"] = r[k]
+                for k in ("scans", "scan_fixes_accepted", *(f"scans_{k}" for k in SCAN_SHORT)):
+                    out[f"{p}_{k}"] = r.get(k, 0)
             elif r.get("scan_counts_note"):
                 out[f"{p}_scan_counts_note"] = r["scan_counts_note"]
         out[f"{p}_collisions"] = r["collision_checks_hit"]
@@ -704,8 +706,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             if scans:  # the LIDAR sweeps: the share the filter took a fix from, and those too sparse to match
                 out[f"{p}_scans"] = scans
                 out[f"{p}_scan_fix_share"] = round(sum(int(r.get("scan_fixes_accepted", 0)) for r in rs) / scans, 3)
-                for k in ("scans_too_few_returns", "scans_too_few_on_map"):
-                    out[f"{p}_{k}"] = sum(int(r.get(k, 0)) for r in rs)
+                for k in SCAN_SHORT:
+                    out[f"{p}_scans_{k}"] = sum(int(r.get(f"scans_{k}", 0)) for r in rs)
             rates = [x for x in map(_fix_rate, rs) if x is not None]
             if rates:  # camera fixes the filter took per simulated second, the median run's
                 out[f"{p}_camera_fixes_accepted_per_s_median"] = round(statistics.median(rates), 2)

@@ -207,8 +207,11 @@ class FieldMap:
         rms = float(math.sqrt(np.mean(d[inl] ** 2))) if k else math.nan
         chi = float(math.sqrt(np.mean((d[inl] / sig[inl]) ** 2))) if k else math.nan
         fix = ScanFix(False, points=n, inliers=k, rms_m=rms, iterations=it)
-        if k < cfg.min_points or k < cfg.min_inlier_share * n:
+        if k < cfg.min_points:
             fix.reason = "too_few_on_map"
+            return fix
+        if k < cfg.min_inlier_share * n:  # parts, another robot: more of the sweep is off the map than on it
+            fix.reason = "mostly_off_map"
             return fix
         if not chi <= cfg.max_rms_sigmas:
             fix.reason = "poor_fit"
