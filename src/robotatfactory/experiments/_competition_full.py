@@ -123,7 +123,7 @@ def read_commands(bag_path: Path, topic: str = "cmd_vel") -> list[tuple[float, f
         return [(t * 1e-9, m.linear.x, m.angular.z) for _topic, t, m in bag.messages(names)]
 
 
-SCAN_SHORT = ("too_few_returns", "too_few_on_map", "mostly_off_map")  # why a sweep gave no fix, counted per run
+SCAN_NO_FIX_CAUSES = ("too_few_returns", "too_few_on_map", "mostly_off_map")  # why a sweep gave no fix, counted per run
 
 
 def read_status_counters(bag_path: Path, name: str, topic: str = "diagnostics") -> dict[str, int]:
@@ -148,7 +148,7 @@ def scan_counts(counters: dict[str, int]) -> dict[str, int]:
     returns (``scans_too_few_returns``: the robot's body and a held part hide the rest), of returns on the map
     (``scans_too_few_on_map``) or with most returns off it (``scans_mostly_off_map``: parts, another robot)."""
     return {"scans": counters["scans"], "scan_fixes_accepted": counters.get("filter_scan_accepted", 0),
-            **{f"scans_{k}": counters.get(f"scan_unmatched_{k}", 0) for k in SCAN_SHORT}}
+            **{f"scans_{k}": counters.get(f"scan_unmatched_{k}", 0) for k in SCAN_NO_FIX_CAUSES}}
 
 
 def count_messages(bag_path: Path, topic: str) -> int:

@@ -53,7 +53,7 @@ the part has just ended (``..._place_heading_error_{median,p90,max}_deg`` over `
 estimate's heading error 0.5 s after each such turn, where its slip is measured
 (``..._carry_turn_heading_error_{rms,max}_deg`` over ``..._carry_turns_estimated``), the LIDAR sweeps the
 localizer took (``..._scans``), the share the filter took a scan fix from (``..._scan_fix_share``) and the sweeps
-too sparse to match (``..._scans_too_few_returns``, ``..._scans_too_few_on_map``, ``..._scans_mostly_off_map``;
+without a fix, by cause (``..._scans_too_few_returns``, ``..._scans_too_few_on_map``, ``..._scans_mostly_off_map``;
 from the localizer's last ``/diagnostics``), and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
@@ -574,7 +574,7 @@ def _fix_rate(run: dict) -> float | None:
 def summarize(mode: str, runs: list[dict]) -> dict:
     """Flat keys per run (``{mode}_{set}_r{round}_s{seed}_...``) and per set and round
     (``{mode}_{set}_r{round}_...``), the set being :func:`seed_set_of` the seed (see the module docstring)."""
-    from ._competition_full import SCAN_SHORT
+    from ._competition_full import SCAN_NO_FIX_CAUSES
 
     out: dict = {"mode": mode, "pose_source": POSE_SOURCE[mode]}
     groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
@@ -629,7 +629,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                 if (rate := _fix_rate(r)) is not None:
                     out[f"{p}_camera_fixes_accepted_per_s"] = round(rate, 2)
             if "scans" in r:  # the LIDAR sweeps and what became of them
-                for k in ("scans", "scan_fixes_accepted", *(f"scans_{k}" for k in SCAN_SHORT)):
+                for k in ("scans", "scan_fixes_accepted", *(f"scans_{k}" for k in SCAN_NO_FIX_CAUSES)):
                     out[f"{p}_{k}"] = r.get(k, 0)
             elif r.get("scan_counts_note"):
                 out[f"{p}_scan_counts_note"] = r["scan_counts_note"]
@@ -702,11 +702,11 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                 out[f"{p}_carry_turn_heading_error_rms_deg"] = round(math.sqrt(statistics.fmean(
                     x * x for x in turns)), 2)
                 out[f"{p}_carry_turn_heading_error_max_deg"] = round(max(turns), 2)
-            scans = sum(int(r.get("scans", 0)) for r in rs)
-            if scans:  # the LIDAR sweeps: the share the filter took a fix from, and those too sparse to match
-                out[f"{p}_scans"] = scans
-                out[f"{p}_scan_fix_share"] = round(sum(int(r.get("scan_fixes_accepted", 0)) for r in rs) / scans, 3)
-                for k in SCAN_SHORT:
+            share = _scan_fix_share(rs)
+            if share is not None:  # the LIDAR sweeps: the share the filter took a fix from, those without one by cause
+                out[f"{p}_scans"] = sum(int(r.get("scans", 0)) for r in rs)
+                out[f"{p}_scan_fix_share"] = round(share, 3)
+                for k in SCAN_NO_FIX_CAUSES:
                     out[f"{p}_scans_{k}"] = sum(int(r.get(f"scans_{k}", 0)) for r in rs)
             rates = [x for x in map(_fix_rate, rs) if x is not None]
             if rates:  # camera fixes the filter took per simulated second, the median run's
@@ -783,10 +783,16 @@ def table(mode: str, runs: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _scan_fix_share(rs: list[dict]) -> float | None:
+    """The share of the runs' LIDAR sweeps the filter took a fix from (None: no sweep counted)."""
+    scans = sum(int(r.get("scans", 0)) for r in rs)
+    return sum(int(r.get("scan_fixes_accepted", 0)) for r in rs) / scans if scans else None
+
+
 def _scan_fix_cell(rs: list[dict]) -> str:
     """A table cell: the percentage of the runs' LIDAR sweeps the filter took a fix from; "-" if none counted."""
-    scans = sum(int(r.get("scans", 0)) for r in rs)
-    return f"{100 * sum(int(r.get('scan_fixes_accepted', 0)) for r in rs) / scans:.0f}" if scans else "-"
+    share = _scan_fix_share(rs)
+    return "-" if share is None else f"{100 * share:.0f}"
 
 
 def _median_max_cell(rs: list[dict], key: str, scale: float = 1.0) -> str:
