@@ -293,3 +293,23 @@ def test_the_whole_stack_refuses_the_bare_stand_ins_sim_settings_and_simtwo_the_
     with pytest.raises(ConfigError, match="real SimTwo's scene and camera"):
         competition.run(args(mode="full_stack", rounds="1", seeds=1, simulator="simtwo", sim=["camera_every=12"]),
                         None)
+
+
+def test_an_out_directory_with_an_earlier_batchs_bags_is_refused_before_any_run(tmp_path, monkeypatch):
+    """The recorder never overwrites a bag: in an ``--out`` that holds an earlier batch's runs every run would fail
+    at its start, minutes in (the real SimTwo started for each); the batch is refused before the first."""
+    started = []
+    monkeypatch.setattr(competition, "_full_item", lambda *a, **kw: started.append(a))
+    (tmp_path / "simtwo_r2_s101").mkdir()
+    (tmp_path / "simtwo_r2_s101" / "pose.bag").write_bytes(b"")
+    with pytest.raises(ConfigError, match=r"simtwo_r2_s101/pose.bag from an earlier batch"):
+        competition.run(args(mode="full_stack", rounds="1,2", seeds=2, first_seed=100, simulator="simtwo"), tmp_path)
+    (tmp_path / "full_r1_s100").mkdir()
+    (tmp_path / "full_r1_s100" / "trace.jsonl").write_text("{}\n")
+    with pytest.raises(ConfigError, match=r"full_r1_s100/trace.jsonl from"):
+        competition.run(args(mode="full_stack", rounds="1", seeds=1, first_seed=100), tmp_path)
+    assert not started
+    with pytest.raises(ConfigError, match="and 1 more"):  # both runs' leftovers named by count
+        (tmp_path / "full_r2_s101").mkdir()
+        (tmp_path / "full_r2_s101" / "pose_bag").mkdir()
+        competition.run(args(mode="full_stack", rounds="1,2", seeds=2, first_seed=100), tmp_path)

@@ -330,10 +330,15 @@ def play_full_stack(round_no: int, seed: int, out_dir: Path | None, record_path:
 def run_dir(out_dir: Path | None, round_no: int, seed: int, simulator: str = "standin") -> Path:
     """The run's log directory (made): ``{out_dir}/full_r{round}_s{seed}`` (``simtwo_...`` on the real SimTwo),
     or a temporary one without ``out_dir``."""
-    tag = "simtwo" if simulator == "simtwo" else "full"
-    d = Path(out_dir) / f"{tag}_r{round_no}_s{seed}" if out_dir else Path(tempfile.mkdtemp(prefix="raf-comp-"))
+    d = Path(out_dir) / run_dir_name(round_no, seed, simulator) if out_dir else Path(tempfile.mkdtemp(
+        prefix="raf-comp-"))
     d.mkdir(parents=True, exist_ok=True)
     return d
+
+
+def run_dir_name(round_no: int, seed: int, simulator: str = "standin") -> str:
+    """The name of a run's log directory in the batch's ``--out`` (:func:`run_dir`)."""
+    return f"{'simtwo' if simulator == 'simtwo' else 'full'}_r{round_no}_s{seed}"
 
 
 #: the agent's trace in a run directory
@@ -349,6 +354,13 @@ def kept_pose_bag(log_dir: Path) -> Path:
     """The pose recording a run left in ``log_dir``, whichever middleware recorded it."""
     log_dir = Path(log_dir)
     return log_dir / POSE_BAG_FILE if (log_dir / POSE_BAG_FILE).exists() else log_dir / POSE_BAG_DIR
+
+
+def previous_outputs(out_dir: Path, runs: list[tuple[int, int]], simulator: str = "standin") -> list[Path]:
+    """What an earlier batch left in ``out_dir`` that the runs ``(round, seed)`` of this one would meet in their
+    directories (:data:`ATTEMPT_OUTPUTS`): the recorder never overwrites a bag, so each such run would fail."""
+    return [p for r, s in runs for name in ATTEMPT_OUTPUTS
+            if (p := Path(out_dir) / run_dir_name(r, s, simulator) / name).exists()]
 
 
 def discard_attempt(log_dir: Path) -> None:

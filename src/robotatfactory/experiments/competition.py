@@ -960,6 +960,12 @@ def run(args, out_dir: Path | None) -> dict:
             runs = [_reanalysed(Path(args.analyse), r, s, rec, field_name, simulator)
                     for r, s, _l, _f, rec, *_ in specs]
         else:  # a thread per run locally (each run is its own processes), or a Ray task per run
+            from ._competition_full import previous_outputs
+
+            if out_dir is not None and (old := previous_outputs(out_dir, [sp[:2] for sp in specs], simulator)):
+                raise ConfigError(f"--out {out_dir}: {old[0]}{f' and {len(old) - 1} more' if len(old) > 1 else ''} "
+                                  "from an earlier batch would make these runs fail (a bag is never overwritten): "
+                                  "give a new --out, or remove them")
             job = functools.partial(_full_item, field_name=field_name, simulator=simulator, localize=localize,
                                     agent=agent_items, sim_set=tuple(sim_items), loss=loss, calibration=calibration,
                                     paced=pace == "paced", compose=nodes == "composed")
