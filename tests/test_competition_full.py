@@ -88,22 +88,25 @@ def test_the_estimate_half_a_second_after_each_carrying_turn():
 
 
 def test_the_lidar_sweeps_and_what_became_of_them():
-    """The localizer's counts (its filter status) give the sweeps, the fixes the filter took and the sweeps too
-    sparse to match; per round their sums and the share of sweeps that gave a fix."""
+    """The localizer's counts (its filter status) give the sweeps, the fixes the filter took, the matcher's fixes
+    from every ray and the sweeps without a fix by cause; per round their sums and the share of sweeps that gave a
+    fix."""
     from robotatfactory.experiments import competition
 
     counters = {"scans": 300, "filter_scan_accepted": 210, "filter_scan_mahalanobis": 12,
                 "scan_unmatched_too_few_returns": 9, "scan_unmatched_too_few_on_map": 40,
-                "scan_unmatched_mostly_off_map": 7, "scan_fixes": 230}
+                "scan_unmatched_mostly_off_map": 7, "scan_fixes": 230, "scan_fixes_every_ray": 25}
     got = scan_counts(counters)
-    assert got == {"scans": 300, "scan_fixes_accepted": 210, "scans_too_few_returns": 9, "scans_too_few_on_map": 40,
-                   "scans_mostly_off_map": 7}
+    assert got == {"scans": 300, "scan_fixes_accepted": 210, "scan_fixes_every_ray": 25, "scans_too_few_returns": 9,
+                   "scans_too_few_on_map": 40, "scans_mostly_off_map": 7}
     assert scan_counts({"scans": 5})["scans_too_few_returns"] == 0  # a count never raised is not in the status
     r = _run(round=2, **got)
     res = competition.summarize("full_stack", [r, dict(r, seed=101, scans=100, scan_fixes_accepted=10,
                                                        scans_too_few_returns=1, scans_too_few_on_map=0,
-                                                       scans_mostly_off_map=2)])
+                                                       scans_mostly_off_map=2, scan_fixes_every_ray=3)])
     assert res["full_stack_heldout_r2_s101_scan_fixes_accepted"] == 10
+    assert (res["full_stack_heldout_r2_s101_scan_fixes_every_ray"], res["full_stack_heldout_r2_scan_fixes_every_ray"]) \
+        == (3, 28)
     assert res["full_stack_heldout_r2_scans"] == 400
     assert res["full_stack_heldout_r2_scan_fix_share"] == pytest.approx(220 / 400, abs=1e-3)
     assert (res["full_stack_heldout_r2_scans_too_few_returns"], res["full_stack_heldout_r2_scans_too_few_on_map"]) \

@@ -218,32 +218,71 @@ def test_a_scan_waits_for_the_odometry_of_its_last_ray(world):
     assert sl.add_scan(np.full(N, np.inf), ANGLES, 0.2, 0.2 / N).reason == "too_few_returns"
 
 
+HELD_POSE = (-0.662, -0.155, math.radians(3))  # before machine A's input 3 on simtwo2022
+HELD_PRIOR = (HELD_POSE[0] + 0.004, HELD_POSE[1] - 0.003, HELD_POSE[2] + math.radians(1.5))
+
+
+def _held_part_sweep(world, visible_to_deg: float, extra=()):
+    """A sweep at :data:`HELD_POSE` with a part held (and the boxes ``extra`` the map does not have), the rays
+    from ``visible_to_deg`` to 330 deg hidden as the robot's body hides them."""
+    fld, robot, _, boxes = world
+    pose = HELD_POSE
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    d = float(robot.electromagnet["x"]) + fld.part.depth / 2
+    part = (pose[0] + d * c, pose[1] + d * s, fld.part.depth / 2, fld.part.width / 2, c, s)
+    r = _scan(boxes, pose, np.random.default_rng(5), extra=[part, *extra])
+    r[(ANGLES > math.radians(visible_to_deg)) & (ANGLES < math.radians(330))] = np.inf
+    return r
+
+
+def _fixes(world, r, **options):
+    """The fix of sweep ``r`` from :data:`HELD_PRIOR`, the robot at rest, for each value of the one boolean
+    ``ScanMatchConfig`` option given (``name=(False, True)``)."""
+    fld, robot, _, _ = world
+    (name, values), = options.items()
+    out = {}
+    for v in values:
+        sl = ScanLocalizer(fld, robot, ScanMatchConfig(**{name: v}))
+        sl.add_odom(0.0, (0.0, 0.0, 0.0))
+        sl.add_odom(0.24, (0.0, 0.0, 0.0))
+        out[v] = sl.add_scan(r, ANGLES, 0.0, 0.2 / N) or sl.fix_pending(0.24, HELD_PRIOR)
+    return out
+
+
+def _assert_every_ray_fix(world, f, r):
+    """``f`` is right within 0.5 deg (1.5 deg off before), and its covariance is every ray's fit with
+    ``rays_per_independent`` doubled (the same surfaces, twice the rays)."""
+    fld, robot, _, _ = world
+    assert f.ok and f.every_ray
+    assert abs(math.remainder(f.pose[2] - HELD_POSE[2], 2 * math.pi)) < math.radians(0.5)
+    assert math.hypot(f.pose[0] - HELD_POSE[0], f.pose[1] - HELD_POSE[1]) < 0.004
+    sl = ScanLocalizer(fld, robot, ScanMatchConfig(stride=1, rays_per_independent=16.0))
+    _, pts = sl.returns(r, ANGLES)
+    ref = sl.map.match(pts, HELD_PRIOR, sl.cfg, sigma=sl.sigma(pts))
+    np.testing.assert_allclose(f.cov, ref.cov, rtol=0.05)
+
+
 def test_every_ray_where_the_strided_returns_are_too_few(world):
     """Before machine A's input 3 on simtwo2022 with a part held, the LIDAR sees one wall past the robot: 17 returns
     at stride 2 on the stand-in (its body hides the rest). Cast here with the part and a sector the body hides:
     stride 2 gives too few, and with ``dense_when_few`` every ray gives the fix, its covariance twice the strided
     fit's would be for the same returns (the same surfaces, twice the rays); off, nothing changes."""
-    fld, robot, _, boxes = world
-    pose = (-0.662, -0.155, math.radians(3))
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    d = float(robot.electromagnet["x"]) + fld.part.depth / 2
-    part = (pose[0] + d * c, pose[1] + d * s, fld.part.depth / 2, fld.part.width / 2, c, s)
-    r = _scan(boxes, pose, np.random.default_rng(5), extra=[part])
-    r[(ANGLES > math.radians(70)) & (ANGLES < math.radians(330))] = np.inf  # what the robot's body hides
-    prior = (pose[0] + 0.004, pose[1] - 0.003, pose[2] + math.radians(1.5))
-    out = {}
-    for dense in (False, True):
-        sl = ScanLocalizer(fld, robot, ScanMatchConfig(dense_when_few=dense))
-        sl.add_odom(0.0, (0.0, 0.0, 0.0))
-        sl.add_odom(0.24, (0.0, 0.0, 0.0))
-        out[dense] = sl.add_scan(r, ANGLES, 0.0, 0.2 / N) or sl.fix_pending(0.24, prior)
+    r = _held_part_sweep(world, 70)
+    out = _fixes(world, r, dense_when_few=(False, True))
     assert not out[False].ok and out[False].reason == "too_few_returns" and out[False].points < 30
-    f = out[True]
-    assert f.ok and f.points >= 30
-    assert abs(math.remainder(f.pose[2] - pose[2], 2 * math.pi)) < math.radians(0.5)  # 1.5 deg off before
-    # the covariance: the dense fit's with rays_per_independent doubled
-    sl = ScanLocalizer(fld, robot, ScanMatchConfig(stride=1, rays_per_independent=16.0))
-    _, pts = sl.returns(r, ANGLES)
-    ref = sl.map.match(pts, prior, sl.cfg, sigma=sl.sigma(pts))
-    np.testing.assert_allclose(f.cov, ref.cov, rtol=0.05)
+    assert out[True].points >= 30
+    _assert_every_ray_fix(world, out[True], r)
     assert from_dict({"scan_match": {"dense_when_few": False}}).scan_match.dense_when_few is False
+
+
+def test_every_ray_where_the_strided_fit_has_too_few_on_the_map(world):
+    """Enough strided returns (35) but a box the map does not have takes 9 of them, and 26 on the map are fewer
+    than ``min_points``: with ``dense_when_few_on_map`` the sweep is fitted again with every ray (40 of 69 on the
+    map) and gives the fix, its covariance as ``dense_when_few``'s; off, the sweep gives none."""
+    r = _held_part_sweep(world, 110, extra=[(-0.45, 0.1, 0.06, 0.06, 1.0, 0.0)])  # a box on the floor
+    out = _fixes(world, r, dense_when_few_on_map=(False, True))
+    f = out[False]
+    assert not f.ok and f.reason == "too_few_on_map" and f.points >= 30 and f.inliers < 30 and not f.every_ray
+    assert out[True].inliers >= 30
+    _assert_every_ray_fix(world, out[True], r)
+    assert from_dict({"scan_match": {"dense_when_few_on_map": True}}).scan_match.dense_when_few_on_map is True

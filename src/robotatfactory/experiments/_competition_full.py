@@ -146,8 +146,10 @@ def scan_counts(counters: dict[str, int]) -> dict[str, int]:
     """What the localizer's LIDAR sweeps came to (``counters``: its filter status, :func:`read_status_counters`):
     ``scans`` taken, ``scan_fixes_accepted`` by the filter, and the sweeps the matcher gave no fix for want of
     returns (``scans_too_few_returns``: the robot's body and a held part hide the rest), of returns on the map
-    (``scans_too_few_on_map``) or with most returns off it (``scans_mostly_off_map``: parts, another robot)."""
+    (``scans_too_few_on_map``) or with most returns off it (``scans_mostly_off_map``: parts, another robot), and
+    the matcher's fixes from every ray (``scan_fixes_every_ray``: ``scan_match.dense_when_few``, ``..._on_map``)."""
     return {"scans": counters["scans"], "scan_fixes_accepted": counters.get("filter_scan_accepted", 0),
+            "scan_fixes_every_ray": counters.get("scan_fixes_every_ray", 0),
             **{f"scans_{k}": counters.get(f"scan_unmatched_{k}", 0) for k in SCAN_NO_FIX_CAUSES}}
 
 

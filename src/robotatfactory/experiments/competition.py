@@ -53,8 +53,8 @@ the part has just ended (``..._place_heading_error_{median,p90,max}_deg`` over `
 estimate's heading error 0.5 s after each such turn, where its slip is measured
 (``..._carry_turn_heading_error_{rms,max}_deg`` over ``..._carry_turns_estimated``), the LIDAR sweeps the
 localizer took (``..._scans``), the share the filter took a scan fix from (``..._scan_fix_share``) and the sweeps
-without a fix, by cause (``..._scans_too_few_returns``, ``..._scans_too_few_on_map``, ``..._scans_mostly_off_map``;
-from the localizer's last ``/diagnostics``), and the targets of the issue:
+without a fix, by cause (``..._scans_too_few_returns``, ``..._scans_too_few_on_map``, ``..._scans_mostly_off_map``),
+the matcher's fixes from every ray (``..._scan_fixes_every_ray``; from the localizer's last ``/diagnostics``), and the targets of the issue:
 
 - maximum score in >= 9 of 10 seeds in each round (``..._max_score_target_met``; with fewer seeds: all
   but one tenth of them), 0 false starts (referee notes), 0 parts knocked out of slots;
@@ -629,7 +629,8 @@ def summarize(mode: str, runs: list[dict]) -> dict:
                 if (rate := _fix_rate(r)) is not None:
                     out[f"{p}_camera_fixes_accepted_per_s"] = round(rate, 2)
             if "scans" in r:  # the LIDAR sweeps and what became of them
-                for k in ("scans", "scan_fixes_accepted", *(f"scans_{k}" for k in SCAN_NO_FIX_CAUSES)):
+                for k in ("scans", "scan_fixes_accepted", "scan_fixes_every_ray",
+                          *(f"scans_{k}" for k in SCAN_NO_FIX_CAUSES)):
                     out[f"{p}_{k}"] = r.get(k, 0)
             elif r.get("scan_counts_note"):
                 out[f"{p}_scan_counts_note"] = r["scan_counts_note"]
@@ -706,6 +707,7 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             if share is not None:  # the LIDAR sweeps: the share the filter took a fix from, those without one by cause
                 out[f"{p}_scans"] = sum(int(r.get("scans", 0)) for r in rs)
                 out[f"{p}_scan_fix_share"] = round(share, 3)
+                out[f"{p}_scan_fixes_every_ray"] = sum(int(r.get("scan_fixes_every_ray", 0)) for r in rs)
                 for k in SCAN_NO_FIX_CAUSES:
                     out[f"{p}_scans_{k}"] = sum(int(r.get(f"scans_{k}", 0)) for r in rs)
             rates = [x for x in map(_fix_rate, rs) if x is not None]

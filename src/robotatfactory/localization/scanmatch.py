@@ -38,6 +38,9 @@ class ScanMatchConfig:
     dense_when_few: bool = setting(True, "when every stride-th ray gives fewer than min_points returns, every ray "
                                           "(the fit's covariance then times stride more: the same surfaces); where "
                                           "one wall is all the LIDAR sees past the robot and a held part")
+    dense_when_few_on_map: bool = setting(False, "when the fit of every stride-th ray has fewer than min_points "
+                                                 "returns on the map (too_few_on_map), it is tried again with "
+                                                 "every ray, the covariance as for dense_when_few")
     max_range_m: float = setting(1.5, "m: farther returns are not used (the range noise grows with distance)",
                                  lo=0.0, lo_open=True)
     body_margin_m: float = setting(0.02, "m: returns on the robot or a held part (their outline grown by this) "
@@ -77,6 +80,7 @@ class ScanFix:
     inliers: int = 0
     rms_m: float = math.nan
     iterations: int = 0
+    every_ray: bool = False  # fitted with every ray (dense_when_few, dense_when_few_on_map), not every stride-th
 
 
 def _se2(p) -> np.ndarray:
@@ -315,7 +319,9 @@ class ScanLocalizer:
         self.body = body_box(robot, field.part, self.cfg.body_margin_m)
         self.noise = (float(getattr(lid, "noise_a", 0.0) or 0.0), float(getattr(lid, "noise_b", 0.0) or 0.0))
         self.odom = OdomHistory()
-        self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (ray times, returns in the laser frame)
+        # (ray times, returns in the laser frame, those fitted first, their stride): every usable ray is kept,
+        # for a fit with every ray when the strided one has too few on the map
+        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray, int] | None = None
 
     def add_odom(self, t: float, pose: tuple[float, float, float]) -> None:
         self.odom.add(t, pose)
@@ -354,31 +360,42 @@ class ScanLocalizer:
         """Take a scan whose ray ``i`` was measured at ``t0 + i * dt``; it is matched (:meth:`fix_pending`)
         once odometry covers its last ray (a scan can arrive before the odometry of the same cycle). A newer
         scan replaces one still waiting. Returns a ScanFix (not ok) when the scan cannot be used at all."""
-        idx, pts = self.returns(ranges, angles, range_min, range_max)
-        stride = self.cfg.stride
-        if len(idx) < self.cfg.min_points and self.cfg.dense_when_few and stride > 1:
-            idx, pts = self.returns(ranges, angles, range_min, range_max, stride=1)
-            stride = 1
-        if len(idx) < self.cfg.min_points:
+        idx, pts = self.returns(ranges, angles, range_min, range_max, stride=1)
+        stride = max(1, self.cfg.stride)
+        first = idx % stride == 0  # what returns(stride=cfg.stride) gives
+        if np.count_nonzero(first) < self.cfg.min_points and self.cfg.dense_when_few and stride > 1:
+            first[:], stride = True, 1
+        if np.count_nonzero(first) < self.cfg.min_points:
             self._pending = None
-            return ScanFix(False, reason="too_few_returns", points=len(idx))
-        self._pending = (t0 + idx * dt, pts, stride)
+            return ScanFix(False, reason="too_few_returns", points=int(np.count_nonzero(first)))
+        self._pending = (t0 + idx * dt, pts, first, stride)
         return None
 
     def ready(self) -> bool:
         """A scan waits and odometry reaches its last ray."""
         last = self.odom.latest
-        return self._pending is not None and last is not None and last[0] >= self._pending[0][-1] - 1e-6
+        if self._pending is None or last is None:
+            return False
+        times, _, first, _ = self._pending
+        return last[0] >= times[first][-1] - 1e-6
 
     def fix_pending(self, filter_t: float, filter_pose) -> ScanFix | None:
         """The waiting scan's fix, given the filter's pose ``filter_pose`` at ``filter_t`` (the odometry's
         clock); None while no scan is ready."""
         if not self.ready():
             return None
-        times, pts, stride = self._pending
+        times, pts, first, stride = self._pending
         self._pending = None
         if filter_pose is None:
             return ScanFix(False, reason="no_prior")
+        f = self._fit(times[first], pts[first], stride, filter_t, filter_pose)
+        if f.reason == "too_few_on_map" and self.cfg.dense_when_few_on_map and stride > 1:
+            every = times <= times[first][-1]  # the rays odometry covers: up to the last one fitted first
+            f = self._fit(times[every], pts[every], 1, filter_t, filter_pose)
+        return f
+
+    def _fit(self, times: np.ndarray, pts: np.ndarray, stride: int, filter_t: float, filter_pose) -> ScanFix:
+        """The fix from the returns ``pts`` (laser frame, measured at ``times``), every ``stride``-th ray."""
         t_ref = float(0.5 * (times[0] + times[-1]))
         odo = self.odom.at(np.concatenate([times, [t_ref, filter_t]]))
         if odo is None:
@@ -390,5 +407,5 @@ class ScanLocalizer:
         cfg = self.cfg if stride == self.cfg.stride else replace(  # every ray: neighbours share more errors
             self.cfg, rays_per_independent=self.cfg.rays_per_independent * self.cfg.stride / stride)
         f = self.map.match(body, _pose(T), cfg, self.laser_pose[:2], self.sigma(pts))
-        f.t = t_ref
+        f.t, f.every_ray = t_ref, stride == 1 < self.cfg.stride
         return f

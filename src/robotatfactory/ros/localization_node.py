@@ -427,6 +427,8 @@ class LocalizationNode:
         if fix.ok:
             r = self.ekf.pose_fix(fix.t, fix.pose, fix.cov, source=SCAN)
             self.counts["scan_fixes"] += 1
+            if fix.every_ray:
+                self.counts["scan_fixes_every_ray"] += 1
             if not r.accepted and r.reason not in ("pending",):
                 self.counts[f"scan_fix_{r.reason}"] += 1
         else:
@@ -475,7 +477,7 @@ class LocalizationNode:
         vals.update({f"filter_{k}": v for k, v in ec.items()})
         vals.update({"odom_messages": c.get("odom", 0), "scans": c.get("scans", 0),
                      "beacons_seen": c.get("beacons_seen", 0), "beacons_used": c.get("beacons_used", 0),
-                     "scan_fixes": c.get("scan_fixes", 0),
+                     "scan_fixes": c.get("scan_fixes", 0), "scan_fixes_every_ray": c.get("scan_fixes_every_ray", 0),
                      "restarts": c.get("restarts", 0), "carrying": carrying,
                      "magnet_commands": c.get("magnet_commands", 0), "carry_switches": c.get("carry_switches", 0)})
         vals.update({k: v for k, v in c.items()
