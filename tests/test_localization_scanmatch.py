@@ -285,4 +285,4 @@ def test_every_ray_where_the_strided_fit_has_too_few_on_the_map(world):
     assert not f.ok and f.reason == "too_few_on_map" and f.points >= 30 and f.inliers < 30 and not f.every_ray
     assert out[True].inliers >= 30
     _assert_every_ray_fix(world, out[True], r)
-    assert from_dict({"scan_match": {"dense_when_few_on_map": True}}).scan_match.dense_when_few_on_map is True
+    assert from_dict({"scan_match": {"dense_when_few_on_map": False}}).scan_match.dense_when_few_on_map is False

@@ -38,9 +38,9 @@ class ScanMatchConfig:
     dense_when_few: bool = setting(True, "when every stride-th ray gives fewer than min_points returns, every ray "
                                           "(the fit's covariance then times stride more: the same surfaces); where "
                                           "one wall is all the LIDAR sees past the robot and a held part")
-    dense_when_few_on_map: bool = setting(False, "when the fit of every stride-th ray has fewer than min_points "
-                                                 "returns on the map (too_few_on_map), it is tried again with "
-                                                 "every ray, the covariance as for dense_when_few")
+    dense_when_few_on_map: bool = setting(True, "when the fit of every stride-th ray has fewer than min_points "
+                                                "returns on the map (too_few_on_map), it is tried again with "
+                                                "every ray, the covariance as for dense_when_few")
     max_range_m: float = setting(1.5, "m: farther returns are not used (the range noise grows with distance)",
                                  lo=0.0, lo_open=True)
     body_margin_m: float = setting(0.02, "m: returns on the robot or a held part (their outline grown by this) "
