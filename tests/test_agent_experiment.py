@@ -29,6 +29,32 @@ def test_round_1_one_seed_scores_the_maximum_and_writes_its_figure(tmp_path):
     assert (tmp_path / "round1_seed0_bare_truth.png").stat().st_size > 10_000
     runs = json.loads((tmp_path / "runs.json").read_text())
     assert sum(text.startswith("picked") for _, text, _, _ in runs[0]["events"]) == 4
+    # the agent's recoveries, from its counters: each key per run and per round, as many as its events say
+    lost = sum("lost the" in text for _, text, _, _ in runs[0]["events"])
+    assert res["bare_truth_tuned_r1_s0_parts_lost"] == res["bare_truth_tuned_r1_parts_lost"] == lost
+    looks = sum("look at markers" in text for _, text, _, _ in runs[0]["events"])
+    assert res["bare_truth_tuned_r1_relocalizations"] == runs[0]["relocalizations"] == looks
+
+
+def test_the_recoveries_are_counted_per_run_and_summed_per_round():
+    """The agent's recoveries (RECOVERY_COUNTS: parts lost, stops to look at markers, ...) per run and summed
+    per round over the runs that counted them; a run without the agent's counters has none of the keys."""
+    from robotatfactory.experiments._competition_full import RECOVERY_COUNTS, recovery_counts
+
+    r = {"round": 1, "seed": 100, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 50.0,
+         "notes": [], "false_start": False, "parts_pushed": 0, "picks_attempted": 4, "pick_failures": 0,
+         "timeouts": 0, "collision_checks_hit": 0, "wall_s": 1.0}
+    counted = {k: 0 for k in RECOVERY_COUNTS}
+    runs = [dict(r, **dict(counted, parts_lost=1, relocalizations=2, relocalize_timeouts=1)),
+            dict(r, seed=101, **dict(counted, relocalizations=3)), dict(r, seed=102)]  # the last: no counters
+    res = competition.summarize("full_stack", runs)
+    p = "full_stack_heldout_r1"
+    assert (res[f"{p}_parts_lost"], res[f"{p}_relocalizations"], res[f"{p}_relocalize_timeouts"]) == (1, 5, 1)
+    assert res[f"{p}_s100_parts_lost"] == 1 and res[f"{p}_s101_relocalizations"] == 3
+    assert not any(k.startswith(f"{p}_s102_") and k.endswith(RECOVERY_COUNTS) for k in res)
+    assert f"{p}_parts_lost" not in competition.summarize("full_stack", [runs[2]])
+    # from the agent's counters as its /diagnostics carry them: only these, and only those it has
+    assert recovery_counts({"picks": 4, "parts_lost": 2, "blocked": 1}) == {"parts_lost": 2, "blocked": 1}
 
 
 def test_a_missed_run_is_the_worst_time_and_fails_the_rate():

@@ -152,6 +152,10 @@ def test_round_1_on_the_whole_stack(middleware, tmp_path):
     # on the thread while backing out (tasks.choose_ahead; round 1 has a choice after every pick)
     assert res["full_stack_tuned_r1_s0_picks"] == runs[0]["picks"] == 4, runs[0].get("counters_note")
     assert 1 <= res["full_stack_tuned_r1_s0_choices_ahead"] <= 4
+    # and its recoveries (a part lost, a stop to look at markers, ...), as many as its events say
+    events = [text for _, text, _, _ in runs[0]["events"]]
+    assert res["full_stack_tuned_r1_parts_lost"] == sum("lost the" in e for e in events)
+    assert res["full_stack_tuned_r1_s0_relocalizations"] == sum("look at markers" in e for e in events)
     # the camera fixes the filter took, counted in the bag: the stand-in renders 14 frames a second (12.8 fixes a
     # second in issue 20's batch); the test below makes it 12 times fewer
     assert res["full_stack_tuned_r1_s0_camera_fixes_accepted_per_s"] > 5, runs[0]["logs"]

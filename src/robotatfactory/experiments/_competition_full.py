@@ -142,6 +142,19 @@ def read_status_counters(bag_path: Path, name: str, topic: str = "diagnostics") 
     return {k: int(v) for k, v in diagnostic_values(last).items() if v.lstrip("-").isdigit()}
 
 
+#: The agent's recoveries (:class:`~robotatfactory.agent.behaviour.AgentCounters`) a run reports and a round sums:
+#: parts that fell off the magnet and those found and picked up again, stops to look at markers and those that
+#: timed out, legs re-planned around a blocked spot or from far off their path.
+RECOVERY_COUNTS = ("parts_lost", "parts_refound", "floor_picks", "relocalizations", "relocalize_timeouts", "blocked",
+                   "replans_off_path")
+
+
+def recovery_counts(counters: dict[str, int]) -> dict[str, int]:
+    """The :data:`RECOVERY_COUNTS` in ``counters`` (the agent's, :func:`read_status_counters`; an agent that lacked
+    one has none of it)."""
+    return {k: int(counters[k]) for k in RECOVERY_COUNTS if k in counters}
+
+
 def scan_counts(counters: dict[str, int]) -> dict[str, int]:
     """What the localizer's LIDAR sweeps came to (``counters``: its filter status, :func:`read_status_counters`):
     ``scans`` taken, ``scan_fixes_accepted`` by the filter, and the sweeps the matcher gave no fix for want of
@@ -455,6 +468,7 @@ def analyse(round_no: int, seed: int, log_dir: Path, trace_path: Path, bag_path:
         if "legs_ahead" in counters:  # (an agent before it had none)
             out["legs_ahead"] = counters["legs_ahead"]
         out["picks"] = counters["picks"]
+        out.update(recovery_counts(counters))
     except Exception as e:  # noqa: BLE001 - as for the poses
         out["counters_note"] = f"no agent counters: {type(e).__name__}: {e}"
     try:  # the LIDAR sweeps and what the scan matcher and the filter made of them

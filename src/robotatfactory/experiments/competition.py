@@ -33,8 +33,9 @@ separately: every key carries the set, ``{mode}_{set}_r{round}_...`` (``other`` 
 Per run (keys ``{mode}_{set}_r{round}_s{seed}_...``): score and maximum score, the referee's delivery time
 (when the final score was reached and held), points the referee took back (``points_lost``), referee rule notes, picks attempted / failed, places, timeouts, the picks and those whose destination was
 chosen on a thread while the robot backed out (``choices_ahead``, ``tasks.choose_ahead``; ``legs_ahead`` of those
-whose leg planned there was driven as it was; on the whole stack
-from the agent's last ``/diagnostics`` in the run's bag), collisions of the robot's outline
+whose leg planned there was driven as it was) and the agent's recoveries (``RECOVERY_COUNTS``: ``parts_lost``,
+``relocalizations``, ...; also summed per round) (on the whole stack from the agent's last ``/diagnostics`` in the
+run's bag), collisions of the robot's outline
 with walls or ribs, or beyond the floor's 2 cm overhang allowance (``floor``), checked every 5 cycles, parts pushed (a part not on the magnet moving 2 mm - 5 cm
 within 5 cycles: a push, not a machine's teleport), where each part was let go (``release_offset_max_m``:
 its offset from the nearest slot's normal, the line through the slot's centre along its facing; parts let go
@@ -322,6 +323,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
     from ..simtwo import Command
     from ..simtwo.scan import make_assembler
     from ._competition_observe import RunObserver
+    from ._competition_full import recovery_counts
 
     field = load_field(field_name) if field_name else load_field()
     robot = load_robot()
@@ -383,6 +385,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             "parts_refound": cnt.parts_refound, "floor_picks": cnt.floor_picks,
             "floor_pick_failures": cnt.floor_pick_failures, "parts_left": cnt.parts_left,
             "choices_ahead": cnt.choices_ahead, "legs_ahead": cnt.legs_ahead, "picks": cnt.picks,
+            **recovery_counts(vars(cnt)),
             "agent_done": agent.mode == "done", "sim_s": sim.time, "wall_s": time.perf_counter() - wall0,
             "delay_estimate_s": agent.delays.estimate if agent.delays.estimate is not None else math.nan,
         }
@@ -574,7 +577,7 @@ def _fix_rate(run: dict) -> float | None:
 def summarize(mode: str, runs: list[dict]) -> dict:
     """Flat keys per run (``{mode}_{set}_r{round}_s{seed}_...``) and per set and round
     (``{mode}_{set}_r{round}_...``), the set being :func:`seed_set_of` the seed (see the module docstring)."""
-    from ._competition_full import SCAN_NO_FIX_CAUSES
+    from ._competition_full import RECOVERY_COUNTS, SCAN_NO_FIX_CAUSES
 
     out: dict = {"mode": mode, "pose_source": POSE_SOURCE[mode]}
     groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
@@ -610,7 +613,10 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             if "legs_ahead" in r:  # of those, the leg planned on the thread driven as it was
                 out[f"{p}_legs_ahead"] = r["legs_ahead"]
             out[f"{p}_picks"] = r["picks"]
-        elif r.get("counters_note"):
+        for k in RECOVERY_COUNTS:  # the agent's recoveries (a run without its counters has no key)
+            if k in r:
+                out[f"{p}_{k}"] = r[k]
+        if "choices_ahead" not in r and r.get("counters_note"):
             out[f"{p}_counters_note"] = r["counters_note"]
         if mode.endswith("full_stack"):
             out[f"{p}_logs"] = r.get("logs", "")
@@ -680,6 +686,9 @@ def summarize(mode: str, runs: list[dict]) -> dict:
             out[f"{p}_choices_ahead"] = sum(int(r.get("choices_ahead", 0)) for r in rs)
             out[f"{p}_legs_ahead"] = sum(int(r.get("legs_ahead", 0)) for r in rs)
             out[f"{p}_picks"] = sum(int(r.get("picks", 0)) for r in rs)
+        for c in RECOVERY_COUNTS:  # summed over the runs that counted them
+            if any(c in r for r in rs):
+                out[f"{p}_{c}"] = sum(int(r.get(c, 0)) for r in rs)
         out[f"{p}_collisions"] = sum(int(r.get("collision_checks_hit", 0)) for r in rs)
         offsets = sorted(o for r in rs for o in r.get("release_offsets_m", ()))
         out[f"{p}_releases_in_slots"] = len(offsets)
