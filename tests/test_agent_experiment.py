@@ -39,7 +39,7 @@ def test_round_1_one_seed_scores_the_maximum_and_writes_its_figure(tmp_path):
 def test_the_recoveries_are_counted_per_run_and_summed_per_round():
     """The agent's recoveries (RECOVERY_COUNTS: parts lost, stops to look at markers, ...) per run and summed
     per round over the runs that counted them; a run without the agent's counters has none of the keys."""
-    from robotatfactory.experiments._competition_full import RECOVERY_COUNTS, recovery_counts
+    from robotatfactory.agent.behaviour import RECOVERY_COUNTS, recovery_counts
 
     r = {"round": 1, "seed": 100, "points": 4, "max_points": 4, "max_score": True, "last_score_s": 50.0,
          "notes": [], "false_start": False, "parts_pushed": 0, "picks_attempted": 4, "pick_failures": 0,

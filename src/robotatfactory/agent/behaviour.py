@@ -95,6 +95,19 @@ class AgentCounters:
     parts_left: int = 0  # lost parts left on the floor after recovery.refind_tries failed floor picks
 
 
+#: The recoveries among the :class:`AgentCounters` that the competition experiment reports per run and sums per
+#: round: parts that fell off the magnet and those found and picked up again, stops to look at markers and those
+#: that timed out, legs re-planned around a blocked spot or from far off their path.
+RECOVERY_COUNTS = ("parts_lost", "parts_refound", "floor_picks", "relocalizations", "relocalize_timeouts", "blocked",
+                   "replans_off_path")
+
+
+def recovery_counts(counters: dict[str, int]) -> dict[str, int]:
+    """The :data:`RECOVERY_COUNTS` in ``counters`` (``vars`` of an :class:`AgentCounters`, or the agent's
+    ``/diagnostics`` values; an agent that lacked one has none of it)."""
+    return {k: int(counters[k]) for k in RECOVERY_COUNTS if k in counters}
+
+
 @dataclass
 class RoundAgent:
     """See the module docstring. ``settings``: every tuning setting (:class:`~.settings.AgentSettings`)."""

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 from ..ros.master import free_port
+from ..agent.behaviour import recovery_counts
 from ._competition_observe import SPIN_AFTER
 
 FULL_DURATION = {1: 130.0, 2: 190.0, 3: 230.0}  # simulated s of one run at most (raf sim --duration)
@@ -140,19 +141,6 @@ def read_status_counters(bag_path: Path, name: str, topic: str = "diagnostics") 
     if last is None:
         raise ValueError(f"no status named ...{name!r} on {topic}")
     return {k: int(v) for k, v in diagnostic_values(last).items() if v.lstrip("-").isdigit()}
-
-
-#: The agent's recoveries (:class:`~robotatfactory.agent.behaviour.AgentCounters`) a run reports and a round sums:
-#: parts that fell off the magnet and those found and picked up again, stops to look at markers and those that
-#: timed out, legs re-planned around a blocked spot or from far off their path.
-RECOVERY_COUNTS = ("parts_lost", "parts_refound", "floor_picks", "relocalizations", "relocalize_timeouts", "blocked",
-                   "replans_off_path")
-
-
-def recovery_counts(counters: dict[str, int]) -> dict[str, int]:
-    """The :data:`RECOVERY_COUNTS` in ``counters`` (the agent's, :func:`read_status_counters`; an agent that lacked
-    one has none of it)."""
-    return {k: int(counters[k]) for k in RECOVERY_COUNTS if k in counters}
 
 
 def scan_counts(counters: dict[str, int]) -> dict[str, int]:

@@ -33,9 +33,9 @@ separately: every key carries the set, ``{mode}_{set}_r{round}_...`` (``other`` 
 Per run (keys ``{mode}_{set}_r{round}_s{seed}_...``): score and maximum score, the referee's delivery time
 (when the final score was reached and held), points the referee took back (``points_lost``), referee rule notes, picks attempted / failed, places, timeouts, the picks and those whose destination was
 chosen on a thread while the robot backed out (``choices_ahead``, ``tasks.choose_ahead``; ``legs_ahead`` of those
-whose leg planned there was driven as it was) and the agent's recoveries (``RECOVERY_COUNTS``: ``parts_lost``,
-``relocalizations``, ...; also summed per round) (on the whole stack from the agent's last ``/diagnostics`` in the
-run's bag), collisions of the robot's outline
+whose leg planned there was driven as it was), the agent's recoveries (``agent.behaviour.RECOVERY_COUNTS``:
+``parts_lost``, ``relocalizations``, ...; also summed per round; on the whole stack all of these from the agent's last
+``/diagnostics`` in the run's bag), collisions of the robot's outline
 with walls or ribs, or beyond the floor's 2 cm overhang allowance (``floor``), checked every 5 cycles, parts pushed (a part not on the magnet moving 2 mm - 5 cm
 within 5 cycles: a push, not a machine's teleport), where each part was let go (``release_offset_max_m``:
 its offset from the nearest slot's normal, the line through the slot's centre along its facing; parts let go
@@ -323,7 +323,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
     from ..simtwo import Command
     from ..simtwo.scan import make_assembler
     from ._competition_observe import RunObserver
-    from ._competition_full import recovery_counts
+    from ..agent.behaviour import recovery_counts
 
     field = load_field(field_name) if field_name else load_field()
     robot = load_robot()
@@ -381,8 +381,7 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
             "points_lost": rep.lost, "world": world, "notes": list(rep.notes), "false_start": any("false start" in n.lower() for n in rep.notes),
             "picks_attempted": cnt.picks + cnt.pick_failures, "pick_failures": cnt.pick_failures,
             "places": cnt.places, "place_failures": cnt.place_failures, "timeouts": cnt.timeouts,
-            "no_path": cnt.no_path, "moved_before_start_cycles": moved_early, "parts_lost": cnt.parts_lost,
-            "parts_refound": cnt.parts_refound, "floor_picks": cnt.floor_picks,
+            "no_path": cnt.no_path, "moved_before_start_cycles": moved_early,
             "floor_pick_failures": cnt.floor_pick_failures, "parts_left": cnt.parts_left,
             "choices_ahead": cnt.choices_ahead, "legs_ahead": cnt.legs_ahead, "picks": cnt.picks,
             **recovery_counts(vars(cnt)),
@@ -577,7 +576,8 @@ def _fix_rate(run: dict) -> float | None:
 def summarize(mode: str, runs: list[dict]) -> dict:
     """Flat keys per run (``{mode}_{set}_r{round}_s{seed}_...``) and per set and round
     (``{mode}_{set}_r{round}_...``), the set being :func:`seed_set_of` the seed (see the module docstring)."""
-    from ._competition_full import RECOVERY_COUNTS, SCAN_NO_FIX_CAUSES
+    from ..agent.behaviour import RECOVERY_COUNTS
+    from ._competition_full import SCAN_NO_FIX_CAUSES
 
     out: dict = {"mode": mode, "pose_source": POSE_SOURCE[mode]}
     groups = sorted({(seed_set_of(r["seed"]), r["round"]) for r in runs},
