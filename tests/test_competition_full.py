@@ -182,6 +182,35 @@ def test_the_whole_stack_passes_camera_every_on_to_raf_sim(tmp_path):
     assert res["full_stack_heldout_r1_camera_fixes_accepted_per_s_median"] == rate
 
 
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_whole_stack_counts_the_recoveries_it_provokes(tmp_path):
+    """The agent's recoveries reach the results through its /diagnostics when there are some: with
+    ``recovery.place_uncertainty_limit`` at 0.5 mm (the stand-in's places begin at up to 2.2 mm) the robot stops
+    to look at markers on the last 15 cm of every leg to a place, wanting 0.3 mm, and after
+    ``recovery.relocalize_timeout`` (2 s here) goes on. The counts are not 0 and are as many as the agent's log
+    says; every place goes in at the first try and the round still ends at the maximum. Paced, round 1 (4
+    places), about 45 s."""
+    r = subprocess.run([sys.executable, "-m", "robotatfactory", "experiment", "competition", "--rounds", "1",
+                        "--seeds", "1", "--first-seed", "100", "--pace", "paced",
+                        "--agent", "recovery.place_uncertainty_limit=0.0005", "--agent", "recovery.relocalize_timeout=2",
+                        "--out", str(tmp_path)], capture_output=True, text=True, timeout=400)
+    res = json.loads((tmp_path / "results.json").read_text())
+    runs = json.loads((tmp_path / "runs.json").read_text())
+    assert "error" not in runs[0], (runs[0].get("error"), r.stderr[-2000:])
+    events = [text for _, text, _, _ in runs[0]["events"]]
+    looks = sum(e.startswith("pose unsure before the place") for e in events)
+    gave_up = sum(e.startswith("re-localizing took more than") for e in events)
+    assert looks >= 4, events  # at least once on each of the four legs to a place
+    # read from the agent's last /diagnostics (the bag), per run and summed over the round
+    assert res["full_stack_heldout_r1_s100_relocalizations"] == res["full_stack_heldout_r1_relocalizations"] == \
+        sum("look at markers" in e for e in events) >= looks, runs[0].get("counters_note")
+    assert res["full_stack_heldout_r1_s100_relocalize_timeouts"] == gave_up >= 1
+    # each look stopped the robot a few cm before its leg's end; it went on along the same path and placed
+    assert runs[0]["place_failures"] == 0, events
+    assert res["full_stack_heldout_r1_s100_points"] == res["full_stack_heldout_r1_s100_max_points"] == 4
+
+
 def test_localize_settings_are_checked_before_any_run():
     """--localize NAME=VALUE reaches the whole stack's raf localize; a bad one is refused at once, and outside
     the whole stack it is refused too (the bare mode runs no raf localize)."""

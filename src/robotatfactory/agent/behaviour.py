@@ -172,6 +172,7 @@ class RoundAgent:
         self.stuck = StuckDetector()
         self.blocked_spots: list[tuple[float, float, float]] = []  # (x, y, until t)
         self._resume: str | None = None  # the leg to re-plan after re-localizing
+        self._resume_path: dict | None = None  # ... or the path to go on along (PathFollower.suspend)
         self._reloc_quiet_until = -math.inf
         self._reloc_t0 = 0.0
         self._calm = 0  # cycles with the uncertainty back below the limit
@@ -324,7 +325,7 @@ class RoundAgent:
             if self._unsure_before_place(o, unc):
                 self._start_relocalize(pose, f"pose unsure before the place ({unc[0] * 1000:.0f} mm): stopping to "
                                              "look at markers",
-                                       0.6 * self.settings.recovery.place_uncertainty_limit)
+                                       0.6 * self.settings.recovery.place_uncertainty_limit, go_on=True)
                 return self._brake()
             if o.off_path:  # far off the path (a slip, a push): plan again from here
                 self._event(self.t, f"{o.off_path * 100:.0f} cm off the path: re-planning")
@@ -553,14 +554,22 @@ class RoundAgent:
                                     FieldObstacles(self.field, []))
         return not self._turn_obstacles[1].collides(fp.inflated(0.005), pose)
 
-    def _start_relocalize(self, pose, why: str, calm_below: float) -> None:
+    def _start_relocalize(self, pose, why: str, calm_below: float, go_on: bool = False) -> None:
         """Stop the leg under way and look at markers (:meth:`_relocalize`) until the position std is at most
-        ``calm_below`` m (and the heading's 60 % of its limit)."""
+        ``calm_below`` m (and the heading's 60 % of its limit). ``go_on``: then go on along the leg's path from
+        where the robot stopped (carrying, it does not turn while it looks), else re-plan the leg from there. The
+        look before a place stops a few cm before the leg's end, often still on its last curve: a leg planned
+        again from there turned on the spot and began the place 15 deg off the slot's normal (stand-in and whole
+        stack, round 1: ``off_line``, tests/test_agent_place_look_sim.py)."""
         self.counters.relocalizations += 1
         self._event(self.t, why)
         self._resume, self.mode = self.mode, "relocalize"
         self._reloc_t0, self._calm, self._calm_below = self.t, 0, calm_below
-        self.follower.stop()
+        if go_on and self.carrying is not None:
+            self._resume_path = self.follower.suspend()
+        else:
+            self._resume_path = None
+            self.follower.stop()
         self.relocalizer.start(pose)
 
     def _unsure_before_place(self, o, unc) -> bool:
@@ -576,7 +585,8 @@ class RoundAgent:
     def _relocalize(self, pose, unc) -> AgentCommand:
         """Standing still, turn towards markers until the uncertainty is back below the target (60 % of the
         limits, or of ``place_uncertainty_limit`` before a place) for 5 cycles, or relocalize_timeout; then re-plan
-        the interrupted leg from here. With a part on the magnet it does not turn."""
+        the interrupted leg from here, or go on along its path (the look before a place, :meth:`_start_relocalize`).
+        With a part on the magnet it does not turn."""
         rc = self.settings.recovery
         calm = unc is None or (unc[0] <= self._calm_below and unc[1] <= 0.6 * rc.heading_uncertainty_limit)
         self._calm = self._calm + 1 if calm else 0
@@ -590,7 +600,14 @@ class RoundAgent:
             else:
                 self._event(self.t, f"pose certain again after {self.t - self._reloc_t0:.1f} s")
             mode, self._resume = self._resume or "decide", None
-            if mode in ("to_pick", "to_place"):
+            held, self._resume_path = self._resume_path, None
+            if held is not None and mode == "to_place" and self.carrying is not None:
+                self.follower.resume(held, (self._v, self._w))  # on along the same path (the look's stop)
+                self.mode = mode
+                self._mode_t0 += self.t - self._reloc_t0  # the leg's time budget: the look does not count
+                self.stuck.reset()
+                self._no_contact = 0
+            elif mode in ("to_pick", "to_place"):
                 self._go(mode, pose)
             else:
                 self.mode, self.need_state_after = "decide", self.t

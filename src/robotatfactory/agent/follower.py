@@ -238,6 +238,19 @@ class PathFollower:
     def done(self) -> bool:
         return self.phase == "done"
 
+    def suspend(self) -> dict:
+        """The path under way and how far along it the robot is, for :meth:`resume` after a stop; then
+        :meth:`stop`."""
+        held = dict(vars(self))
+        self.stop()
+        return held
+
+    def resume(self, held: dict, speeds: tuple[float, float]) -> None:
+        """Go on along the path :meth:`suspend` returned from where the robot stands now (it stopped on it): from
+        the speeds last commanded, ``speeds`` (v, w), as in :meth:`start`."""
+        self.__dict__.update(held)
+        self.v, self.w = (-float(speeds[0]) if self.reverse else float(speeds[0])), float(speeds[1])
+
     def stop(self) -> None:
         """Abandon the path (the next step brakes to a stop within the limits)."""
         self.path = SmoothPath(())

@@ -303,14 +303,16 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
                field_name: str | None = None, record_path: bool = False, agent: dict | None = None,
                sim_options: dict | None = None, pose_noise: tuple[float, float] = (0.0, 0.0),
                pose_delay: int = 0, pose_predict: bool = False, cmd_delay: int = 0, *, lidar: bool = False,
-               on_cycle=None, after_cycle=None) -> dict:
+               on_cycle=None, after_cycle=None, uncertainty=None) -> dict:
     """One round on the bare stand-in with ground truth as the agent's pose; a flat dict of the run's
     figures (plus ``path`` [(t, x, y)] and ``events`` [(t, text, x, y)] when ``record_path``).
     ``cmd_delay``: the agent's commands run that many cycles late (the whole stack's loop: 2). ``lidar``: the
     simulator casts the LIDAR and the agent gets each sweep (``RoundAgent.on_scan``, assembled and stamped as
     the bridge does: :mod:`robotatfactory.simtwo.scan`). ``on_cycle(sim, agent)``: called before every cycle
     (a test's hand in the run, e.g. a part knocked off the magnet); ``after_cycle(sim, agent, command, frame)``:
-    after every cycle, with the Command the cycle ran and the SensorFrame it gave (a bench's record of the run)."""
+    after every cycle, with the Command the cycle ran and the SensorFrame it gave (a bench's record of the run);
+    ``uncertainty(sim, agent)``: the pose's uncertainty the agent gets each cycle (``RoundAgent.step``; e.g.
+    (position std m, heading std rad)); without it none, as ground truth has none."""
     from ..agent.behaviour import RoundAgent
     from ..agent.client import FactoryClient
     from ..agent.settings import agent_settings
@@ -353,7 +355,8 @@ def play_round(round_no: int, seed: int, limit: float = 300.0,
                     st = client.poll_state()
                     if st is not None:
                         agent.on_state(st, sim.time)
-                c = agent.step(sim.time, pose_in(sim.pose, obs.twist, sim.time), contact)
+                c = agent.step(sim.time, pose_in(sim.pose, obs.twist, sim.time), contact,
+                               None if uncertainty is None else uncertainty(sim, agent))
                 pose_in.sent(sim.time, c.v, c.w)
                 if not sim.factory.started and (c.v or c.w or c.magnet):
                     moved_early += 1
