@@ -325,7 +325,8 @@ class RoundAgent:
             if self._unsure_before_place(o, unc):
                 self._start_relocalize(pose, f"pose unsure before the place ({unc[0] * 1000:.0f} mm): stopping to "
                                              "look at markers",
-                                       0.6 * self.settings.recovery.place_uncertainty_limit, go_on=True)
+                                       0.6 * self.settings.recovery.place_uncertainty_limit,
+                                       go_on=self.settings.recovery.go_on_after_look)
                 return self._brake()
             if o.off_path:  # far off the path (a slip, a push): plan again from here
                 self._event(self.t, f"{o.off_path * 100:.0f} cm off the path: re-planning")

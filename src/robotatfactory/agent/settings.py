@@ -169,6 +169,10 @@ class Recovery:
                                                    "dropped its part; 0: off)", lo=0.0, hi=0.5)
     relocalize_timeout: float = setting(12.0, "s looking at markers before it goes on regardless", lo=0.0,
                                         hi=600.0)
+    go_on_after_look: bool = setting(True, "after the look at markers before a place, on along the leg's path from "
+                                           "where the robot stopped (false: the leg planned again from there, as "
+                                           "until stop 58: from a few cm before its end it often began the place "
+                                           "off the slot's normal; raf bench looks)")
     replans: int = setting(2, "re-plans of one leg around a blocked spot before the leg counts as failed", lo=0,
                            hi=20)
     block_memory: float = setting(20.0, "s a blocked spot stays an obstacle", lo=0.0, hi=3600.0)
