@@ -205,3 +205,52 @@ def test_an_unsure_pose_at_the_end_of_a_leg_to_a_place_stops_to_look_first(field
     assert 0.04 < gap < PLACE_LOOK + 0.1, gap
     run(agent, bot, lambda a: a.mode == "place", uncertainty=lambda t: (0.003, 0.01))  # sure again: it places
     assert agent.mode == "place" and any("certain again" in text for _, text in agent.events)
+
+
+@pytest.mark.parametrize("falling", [False, True])
+def test_a_look_with_a_part_on_goes_on_once_the_std_stops_falling(field, robot, falling):
+    """With a part on the robot does not turn towards markers: a std that stays where it is (no fix comes from
+    this view) ends the look after ``recovery.look_patience`` (3 s), not relocalize_timeout (12 s); one still
+    falling (fixes coming) is waited for until the estimate is sure."""
+    agent = RoundAgent(field, robot)
+    bot = KinRobot(field, robot)
+    run(agent, bot, lambda a: a.mode == "to_place" and a.carrying is not None)
+    state = {}
+
+    def unc(t):
+        if agent.mode == "relocalize" and "t0" not in state:
+            state["t0"] = t
+        if "t0" not in state:
+            return (0.015, 0.01)
+        # falling: 10 % a second from 15 mm (sure, 6 mm, after 8.7 s); else 15 mm for ever
+        return (0.015 * 0.9 ** (t - state["t0"]) if falling else 0.015, 0.01)
+
+    run(agent, bot, lambda a: a.mode == "relocalize", uncertainty=unc)
+    t0 = bot.t
+    run(agent, bot, lambda a: a.mode != "relocalize", uncertainty=unc, limit=t0 + 20.0)
+    looked = bot.t - t0
+    assert agent.mode == "to_place" and agent.carrying is not None
+    if falling:
+        assert 8.0 < looked < 10.0, looked
+        assert agent.counters.relocalize_timeouts == 0 and any("certain again" in e for _, e in agent.events)
+    else:
+        assert 2.9 < looked < 3.5, looked
+        assert agent.counters.relocalize_timeouts == 1
+        assert any(e.startswith("the pose's std stopped falling with the part on (15 mm") for _, e in agent.events)
+    # and it places (going on along its path)
+    run(agent, bot, lambda a: a.mode not in ("to_place", "place"), uncertainty=lambda t: (0.003, 0.01),
+        limit=bot.t + 20.0)
+    assert any(e.startswith("placed ") for _, e in agent.events), agent.events
+
+
+def test_a_look_without_a_part_is_not_cut_short(field, robot):
+    """Empty, the robot turns towards markers while it looks: a std that does not fall yet is waited for up to
+    relocalize_timeout (look_patience is for a look with a part on)."""
+    agent = RoundAgent(field, robot, agent_settings({"recovery": {"relocalize_timeout": 6.0}}))
+    bot = KinRobot(field, robot)
+    run(agent, bot, lambda a: a.mode == "to_pick" and abs(a._v) > 0.2)
+    t0 = bot.t
+    run(agent, bot, lambda a: a.mode != "relocalize" and bot.t > t0 + 1.0, uncertainty=lambda t: 0.08,
+        limit=t0 + 10.0)
+    assert 5.9 < bot.t - t0 < 7.0 and agent.counters.relocalize_timeouts == 1
+    assert any(e.startswith("re-localizing took more than 6 s") for _, e in agent.events)

@@ -83,7 +83,8 @@ class AgentCounters:
     timeouts: int = 0
     stale_pose_cycles: int = 0
     relocalizations: int = 0  # times it stopped to look at markers (the pose's uncertainty too large)
-    relocalize_timeouts: int = 0  # ... and went on after relocalize_timeout without the uncertainty shrinking
+    relocalize_timeouts: int = 0  # ... and went on after relocalize_timeout without the uncertainty shrinking (with
+    # a part on, also once its std stopped falling for recovery.look_patience)
     blocked: int = 0  # legs found stuck or timed out and re-planned around the spot
     parts_lost: int = 0  # the contact switch released while carrying
     replans_off_path: int = 0  # legs planned again because the robot was far off its path
@@ -177,6 +178,7 @@ class RoundAgent:
         self._reloc_t0 = 0.0
         self._calm = 0  # cycles with the uncertainty back below the limit
         self._calm_below = 0.0  # m: the position std re-localizing waits for
+        self._look_best = (math.inf, 0.0)  # (the lowest position std of the look so far, when it was reached)
         self._leg_replans = 0
         self._no_contact = 0
         self._no_path: dict = {}  # consecutive legs without a path per target (SlotRef)
@@ -566,6 +568,7 @@ class RoundAgent:
         self._event(self.t, why)
         self._resume, self.mode = self.mode, "relocalize"
         self._reloc_t0, self._calm, self._calm_below = self.t, 0, calm_below
+        self._look_best = (math.inf, self.t)
         if go_on and self.carrying is not None:
             self._resume_path = self.follower.suspend()
         else:
@@ -592,12 +595,15 @@ class RoundAgent:
         calm = unc is None or (unc[0] <= self._calm_below and unc[1] <= 0.6 * rc.heading_uncertainty_limit)
         self._calm = self._calm + 1 if calm else 0
         timed_out = self.t - self._reloc_t0 > self.settings.recovery.relocalize_timeout
-        if self._calm >= 5 or timed_out:
-            if timed_out:  # go on driving (new views of markers) for as long before looking again
+        stalled = self._look_stalled(unc)
+        if self._calm >= 5 or timed_out or stalled:
+            if timed_out or stalled:  # go on driving (new views of markers) for as long before looking again
                 self._reloc_quiet_until = self.t + self.settings.recovery.relocalize_timeout
                 self.counters.relocalize_timeouts += 1
                 self._event(self.t, f"re-localizing took more than {self.settings.recovery.relocalize_timeout:.0f} s: "
-                                    "going on")
+                                    "going on" if timed_out else
+                            f"the pose's std stopped falling with the part on ({unc[0] * 1000:.0f} mm for "
+                            f"{self.t - self._look_best[1]:.1f} s): going on")
             else:
                 self._event(self.t, f"pose certain again after {self.t - self._reloc_t0:.1f} s")
             mode, self._resume = self._resume or "decide", None
@@ -617,6 +623,17 @@ class RoundAgent:
             return self._brake()
         w = self.relocalizer.step(pose, self.dt) if self.carrying is None else 0.0  # no spin with a part on
         return self._cmd(0.0, ramp(self._w, w, self.limits.alpha_max * self.dt))
+
+    def _look_stalled(self, unc) -> bool:
+        """Looking with a part on (standing, not turning): the position std has not fallen below 95 % of the
+        lowest it reached for ``recovery.look_patience`` s. The view does not change, so no fix is coming: on the
+        real SimTwo a look with a part on stood out its 12 s without one (stop 56)."""
+        patience = self.settings.recovery.look_patience
+        if patience <= 0 or self.carrying is None or unc is None:
+            return False
+        if unc[0] < 0.95 * self._look_best[0]:
+            self._look_best = (unc[0], self.t)
+        return self.t - self._look_best[1] > patience
 
     def _blocked(self, pose, why: str) -> None:
         """Something the map lacks blocks the leg: remember the spot ahead of the robot as an obstacle for

@@ -169,6 +169,10 @@ class Recovery:
                                                    "dropped its part; 0: off)", lo=0.0, hi=0.5)
     relocalize_timeout: float = setting(12.0, "s looking at markers before it goes on regardless", lo=0.0,
                                         hi=600.0)
+    look_patience: float = setting(3.0, "s: looking at markers with a part on (it does not turn towards them), it "
+                                        "goes on once the position std has not fallen by 5 % for this long: no fix "
+                                        "is coming from here (0: it waits for relocalize_timeout)", lo=0.0,
+                                   hi=600.0)
     go_on_after_look: bool = setting(True, "after the look at markers before a place, on along the leg's path from "
                                            "where the robot stopped (false: the leg planned again from there, as "
                                            "until stop 58: from a few cm before its end it often began the place "
