@@ -594,18 +594,19 @@ class RoundAgent:
         rc = self.settings.recovery
         calm = unc is None or (unc[0] <= self._calm_below and unc[1] <= 0.6 * rc.heading_uncertainty_limit)
         self._calm = self._calm + 1 if calm else 0
-        timed_out = self.t - self._reloc_t0 > self.settings.recovery.relocalize_timeout
-        stalled = self._look_stalled(unc)
-        if self._calm >= 5 or timed_out or stalled:
-            if timed_out or stalled:  # go on driving (new views of markers) for as long before looking again
-                self._reloc_quiet_until = self.t + self.settings.recovery.relocalize_timeout
-                self.counters.relocalize_timeouts += 1
-                self._event(self.t, f"re-localizing took more than {self.settings.recovery.relocalize_timeout:.0f} s: "
-                                    "going on" if timed_out else
-                            f"the pose's std stopped falling with the part on ({unc[0] * 1000:.0f} mm for "
-                            f"{self.t - self._look_best[1]:.1f} s): going on")
-            else:
+        sure = self._calm >= 5  # (before the time limits: a look that ends sure is not counted as gone on)
+        timed_out = not sure and self.t - self._reloc_t0 > rc.relocalize_timeout
+        stalled = not (sure or timed_out) and self._look_stalled(unc)
+        if sure or timed_out or stalled:
+            if sure:
                 self._event(self.t, f"pose certain again after {self.t - self._reloc_t0:.1f} s")
+            else:  # go on driving (new views of markers) for as long before looking again
+                self._reloc_quiet_until = self.t + rc.relocalize_timeout
+                self.counters.relocalize_timeouts += 1
+                why = (f"re-localizing took more than {rc.relocalize_timeout:.0f} s" if timed_out else
+                       f"the pose's std stopped falling with the part on ({unc[0] * 1000:.0f} mm for "
+                       f"{self.t - self._look_best[1]:.1f} s)")
+                self._event(self.t, f"{why}: going on")
             mode, self._resume = self._resume or "decide", None
             held, self._resume_path = self._resume_path, None
             if held is not None and mode == "to_place" and self.carrying is not None:

@@ -3,9 +3,9 @@ a place").
 
 **Mode**: the bare stand-in in this process (:func:`~robotatfactory.experiments.competition.play_round`: the
 competition agent on ground truth as its pose, SimTwo-like defaults, SimTwo's force magnet). Ground truth has no
-uncertainty; :class:`UnsureUntilLooked` gives the agent a position std of ``--std`` m on its first leg to a place
-until it has looked at markers for ``--look`` s, so that on the last 15 cm of that leg it stops, part held, to look
-(``recovery.place_uncertainty_limit``, 10 mm). Rounds ``--rounds`` x seeds ``0..--seeds-1``, each played three
+uncertainty; :class:`UnsureUntilLooked` gives the agent a position std of ``--std`` m on its legs to a place from
+the first one until it has looked at markers for ``--look`` s (a large ``--look``: a std that never falls), so that
+on the last 15 cm of such a leg it stops, part held, to look (``recovery.place_uncertainty_limit``, 10 mm). Rounds ``--rounds`` x seeds ``0..--seeds-1``, each played three
 ways: undisturbed, with the look and the robot going on along its path after it (``recovery.go_on_after_look``,
 the default), and with the look and the leg planned again from where the robot stopped (the behaviour until stop
 58). Per way: runs at the maximum, the places after the look that went in at the first try, places failed, and
@@ -61,8 +61,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rounds", default="1,2,3", help="rounds (default 1,2,3)")
     parser.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 of each round (default 5)")
     parser.add_argument("--std", type=float, default=0.015,
-                        help="m: the position std on the first leg to a place (default 0.015; the real SimTwo's one "
-                             "unsure place began at 18.6 mm)")
+                        help="m: the position std on the legs to a place until --look s of looking (default "
+                             "0.015; the real SimTwo's one unsure place began at 18.6 mm)")
     parser.add_argument("--look", type=float, default=1.0, help="s of looking before the std is sure (default 1)")
 
 
@@ -71,7 +71,7 @@ def run(args) -> dict:
 
     rounds = [int(r) for r in str(args.rounds).split(",") if r.strip()]
     out: dict = {"mode": "stand-in Simulator in process, SimTwo-like defaults, force magnet, ground truth as the "
-                         f"pose; a position std of {args.std * 1000:.0f} mm on the first leg to a place until "
+                         f"pose; a position std of {args.std * 1000:.0f} mm on the legs to a place until "
                          f"{args.look:g} s of looking at markers"}
     ways = {"go_on": {}, "replan": {"recovery": {"go_on_after_look": False}}}
     rows = {k: [] for k in ways}
