@@ -114,6 +114,30 @@ def test_odometry_from_zero_after_a_restart_and_from_its_first_frame_after_a_bri
     assert {x.topic for x in ob.Observer(tr, p, GEO, bridge_starts=[0.0, restart_wall]).poisoned} == {"odom"}
 
 
+def test_a_restarted_bridge_whose_first_messages_the_observer_missed_while_the_robot_moved():
+    """CI's failure: the restarted bridge took its baseline at its first frame, the watcher's subscription
+    connected six frames later, the robot turning meanwhile. The baseline is recovered from the first
+    joint_states seen (the genuine frame with those totals), not taken as the first frame seen; a baseline
+    no genuine frame after the bridge's start has is still caught."""
+    tr, _ = truth(n=60)
+    restart_wall = tr[20, 0] - 0.01
+    first_seen = 26
+    p_all = bridge(tr, idx=range(20, len(tr)), from_zero=False)  # the bridge's baseline: frame 20
+    p = ob.Published(*[[m for m in x if m[0] > tr[first_seen, 0]] for x in (p_all.odom, p_all.clock,
+                                                                          p_all.joints, p_all.tf)])
+    o = ob.Observer(tr, p, GEO, bridge_starts=[0.0, restart_wall])
+    assert o.poisoned == []
+    assert o.tracks()[(1, 0)]["baseline_frame"] == 20
+    assert o.odometry_errors()[:, 2].max() < 1e-9
+    # the same messages from a bridge whose baseline was a frame sent before it started: no genuine frame
+    # after its start explains them
+    p_old = bridge(tr, idx=range(15, len(tr)), from_zero=False)
+    p = ob.Published(*[[m for m in x if m[0] > tr[first_seen, 0]] for x in (p_old.odom, p_old.clock,
+                                                                          p_old.joints, p_old.tf)])
+    bad = ob.Observer(tr, p, GEO, bridge_starts=[0.0, restart_wall]).poisoned
+    assert {x.topic for x in bad} == {"odom", "tf", "joints"}
+
+
 def test_a_lossy_bridge_is_not_poisoned_and_stays_within_the_chord_bound():
     tr, _ = truth(n=80)
     rng = np.random.default_rng(1)

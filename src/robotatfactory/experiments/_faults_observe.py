@@ -17,8 +17,9 @@ nothing the bridge says about itself (no counter, no diagnostics, no log): its i
   before the message arrived;
 * a pose (``odom``, TF) other than the odometry integrated over the genuine frames' encoder totals at the
   stamps the bridge published, in the simulator's order, from the bridge's baseline (zero when it saw the
-  stream start at ``Seq`` 0, else the first frame it published; :meth:`Observer.tracks`): a frame with forged
-  totals and a genuine stamp changes the pose there and after it;
+  stream start at ``Seq`` 0, else the first frame it accepted, recovered from its first ``joint_states``
+  when this observer missed its first messages; :meth:`Observer.tracks`): a frame with forged totals and a
+  genuine stamp changes the pose there and after it;
 * a stamp that goes back, or repeats, within one bridge process and one simulator run (``odom``, TF,
   ``joint_states``); a ``/clock`` step back other than to a later simulator run (a genuine restart);
 * wheel angles (``joint_states``) other than the genuine totals at the stamp, from the same baseline (within
@@ -168,8 +169,9 @@ class Observer:
     # -- tracks: one bridge process x one simulator run ------------------------------------------------------
     def tracks(self) -> dict:
         """(instance, epoch) -> {"frames": published frame indices ascending, "from_zero": bool, "poses": {i:
-        (x, y, theta)}, "angles": {i: (left, right)}, "baseline": totals}: the odometry over the genuine
-        frames the bridge published."""
+        (x, y, theta)}, "angles": {i: (left, right)}, "baseline": totals, "baseline_frame": the frame whose
+        totals those are (None from zero)}: the odometry over the genuine frames the bridge published (and,
+        for a bridge that joined mid-run, the unseen ones between its baseline frame and the first seen)."""
         return self._tracks
 
     def _build_tracks(self, used: dict) -> None:
@@ -182,14 +184,46 @@ class Observer:
             # the bridge saw this run start (it was up before the run's first frame) at Seq 0: totals from zero
             from_zero = (self.starts[inst] <= r0[0] and 0 <= r0[1] <= RESTART_MAX_SEQ
                          and 0 <= r0[2] <= (RESTART_MAX_SEQ + 1) * PERIOD_MS + PERIOD_MS // 2)
-            totals = self.truth[idx, 3:5]
-            baseline = (0.0, 0.0) if from_zero else tuple(totals[0])
+            start = None if from_zero else self._joined_at(key, idx[0])
+            # the frames the bridge integrated: the unseen ones after its baseline frame, then those it published
+            rows = idx if start is None else self._delivered(start + 1, idx[0]) + idx
+            totals = self.truth[rows, 3:5]
+            baseline = (0.0, 0.0) if from_zero else tuple(self.truth[start, 3:5])
             poses = odometry(totals, g, baseline)
             base = np.asarray(baseline)
             angles = (totals - base) * g.rad_per_tick
-            self._tracks[key] = {"frames": idx, "from_zero": from_zero, "baseline": baseline,
-                                 "poses": {i: tuple(p) for i, p in zip(idx, poses)},
-                                 "angles": {i: tuple(a) for i, a in zip(idx, angles)}}
+            self._tracks[key] = {"frames": idx, "from_zero": from_zero, "baseline": baseline, "baseline_frame": start,
+                                 "poses": {i: tuple(p) for i, p in zip(rows, poses)},
+                                 "angles": {i: tuple(a) for i, a in zip(rows, angles)}}
+
+    def _joined_at(self, key, first_seen: int) -> int:
+        """The frame a bridge that joined a simulator run mid-stream took as its baseline: the first frame it
+        accepted, which this observer may not have seen (a subscriber connects to a restarted publisher a
+        moment after its first messages, and the robot may move meanwhile). Recovered from the earliest
+        ``joint_states`` message of the track (its angles are the genuine totals at its stamp minus the
+        baseline's): the latest genuine frame of the run, sent after the bridge started and not after the
+        first frame seen published, with those totals. A baseline no such frame has (a forged or kept one)
+        leaves the first frame seen published, so every pose and angle from it is checked against that."""
+        inst, ep = key
+        joints = [(i, self.pub.joints[k]) for k, i in self.matched.get("joints", ())
+                  if i >= 0 and self.instance(self.pub.joints[k][0]) == inst and int(self.epoch[i]) == ep]
+        if not joints:
+            return first_seen
+        i, msg = min(joints, key=lambda x: x[0])
+        if len(msg) < 4 or not (_num(msg[2]) and _num(msg[3])):
+            return first_seen
+        est = self.truth[i, 3:5] - np.array([float(msg[2]), float(msg[3])]) / self.geo.rad_per_tick
+        rows = np.flatnonzero((self.epoch == ep) & (np.arange(len(self.truth)) <= first_seen)
+                              & (self.truth[:, 0] >= self.starts[inst]))
+        hit = rows[np.all(np.abs(self.truth[rows, 3:5] - est) <= 0.5, axis=1)] if len(rows) else rows
+        return int(hit[-1]) if len(hit) else first_seen
+
+    def _delivered(self, a: int, b: int) -> list[int]:
+        """Frames a..b-1 the proxy delivered in order (all of them when no fates were given)."""
+        rows = range(a, b)
+        if len(self.fates) != len(self.truth):
+            return list(rows)
+        return [r for r in rows if self.fates[r] not in (DROPPED, DELAYED)]
 
     def _run(self) -> None:
         p = self.pub
@@ -307,7 +341,7 @@ class Observer:
             tr = self._tracks[key]
             if key not in full:
                 ep = np.flatnonzero(self.epoch == key[1])
-                first = ep[0] if tr["from_zero"] else tr["frames"][0]
+                first = ep[0] if tr["from_zero"] else tr["baseline_frame"]
                 rows = ep[ep >= first]
                 full[key] = dict(zip(rows.tolist(), odometry(self.truth[rows, 3:5], self.geo, tr["baseline"])))
             x, y, th = full[key][i]
