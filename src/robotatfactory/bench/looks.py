@@ -5,11 +5,12 @@ a place").
 competition agent on ground truth as its pose, SimTwo-like defaults, SimTwo's force magnet). Ground truth has no
 uncertainty; :class:`UnsureUntilLooked` gives the agent a position std of ``--std`` m on its legs to a place from
 the first one until it has looked at markers for ``--look`` s (a large ``--look``: a std that never falls), so that
-on the last 15 cm of such a leg it stops, part held, to look (``recovery.place_uncertainty_limit``, 10 mm). Rounds ``--rounds`` x seeds ``0..--seeds-1``, each played three
-ways: undisturbed, with the look and the robot going on along its path after it (``recovery.go_on_after_look``,
-the default), and with the look and the leg planned again from where the robot stopped (the behaviour until stop
-58). Per way: runs at the maximum, the places after the look that went in at the first try, places failed, and
-the seconds from the start of the look to the end of that place.
+on the last 15 cm of such a leg it stops, part held, to look (``recovery.place_uncertainty_limit``, 10 mm).
+Rounds ``--rounds`` x seeds ``0..--seeds-1``, each played three ways: undisturbed, with the look and the robot
+going on along its path after it (``recovery.go_on_after_look``, the default), and with the look and the leg
+planned again from where the robot stopped (the behaviour until stop 58). Per way: runs at the maximum, the places
+after the look that went in at the first try, places failed, and the seconds from the start of the look to the end
+of that place.
 """
 from __future__ import annotations
 
