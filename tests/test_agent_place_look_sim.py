@@ -25,6 +25,21 @@ def test_after_a_look_before_a_place_the_place_succeeds(round_no, seed):
     assert r["place_failures"] == 0 and r["points"] == r["max_points"], ev
 
 
+def test_a_look_whose_std_never_falls_goes_on_after_the_look_patience():
+    """The look with a part on (the robot does not turn, so its view does not change) ends once the std has not
+    fallen for ``recovery.look_patience`` (3 s), not after ``recovery.relocalize_timeout`` (12 s): here the std
+    stays 15 mm however long the robot looks. On it goes along its path, the place goes in at the first try."""
+    r = play_round(1, 0, record_path=True, uncertainty=UnsureUntilLooked(0.015, 100.0))
+    ev = [(t, text) for t, text, *_ in r["events"]]
+    t0 = next(t for t, text in ev if text.startswith("pose unsure before the place"))
+    t1, why = next((t, text) for t, text in ev if t > t0 and text.endswith(": going on"))
+    assert why.startswith("the pose's std stopped falling with the part on (15 mm"), why
+    assert 3.0 <= t1 - t0 <= 3.5, (t0, t1)
+    a = after_look(r["events"])
+    assert a["first_try"] and a["place_s"] < 8.0, a
+    assert r["place_failures"] == 0 and r["points"] == r["max_points"], ev
+
+
 def test_the_leg_planned_again_after_the_look_began_the_place_off_the_line():
     """Why the robot goes on along its path (``recovery.go_on_after_look``): planned again from where the braking
     left it, a few cm before the leg's end and still on its last curve, the leg turned the robot on the spot and
