@@ -220,10 +220,10 @@ class Observer:
 
     def _delivered(self, a: int, b: int) -> list[int]:
         """Frames a..b-1 the proxy delivered in order (all of them when no fates were given)."""
-        rows = range(a, b)
+        rows = np.arange(a, b)
         if len(self.fates) != len(self.truth):
-            return list(rows)
-        return [r for r in rows if self.fates[r] not in (DROPPED, DELAYED)]
+            return rows.tolist()
+        return rows[~undelivered(self.fates[a:b])].tolist()
 
     def _run(self) -> None:
         p = self.pub
@@ -414,10 +414,15 @@ def chord_error(totals: np.ndarray, geo: Geometry) -> float:
     return float(math.hypot(steps[-1, 0] - x, steps[-1, 1] - y))
 
 
+def undelivered(fates) -> np.ndarray:
+    """Which frames the proxy did not deliver in order: dropped, or delayed behind the next one (which the
+    bridge then drops as stale)."""
+    return np.isin(np.asarray(fates), (DROPPED, DELAYED))
+
+
 def missing_runs(fates: np.ndarray) -> list[tuple[int, int]]:
-    """Runs [a, b] of consecutive frames the proxy did not deliver in order (dropped, or delayed behind the
-    next one, which the bridge then drops as stale)."""
-    miss = np.isin(np.asarray(fates), (DROPPED, DELAYED))
+    """Runs [a, b] of consecutive frames the proxy did not deliver in order (see :func:`undelivered`)."""
+    miss = undelivered(fates)
     runs, a = [], None
     for i, m in enumerate(miss):
         if m and a is None:
