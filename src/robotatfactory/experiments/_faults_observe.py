@@ -215,7 +215,7 @@ class Observer:
         est = self.truth[i, 3:5] - np.array([float(msg[2]), float(msg[3])]) / self.geo.rad_per_tick
         rows = np.flatnonzero((self.epoch == ep) & (np.arange(len(self.truth)) <= first_seen)
                               & (self.truth[:, 0] >= self.starts[inst]))
-        hit = rows[np.all(np.abs(self.truth[rows, 3:5] - est) <= 0.5, axis=1)] if len(rows) else rows
+        hit = rows[np.all(np.abs(self.truth[rows, 3:5] - est) <= 0.5, axis=1)]
         return int(hit[-1]) if len(hit) else first_seen
 
     def _delivered(self, a: int, b: int) -> list[int]:
