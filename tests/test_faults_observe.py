@@ -45,6 +45,11 @@ def bridge(tr, idx=None, from_zero=True, lag=0.002, forge=None):
     return p
 
 
+def seen_after(p, wall):
+    """The part of ``p`` a watcher sees when it connects at ``wall`` (the messages that arrive after it)."""
+    return ob.Published(*[[m for m in x if m[0] > wall] for x in (p.odom, p.clock, p.joints, p.tf, p.scans)])
+
+
 def test_a_correct_bridge_is_not_poisoned():
     tr, rg = truth()
     o = ob.Observer(tr, bridge(tr), GEO, bridge_starts=[0.0], ranges=rg)
@@ -123,8 +128,7 @@ def test_a_restarted_bridge_whose_first_messages_the_observer_missed_while_the_r
     restart_wall = tr[20, 0] - 0.01
     first_seen = 26
     p_all = bridge(tr, idx=range(20, len(tr)), from_zero=False)  # the bridge's baseline: frame 20
-    p = ob.Published(*[[m for m in x if m[0] > tr[first_seen, 0]] for x in (p_all.odom, p_all.clock,
-                                                                          p_all.joints, p_all.tf)])
+    p = seen_after(p_all, tr[first_seen, 0])
     o = ob.Observer(tr, p, GEO, bridge_starts=[0.0, restart_wall])
     assert o.poisoned == []
     assert o.tracks()[(1, 0)]["baseline_frame"] == 20
@@ -132,8 +136,7 @@ def test_a_restarted_bridge_whose_first_messages_the_observer_missed_while_the_r
     # the same messages from a bridge whose baseline was a frame sent before it started: no genuine frame
     # after its start explains them
     p_old = bridge(tr, idx=range(15, len(tr)), from_zero=False)
-    p = ob.Published(*[[m for m in x if m[0] > tr[first_seen, 0]] for x in (p_old.odom, p_old.clock,
-                                                                          p_old.joints, p_old.tf)])
+    p = seen_after(p_old, tr[first_seen, 0])
     bad = ob.Observer(tr, p, GEO, bridge_starts=[0.0, restart_wall]).poisoned
     assert {x.topic for x in bad} == {"odom", "tf", "joints"}
 
