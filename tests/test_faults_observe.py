@@ -132,6 +132,10 @@ def test_a_restarted_bridge_whose_first_messages_the_observer_missed_while_the_r
     o = ob.Observer(tr, p, GEO, bridge_starts=[0.0, restart_wall])
     assert o.poisoned == []
     assert o.tracks()[(1, 0)]["baseline_frame"] == 20
+    # what the experiment reports: the six frames (20-25) published before the watcher's first message
+    assert o.tracks()[(1, 0)]["unseen"] == list(range(20, 26))
+    assert o.unseen_at_join(1) == (6, pytest.approx(tr[26, 0] - tr[20, 0]))
+    assert o.unseen_at_join(0) == (0, 0.0)
     assert o.odometry_errors()[:, 2].max() < 1e-9
     # the same messages from a bridge whose baseline was a frame sent before it started: no genuine frame
     # after its start explains them

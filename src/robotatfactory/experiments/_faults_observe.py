@@ -170,9 +170,23 @@ class Observer:
     def tracks(self) -> dict:
         """(instance, epoch) -> {"frames": published frame indices ascending, "from_zero": bool, "poses": {i:
         (x, y, theta)}, "angles": {i: (left, right)}, "baseline": totals, "baseline_frame": the frame whose
-        totals those are (None from zero)}: the odometry over the genuine frames the bridge published (and,
-        for a bridge that joined mid-run, the unseen ones between its baseline frame and the first seen)."""
+        totals those are (None from zero), "unseen": the frames a bridge that joined mid-run published before
+        the first message seen (its baseline frame and the delivered ones after it; empty when the first
+        message seen is its baseline's)}: the odometry over the genuine frames the bridge published (and, for a
+        bridge that joined mid-run, the unseen ones between its baseline frame and the first seen)."""
         return self._tracks
+
+    def unseen_at_join(self, inst: int) -> tuple[int, float]:
+        """(frames, s): what bridge process ``inst`` published in its first simulator run before this observer's
+        first message from it (see :meth:`tracks`' "unseen"), and the wall time from the first of those frames
+        to the first seen (the simulator's send times); (0, 0.0) when nothing was missed or nothing seen."""
+        keys = sorted(k for k in self._tracks if k[0] == inst)
+        if not keys:
+            return 0, 0.0
+        t = self._tracks[keys[0]]
+        if not t["unseen"]:
+            return 0, 0.0
+        return len(t["unseen"]), float(self.truth[t["frames"][0], 0] - self.truth[t["unseen"][0], 0])
 
     def _build_tracks(self, used: dict) -> None:
         g = self.geo
@@ -186,13 +200,17 @@ class Observer:
                          and 0 <= r0[2] <= (RESTART_MAX_SEQ + 1) * PERIOD_MS + PERIOD_MS // 2)
             start = None if from_zero else self._joined_at(key, idx[0])
             # the frames the bridge integrated: the unseen ones after its baseline frame, then those it published
-            rows = idx if start is None else self._delivered(start + 1, idx[0]) + idx
+            between = [] if start is None else self._delivered(start + 1, idx[0])
+            rows = between + idx
+            # what the bridge published before this observer's first message (a bridge that joined mid-run)
+            unseen = [] if start is None or start == idx[0] else [start] + between
             totals = self.truth[rows, 3:5]
             baseline = (0.0, 0.0) if from_zero else tuple(self.truth[start, 3:5])
             poses = odometry(totals, g, baseline)
             base = np.asarray(baseline)
             angles = (totals - base) * g.rad_per_tick
             self._tracks[key] = {"frames": idx, "from_zero": from_zero, "baseline": baseline, "baseline_frame": start,
+                                 "unseen": unseen,
                                  "poses": {i: tuple(p) for i, p in zip(rows, poses)},
                                  "angles": {i: tuple(a) for i, a in zip(rows, angles)}}
 

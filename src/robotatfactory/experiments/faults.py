@@ -571,6 +571,11 @@ def part_restarts(args, log_dir: Path, robot) -> dict:
     out["restart_bridge_timeout_age_logged_s"] = float(ages[0]) if ages else float("nan")
     out["restart_bridge_resume_s"] = back("odom", t_rep)
     out["restart_bridge_process_start_to_first_reply_s"] = t_rep - t_bstart
+    # how late this node's subscriptions joined the restarted bridge (informational; the observer recovers
+    # the bridge's baseline across them): frames it published before the first message seen, and their span
+    n_unseen, s_unseen = obs.unseen_at_join(len(obs.starts) - 1)
+    out["restart_bridge_frames_unseen_at_join"] = n_unseen
+    out["restart_bridge_unseen_at_join_s"] = round(s_unseen, 3)
     out.update(_poison_figures("restart", obs, d / "poisoned.json"))
     out.update({k: bool(v) for k, v in {
         "restart_sim_odom_back_target_met": out["restart_sim_odom_back_s"] <= 1.0,
