@@ -144,3 +144,35 @@ def test_a_cornered_robot_with_a_part_and_no_straight_way_out_turns_on_its_last_
         legs.plan(obs, ends[-1][2], target, True, "place")  # (raises NoPath where it could not plan from)
         agent._no_leg(pose)  # every try spent: no more escapes
         assert agent.mode != "escape"
+
+
+def test_escapes_that_end_short_of_clear_space_start_again_once_the_target_is_given_up(field, robot):
+    """An escape drive ends after ``recovery.escape_time`` or off its path (a pose that jumps), so it may end
+    short of clear space. With every try spent, a robot still too close to something asked for a path, gave
+    its target up, and asked again, standing still for the rest of the round ("Not done yet" in docs/agent.md).
+    Giving a target up starts a new round of escapes: the cornered robot with a part, whose escapes are cut
+    short (0.5 s each), gets clear and goes on to its place."""
+    from robotatfactory.agent.settings import agent_settings
+    from robotatfactory.agent.state import FactoryState, SlotRef
+    from robotatfactory.competition.rounds import PartType
+
+    probe = RoundAgent(field, robot)
+    probe.state = FactoryState.from_letters("XXXX")
+    obs = probe._obstacles()
+    poses = [pose for pose, _ in _carrying_poses_beside_clear(probe)
+             if not probe.legs.escape_point(obs, pose, carrying=True).straight]
+    settings = agent_settings({"recovery": {"escape_time": 0.5}})
+    tries = settings.recovery.escape_tries
+    again = 0
+    for pose in poses:
+        agent = RoundAgent(field, robot, settings=settings)
+        agent.state = FactoryState.from_letters("XXXX")
+        agent.carrying, agent.target, agent.mode = PartType.BLUE, SlotRef("outgoing", 1), "decide"
+        bot = KinRobot(field, robot, letters="XXXX")
+        bot.pose, bot.held = pose, True
+        run(agent, bot, lambda a: a.mode == "to_place", limit=30.0)
+        assert agent.mode == "to_place", (pose, agent.counters.escapes, agent.events[-4:])
+        if agent.counters.escapes > tries:
+            again += 1
+            assert any("giving it up" in text for _, text in agent.events)
+    assert again >= 1  # (some of these robots needed a second round of escapes)

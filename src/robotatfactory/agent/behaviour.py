@@ -784,6 +784,9 @@ class RoundAgent:
         if n >= self.settings.tasks.give_up_after:
             self._no_path.pop(self.target, None)
             self._event(self.t, f"no path to {self.target} {n} times: giving it up")
+            # the next target starts a new round of escape drives: a robot whose escapes ended short of clear
+            # space (an escape ends after escape_time or off its path) does not stand still for the round
+            self._escapes = 0
             if carrying:
                 self.place_failed[self.target] = max(self.place_failed.get(self.target, 0),
                                                      self.settings.tasks.give_up_after)
